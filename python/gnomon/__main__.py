@@ -1,0 +1,5 @@
+import sys
+
+from gnomon.cli import main
+
+sys.exit(main())
