@@ -122,3 +122,125 @@ class Pose:
 
     def camera_to_world(self, points_cam: np.ndarray) -> np.ndarray:
         return (np.asarray(points_cam, dtype=np.float64) - self.t) @ self.R
+
+
+@dataclass(frozen=True)
+class TsaiCamera:
+    """Tsai's camera model (IEEE J. Robotics & Automation, 1987).
+
+    Camera frame as OpenCV's (x right, y down, z forward); pixel centres at
+    integer coordinates.
+
+    * Pinhole, sensor units (mm): ``Xu = f·x/z``, ``Yu = f·y/z``.
+    * Radial distortion, Tsai's way round (undistorted *from* distorted):
+      ``Xu = Xd·(1 + κ1·r²)``, ``Yu = Yd·(1 + κ1·r²)``, ``r² = Xd² + Yd²`` (mm²).
+    * Sensor → frame buffer: ``u = sx·Xd/dx + Cx``, ``v = Yd/dy + Cy``.
+
+    ``f_mm`` focal length (mm); ``kappa1`` (1/mm²); ``cx, cy`` the centre of
+    radial distortion (pixels); ``sx`` the horizontal scale uncertainty
+    (dimensionless, 1 for a digital camera); ``dx_mm`` and ``dy_mm`` the
+    distance between the centres of adjacent frame-buffer pixels on the
+    sensor, horizontally (Tsai's ``dx' = dx·Ncx/Nfx``) and vertically (mm).
+
+    ``rays`` is closed-form. ``project`` inverts the distortion on the radius,
+    ``κ1·rd³ + rd = ru``, by Newton's method to machine precision. For κ1 < 0
+    that map folds over at ``rd² = 1/(3|κ1|)``: points whose undistorted
+    radius lies beyond the fold project to NaN, and pixels beyond it have NaN
+    rays (both far outside the image for any real lens).
+    """
+
+    width: int
+    height: int
+    f_mm: float
+    kappa1: float
+    cx: float
+    cy: float
+    dx_mm: float
+    dy_mm: float
+    sx: float = 1.0
+
+    @property
+    def fx(self) -> float:
+        """Equivalent pinhole focal length along u (pixels): f·sx/dx."""
+        return self.f_mm * self.sx / self.dx_mm
+
+    @property
+    def fy(self) -> float:
+        """Equivalent pinhole focal length along v (pixels): f/dy."""
+        return self.f_mm / self.dy_mm
+
+    @property
+    def K(self) -> np.ndarray:
+        """The pinhole part as a 3×3 matrix (pixels), distortion ignored."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def sensor_from_pixels(self, pixels: np.ndarray) -> np.ndarray:
+        """Pixels (N, 2) → distorted sensor coordinates (Xd, Yd) in mm, (N, 2)."""
+        pix = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+        return np.stack(
+            [(pix[:, 0] - self.cx) * self.dx_mm / self.sx, (pix[:, 1] - self.cy) * self.dy_mm], axis=1
+        )
+
+    def pixels_from_sensor(self, sensor_mm: np.ndarray) -> np.ndarray:
+        """Distorted sensor coordinates (N, 2) in mm → pixels (N, 2)."""
+        s = np.asarray(sensor_mm, dtype=np.float64).reshape(-1, 2)
+        return np.stack([self.sx * s[:, 0] / self.dx_mm + self.cx, s[:, 1] / self.dy_mm + self.cy], axis=1)
+
+    def undistort_sensor(self, sensor_mm: np.ndarray) -> np.ndarray:
+        """Distorted (Xd, Yd) → undistorted (Xu, Yu), mm, (N, 2). Closed form.
+
+        NaN beyond the fold of a negative κ1 (see the class docstring).
+        """
+        d = np.asarray(sensor_mm, dtype=np.float64).reshape(-1, 2)
+        r2 = np.sum(d * d, axis=1, keepdims=True)
+        out = d * (1.0 + self.kappa1 * r2)
+        if self.kappa1 < 0.0:
+            out[r2[:, 0] > 1.0 / (3.0 * -self.kappa1)] = np.nan
+        return out
+
+    def distort_sensor(self, sensor_mm: np.ndarray) -> np.ndarray:
+        """Undistorted (Xu, Yu) → distorted (Xd, Yd), mm, (N, 2).
+
+        Solves ``κ1·rd³ + rd − ru = 0`` on the radius by Newton's method. From
+        ``rd = ru`` the iteration is monotone for either sign of κ1 (the cubic
+        is convex for κ1 > 0 and we start right of the root, concave for
+        κ1 < 0 and we start left of it), so it cannot jump to a wrong branch.
+        """
+        u = np.asarray(sensor_mm, dtype=np.float64).reshape(-1, 2)
+        ru = np.hypot(u[:, 0], u[:, 1])
+        k = self.kappa1
+        if k == 0.0:
+            return u.copy()
+        rd = ru.copy()
+        valid = np.isfinite(ru)
+        if k < 0.0:
+            valid &= ru <= 2.0 / (3.0 * np.sqrt(-3.0 * k))
+        rd[~valid] = np.nan
+        for _ in range(100):
+            g = k * rd**3 + rd - ru
+            step = g / (3.0 * k * rd**2 + 1.0)
+            rd = rd - step
+            if not np.any(np.abs(step[valid]) > 1e-15 * np.maximum(ru[valid], 1e-300)):
+                break
+        # Xd = Xu·rd/ru (same direction, radius rd); ru = 0 maps to 0.
+        scale = np.where(ru > 0.0, rd / np.where(ru > 0.0, ru, 1.0), 1.0)
+        return u * scale[:, None]
+
+    def project(self, points_cam: np.ndarray) -> np.ndarray:
+        """Camera-frame points (N, 3) → distorted pixels (N, 2). NaN for z ≤ 0."""
+        p = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
+        z = p[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            und = self.f_mm * p[:, :2] / z[:, None]
+        und[~(z > 0.0)] = np.nan
+        return self.pixels_from_sensor(self.distort_sensor(und))
+
+    def rays(self, pixels: np.ndarray) -> np.ndarray:
+        """Distorted pixels (N, 2) → unit rays in the camera frame (N, 3)."""
+        und = self.undistort_sensor(self.sensor_from_pixels(pixels))
+        v = np.concatenate([und, np.full((len(und), 1), self.f_mm)], axis=1)
+        return _unit(v)
+
+    def ray_map(self) -> np.ndarray:
+        """Unit camera-frame ray of every pixel centre, (H, W, 3) float64."""
+        return self.rays(pixel_grid(self.width, self.height)).reshape(self.height, self.width, 3)

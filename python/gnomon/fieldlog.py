@@ -1,0 +1,310 @@
+"""The field log: one TOML file that describes one capture.
+
+The contract (sections, keys, units) is documented in ``field_logs/README.md``.
+Every path inside a field log is relative to the file. Unknown keys and
+missing required keys raise :class:`FieldLogError` naming the file and the key;
+the CLI prints that as one line and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gnomon import toml_io
+from gnomon.camera import OpenCVCamera, Pose
+from gnomon.errors import FieldLogError
+
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
+UNITS = ("mm", "m")
+EDGES = ("enter", "leave")
+
+
+class _Table:
+    """A TOML table being read: takes keys one by one, then rejects leftovers."""
+
+    def __init__(self, path: Path, name: str, data: Any):
+        if not isinstance(data, dict):
+            raise FieldLogError(f"{path}: [{name}] must be a table")
+        self.path, self.name, self.data = path, name, dict(data)
+
+    def where(self, key: str) -> str:
+        return f"{self.path}: [{self.name}] {key}"
+
+    def error(self, key: str, message: str) -> FieldLogError:
+        return FieldLogError(f"{self.where(key)}: {message}")
+
+    def take(self, key: str, default: Any = ...) -> Any:
+        """Pop ``key``; without a default the key is required."""
+        if key in self.data:
+            return self.data.pop(key)
+        if default is ...:
+            raise FieldLogError(f"{self.path}: [{self.name}] missing required key '{key}'")
+        return default
+
+    def number(self, key: str, default: Any = ..., *, positive: bool = False) -> float:
+        v = self.take(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.error(key, f"expected a finite number, got {v!r}")
+        if positive and v <= 0:
+            raise self.error(key, f"must be > 0, got {v!r}")
+        return float(v)
+
+    def integer(self, key: str, default: Any = ..., *, minimum: int | None = None) -> int:
+        v = self.take(key, default)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.error(key, f"expected an integer, got {v!r}")
+        if minimum is not None and v < minimum:
+            raise self.error(key, f"must be ≥ {minimum}, got {v}")
+        return int(v)
+
+    def string(self, key: str, default: Any = ..., choices: tuple[str, ...] | None = None) -> str:
+        v = self.take(key, default)
+        if not isinstance(v, str):
+            raise self.error(key, f"expected a string, got {v!r}")
+        if choices is not None and v not in choices:
+            raise self.error(key, f"expected one of {', '.join(map(repr, choices))}, got {v!r}")
+        return v
+
+    def vector(self, key: str, n: int, default: Any = ...) -> np.ndarray:
+        v = self.take(key, default)
+        ok = isinstance(v, (list, tuple)) and len(v) == n
+        ok = ok and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+        if not ok or not all(math.isfinite(x) for x in v):
+            raise self.error(key, f"expected {n} finite numbers, got {v!r}")
+        return np.asarray(v, dtype=np.float64)
+
+    def subtable(self, key: str, *, required: bool = False) -> "_Table | None":
+        if key not in self.data:
+            if required:
+                raise FieldLogError(f"{self.path}: missing required table [{self.name}.{key}]")
+            return None
+        return _Table(self.path, f"{self.name}.{key}", self.data.pop(key))
+
+    def done(self) -> None:
+        if self.data:
+            key = sorted(self.data)[0]
+            raise FieldLogError(f"{self.path}: [{self.name}] unknown key '{key}'")
+
+
+@dataclass(frozen=True)
+class CaptureSpec:
+    """Where the frames are. ``frames`` is a sorted list of image files, or one video."""
+
+    pattern: str
+    image_files: tuple[Path, ...] = ()
+    video: Path | None = None
+    units: str = "mm"
+    gamma: float | str = "srgb"
+    frame_count: int | None = None
+
+
+@dataclass(frozen=True)
+class PlaneSpec:
+    """A reference plane in world coordinates, with the image regions where it is bare."""
+
+    name: str
+    point: np.ndarray
+    normal: np.ndarray  # unit
+    regions: tuple[tuple[int, int, int, int], ...]
+
+
+@dataclass(frozen=True)
+class LightSpec:
+    kind: str
+    position: np.ndarray | None = None  # lamp centre, world units
+
+
+@dataclass(frozen=True)
+class ScanSettings:
+    min_contrast: float = 20.0
+    window: int = 4
+    edge: str = "enter"
+    max_depth_jump: float = 0.02
+
+
+@dataclass(frozen=True)
+class FieldLog:
+    path: Path
+    capture: CaptureSpec
+    camera: OpenCVCamera
+    pose: Pose
+    planes: tuple[PlaneSpec, ...]
+    light: LightSpec
+    scan: ScanSettings
+    camera_file: Path | None = None
+    calibration: dict = field(default_factory=dict)
+
+    @property
+    def base_dir(self) -> Path:
+        return self.path.parent
+
+
+def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
+    pattern = t.string("frames")
+    units = t.string("units", "mm", UNITS)
+    gamma_raw = t.take("gamma", "srgb")
+    if isinstance(gamma_raw, str):
+        if gamma_raw != "srgb":
+            raise t.error("gamma", f"expected a number or 'srgb', got {gamma_raw!r}")
+        gamma: float | str = "srgb"
+    elif isinstance(gamma_raw, (int, float)) and not isinstance(gamma_raw, bool) and gamma_raw > 0:
+        gamma = float(gamma_raw)
+    else:
+        raise t.error("gamma", f"expected a positive number or 'srgb', got {gamma_raw!r}")
+    frame_count = t.integer("frame_count", minimum=2) if "frame_count" in t.data else None
+    t.done()
+
+    if Path(pattern).suffix.lower() in VIDEO_SUFFIXES and not any(c in pattern for c in "*?["):
+        video = base / pattern
+        if not video.is_file():
+            raise FieldLogError(f"{t.where('frames')}: video {video} not found")
+        return CaptureSpec(pattern, (), video, units, gamma, frame_count)
+    folder = (base / pattern).parent
+    if not folder.is_dir():
+        raise FieldLogError(f"{t.where('frames')}: frames folder {folder} not found")
+    files = tuple(sorted(p for p in base.glob(pattern) if p.is_file()))
+    if not files:
+        raise FieldLogError(f"{t.where('frames')}: no files match {pattern!r} in {base}")
+    if len(files) < 2:
+        raise FieldLogError(f"{t.where('frames')}: only one frame matches {pattern!r}; a scan needs a sequence")
+    if frame_count is not None and len(files) != frame_count:
+        raise FieldLogError(
+            f"{t.where('frames')}: {len(files)} files match {pattern!r}, frame_count says {frame_count}"
+        )
+    return CaptureSpec(pattern, files, None, units, gamma, frame_count)
+
+
+def _parse_intrinsics(t: _Table) -> OpenCVCamera:
+    t.string("model", "opencv", ("opencv",))
+    width = t.integer("width", minimum=2)
+    height = t.integer("height", minimum=2)
+    cam = OpenCVCamera(
+        width=width,
+        height=height,
+        fx=t.number("fx", positive=True),
+        fy=t.number("fy", positive=True),
+        cx=t.number("cx"),
+        cy=t.number("cy"),
+        dist=tuple(t.vector("dist", 5, [0.0] * 5).tolist()),  # type: ignore[arg-type]
+    )
+    return cam
+
+
+def _parse_camera(t: _Table, base: Path) -> tuple[OpenCVCamera, Pose | None, Path | None, dict]:
+    pose_table = t.subtable("pose")
+    pose = None
+    if pose_table is not None:
+        pose = Pose.from_rvec_tvec(pose_table.vector("rvec", 3), pose_table.vector("tvec", 3))
+        pose_table.done()
+    camera_file = None
+    calibration: dict = {}
+    if "file" in t.data:
+        camera_file = base / t.string("file")
+        t.done()
+        data = toml_io.load(camera_file)
+        calibration = data.pop("calibration", {}) if isinstance(data.get("calibration"), dict) else {}
+        cam = _parse_intrinsics(_Table(camera_file, "camera file", data))
+    else:
+        calibration_table = t.take("calibration", {})
+        calibration = calibration_table if isinstance(calibration_table, dict) else {}
+        cam = _parse_intrinsics(t)
+    t.done()
+    return cam, pose, camera_file, calibration
+
+
+def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
+    name = t.string("name", f"plane{index}")
+    point = t.vector("point", 3, [0.0, 0.0, 0.0])
+    normal = t.vector("normal", 3, [0.0, 0.0, 1.0])
+    if np.linalg.norm(normal) < 1e-12:
+        raise t.error("normal", "must not be the zero vector")
+    raw = t.take("regions")
+    if not isinstance(raw, list) or not raw:
+        raise t.error("regions", "expected a non-empty list of [u0, v0, u1, v1] rectangles")
+    regions = []
+    for r in raw:
+        ok = isinstance(r, list) and len(r) == 4 and all(isinstance(x, int) and not isinstance(x, bool) for x in r)
+        if not ok:
+            raise t.error("regions", f"each region is [u0, v0, u1, v1] in whole pixels, got {r!r}")
+        u0, v0, u1, v1 = r
+        if not (0 <= u0 < u1 <= width and 0 <= v0 < v1 <= height):
+            raise t.error("regions", f"region {r} is empty or outside the {width}x{height} image")
+        regions.append((u0, v0, u1, v1))
+    t.done()
+    return PlaneSpec(name, point, normal / np.linalg.norm(normal), tuple(regions))
+
+
+def _parse_light(t: _Table) -> LightSpec:
+    kind = t.string("kind")
+    if kind != "lamp":
+        raise t.error("kind", f"light kind {kind!r} is not supported yet (supported: 'lamp')")
+    position = t.vector("position", 3)
+    t.done()
+    return LightSpec(kind, position)
+
+
+def _parse_scan(t: _Table | None) -> ScanSettings:
+    if t is None:
+        return ScanSettings()
+    s = ScanSettings(
+        min_contrast=t.number("min_contrast", 20.0, positive=True),
+        window=t.integer("window", 4, minimum=1),
+        edge=t.string("edge", "enter", EDGES),
+        max_depth_jump=t.number("max_depth_jump", 0.02, positive=True),
+    )
+    t.done()
+    return s
+
+
+def load_field_log(path: str | Path) -> FieldLog:
+    """Read and validate a field log. Raises :class:`FieldLogError` on any problem."""
+    p = Path(path)
+    if not p.is_file():
+        raise FieldLogError(f"{p}: field log not found")
+    root = _Table(p, "field log", toml_io.load(p))
+    base = p.resolve().parent
+
+    def section(name: str, required: bool = True) -> _Table | None:
+        if name not in root.data:
+            if required:
+                raise FieldLogError(f"{p}: missing required table [{name}]")
+            return None
+        return _Table(p, name, root.data.pop(name))
+
+    capture = _parse_capture(section("capture"), base)  # type: ignore[arg-type]
+    camera, pose, camera_file, calibration = _parse_camera(section("camera"), base)  # type: ignore[arg-type]
+    if pose is None:
+        raise FieldLogError(f"{p}: missing required table [camera.pose] (the world → camera transform)")
+    raw_planes = root.data.pop("planes", None)
+    if not isinstance(raw_planes, list) or not raw_planes:
+        raise FieldLogError(f"{p}: missing required [[planes]] (at least one reference plane)")
+    planes = tuple(
+        _parse_plane(_Table(p, f"planes.{i}", d), i, camera.width, camera.height) for i, d in enumerate(raw_planes)
+    )
+    light = _parse_light(section("light"))  # type: ignore[arg-type]
+    scan = _parse_scan(section("scan", required=False))
+    root.done()
+
+    log = FieldLog(p, capture, camera, pose, planes, light, scan, camera_file, calibration)
+    _check_geometry(log)
+    return log
+
+
+def _check_geometry(log: FieldLog) -> None:
+    """The camera and the lamp must both be on the visible side of the first plane."""
+    plane = log.planes[0]
+    cam_side = float(np.dot(log.pose.camera_centre_world - plane.point, plane.normal))
+    if abs(cam_side) < 1e-9:
+        raise FieldLogError(f"{log.path}: [camera.pose] puts the camera in the plane '{plane.name}'")
+    if log.light.kind == "lamp" and log.light.position is not None:
+        lamp_side = float(np.dot(log.light.position - plane.point, plane.normal))
+        if lamp_side * cam_side <= 0:
+            raise FieldLogError(
+                f"{log.path}: [light] position {log.light.position.tolist()} is below the plane "
+                f"'{plane.name}' (not on the camera's side): the surface the camera sees would be unlit"
+            )

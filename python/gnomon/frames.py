@@ -1,0 +1,181 @@
+"""Frame readers: image folders and video files, decoded on a background thread.
+
+Frames are delivered one at a time as grey images (uint8 or uint16, as
+encoded), so a scan never holds the whole sequence in memory. Decoding runs on
+a reader thread ahead of the consumer (OpenCV releases the GIL while decoding),
+through a small bounded queue.
+
+Problems with the input raise :class:`FrameError` naming the frame: a file that
+cannot be decoded, a frame whose size differs from the first, a video that
+ends before the number of frames it announced (or the field log expects).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import queue
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from gnomon.errors import FrameError
+
+_QUEUE_DEPTH = 8
+_DONE = object()
+
+
+def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while block := fh.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def to_grey(image: np.ndarray) -> np.ndarray:
+    """A decoded frame (grey, BGR or BGRA; 8 or 16 bit) as a 2-D grey image of the same depth."""
+    if image.ndim == 2:
+        return image
+    if image.shape[2] == 4:
+        return cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY)
+    if image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    return image[:, :, 0]
+
+
+def decode_image_file(path: Path) -> tuple[np.ndarray, bytes]:
+    """Decode an image file as stored (keeping 16-bit data); return it and its raw bytes."""
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise FrameError(f"{path}: cannot be read ({exc.strerror})") from None
+    image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)
+    if image is None or image.size == 0:
+        raise FrameError(f"{path}: cannot be decoded as an image")
+    if image.dtype not in (np.uint8, np.uint16):
+        raise FrameError(f"{path}: unsupported sample type {image.dtype} (8- or 16-bit images only)")
+    return image, raw
+
+
+@dataclass
+class Frame:
+    index: int
+    grey: np.ndarray  # (H, W) uint8 | uint16
+    color: np.ndarray | None  # (H, W, 3) BGR, only for the first frame
+    name: str
+
+
+class FrameSource:
+    """A sequence of frames from an image list or a video file.
+
+    ``expected_count``: when given, a source that delivers fewer frames raises
+    :class:`FrameError` (a truncated video or a missing file is not a shorter scan).
+    """
+
+    def __init__(self, image_files: tuple[Path, ...] = (), video: Path | None = None,
+                 expected_count: int | None = None):
+        if bool(image_files) == (video is not None):
+            raise ValueError("give either image files or a video")
+        self.image_files = tuple(image_files)
+        self.video = video
+        self.expected_count = expected_count
+        # Digest of every frame file's bytes, filled while decoding (videos: see frames_digest).
+        self.digest = hashlib.sha256()
+        if video is not None:
+            cap = cv2.VideoCapture(str(video))
+            try:
+                if not cap.isOpened():
+                    raise FrameError(f"{video}: cannot be opened as a video")
+                announced = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+            finally:
+                cap.release()
+            self.count = expected_count if expected_count is not None else announced
+            if self.count <= 1:
+                raise FrameError(f"{video}: the video reports {announced} frames; a scan needs a sequence")
+        else:
+            self.count = len(self.image_files)
+
+    def frames_digest(self) -> str:
+        """sha256 of the input: all image files' bytes (after a full pass), or the video file."""
+        if self.video is not None:
+            return sha256_file(self.video)
+        return self.digest.hexdigest()
+
+    @property
+    def name(self) -> str:
+        return str(self.video) if self.video is not None else str(self.image_files[0].parent)
+
+    def _produce(self, out: "queue.Queue[object]", stop: threading.Event) -> None:
+        try:
+            for frame in self._decode():
+                while not stop.is_set():
+                    try:
+                        out.put(frame, timeout=0.1)
+                        break
+                    except queue.Full:
+                        continue
+                if stop.is_set():
+                    return
+            out.put(_DONE)
+        except BaseException as exc:  # forwarded to the consumer, re-raised there
+            out.put(exc)
+
+    def _check_size(self, index: int, name: str, image: np.ndarray, first: np.ndarray | None) -> None:
+        if first is not None and image.shape[:2] != first.shape[:2]:
+            h, w = image.shape[:2]
+            h0, w0 = first.shape[:2]
+            raise FrameError(f"frame {index} ({name}): size {w}x{h} differs from the first frame's {w0}x{h0}")
+        if first is not None and image.dtype != first.dtype:
+            raise FrameError(f"frame {index} ({name}): {image.dtype} samples, the first frame has {first.dtype}")
+
+    def _decode(self) -> Iterator[Frame]:
+        first: np.ndarray | None = None
+        if self.video is None:
+            for i, path in enumerate(self.image_files):
+                image, raw = decode_image_file(path)
+                self.digest.update(raw)
+                self._check_size(i, path.name, image, first)
+                color = image if (i == 0 and image.ndim == 3) else None
+                if first is None:
+                    first = image
+                yield Frame(i, to_grey(image), color[:, :, :3] if color is not None else None, path.name)
+            return
+        cap = cv2.VideoCapture(str(self.video))
+        try:
+            i = 0
+            while i < self.count:
+                ok, image = cap.read()
+                if not ok or image is None:
+                    raise FrameError(
+                        f"{self.video}: the video ended after {i} frames, expected {self.count}"
+                    )
+                self._check_size(i, f"video frame {i}", image, first)
+                if first is None:
+                    first = image
+                color = image[:, :, :3] if (i == 0 and image.ndim == 3) else None
+                yield Frame(i, to_grey(image), color, f"video frame {i}")
+                i += 1
+        finally:
+            cap.release()
+
+    def __iter__(self) -> Iterator[Frame]:
+        """Frames in order, decoded on a background thread."""
+        out: "queue.Queue[object]" = queue.Queue(maxsize=_QUEUE_DEPTH)
+        stop = threading.Event()
+        worker = threading.Thread(target=self._produce, args=(out, stop), name="gnomon-frame-reader", daemon=True)
+        worker.start()
+        try:
+            while True:
+                item = out.get()
+                if item is _DONE:
+                    return
+                if isinstance(item, BaseException):
+                    raise item
+                yield item  # type: ignore[misc]
+        finally:
+            stop.set()
+            worker.join(timeout=5)

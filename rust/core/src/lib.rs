@@ -1,0 +1,22 @@
+//! gnomon-core: the per-pixel numerics of the Gnomon shadow scanner
+//! (Bouguet & Perona, "3D photography on your desk", 1998).
+//!
+//! * [`TemporalTracker`]: streaming per-pixel shadow times from a sequence of
+//!   grey frames, `O(pixels)` memory whatever the number of frames;
+//! * [`triangulate`]: camera rays ∩ interpolated shadow planes;
+//! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
+//!
+//! Pure Rust, no Python types; every function on user data returns
+//! `Result<_, KernelError>`.
+
+pub mod error;
+pub mod geometry;
+pub mod sample;
+pub mod tracker;
+pub mod triangulate;
+
+pub use error::KernelError;
+pub use geometry::{Plane, Ray};
+pub use sample::{Lane, Sample};
+pub use tracker::{find_crossing, Crossing, Edge, ShadowTimes, TemporalTracker, TrackerParams};
+pub use triangulate::{plane_at, triangulate};

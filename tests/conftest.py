@@ -1,0 +1,53 @@
+"""Shared fixtures: small captures written to a temporary folder."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from gnomon import toml_io
+
+# Tests never talk to the network and never open a viewer.
+os.environ.setdefault("RERUN_TELEMETRY_ENABLED", "false")
+
+
+def write_tiny_capture(folder: Path, *, n_frames: int = 12, width: int = 48, height: int = 36,
+                       lamp=(-200.0, 0.0, 400.0), extra: dict | None = None) -> Path:
+    """A minimal, valid capture: a dark band sweeping left→right, a camera looking
+    straight down at the desk from 500 mm, and its field log. Returns the log's path."""
+    frames = folder / "frames"
+    frames.mkdir(parents=True, exist_ok=True)
+    u = np.arange(width)
+    for i in range(n_frames):
+        centre = -4 + (width + 8) * i / (n_frames - 1)
+        shadow = np.clip(np.abs(u - centre) - 2.0, 0, 1)  # 1 = lit
+        row = (40 + 160 * shadow).astype(np.uint8)
+        cv2.imwrite(str(frames / f"frame_{i:04d}.png"), np.tile(row, (height, 1)))
+    log = {
+        "capture": {"frames": "frames/*.png", "units": "mm", "gamma": 1.0},
+        "camera": {
+            "model": "opencv", "width": width, "height": height,
+            "fx": 60.0, "fy": 60.0, "cx": (width - 1) / 2, "cy": (height - 1) / 2,
+            "dist": [0.0, 0.0, 0.0, 0.0, 0.0],
+            # Camera at z = 500 looking down: world z up maps to camera -z.
+            "pose": {"rvec": [np.pi, 0.0, 0.0], "tvec": [0.0, 0.0, 500.0]},
+        },
+        "planes": [{"name": "desk", "point": [0, 0, 0], "normal": [0, 0, 1],
+                    "regions": [[0, 0, width, 6], [0, height - 6, width, height]]}],
+        "light": {"kind": "lamp", "position": list(lamp)},
+        "scan": {"min_contrast": 20},
+    }
+    for section, values in (extra or {}).items():
+        log.setdefault(section, {}).update(values)
+    path = folder / "field_log.toml"
+    toml_io.dump(log, path)
+    return path
+
+
+@pytest.fixture
+def tiny_capture(tmp_path: Path) -> Path:
+    return write_tiny_capture(tmp_path / "capture")

@@ -1,0 +1,83 @@
+"""Shadow lines on a reference plane from the shadow-time map (isochrones)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gnomon.camera import OpenCVCamera, Pose
+from gnomon.fieldlog import PlaneSpec
+from gnomon.reference_lines import fit_line_robust, isochrone_crossings, measure_reference_lines
+from gnomon.shadow_planes import lamp_shadow_planes
+
+CAMERA = OpenCVCamera(160, 120, 150.0, 152.0, 80.3, 59.1, (-0.2, 0.08, 0.001, -0.002, 0.0))
+# Camera 400 mm above the desk, tilted 20° about x.
+POSE = Pose.from_rvec_tvec(np.array([np.pi + np.radians(20), 0, 0]), np.array([10.0, 30.0, 420.0]))
+X0, SPEED = -150.0, 5.0  # world x of the shadow line at frame 0, mm per frame
+
+
+def desk_times() -> np.ndarray:
+    """Exact shadow times of a line x = X0 + SPEED·t sweeping the desk (z = 0)."""
+    rays = CAMERA.ray_map().reshape(-1, 3)
+    n = POSE.R @ np.array([0, 0, 1.0])
+    d = n @ POSE.t
+    pts_cam = rays * (d / (rays @ n))[:, None]
+    pts = POSE.camera_to_world(pts_cam)
+    return ((pts[:, 0] - X0) / SPEED).reshape(CAMERA.height, CAMERA.width)
+
+
+def test_crossings_on_a_ramp() -> None:
+    times = np.tile(np.arange(10) * 0.4, (3, 1))  # 0, 0.4, ..., 3.6 along each row
+    f, u, v = isochrone_crossings(times, n_frames=5)
+    # frames 0..3 cross each row once, at u = t / 0.4
+    assert sorted(set(f.tolist())) == [0, 1, 2, 3]
+    np.testing.assert_allclose(u, f / 0.4, atol=1e-12)
+    assert len(f) == 4 * 3
+
+
+def test_robust_line_ignores_outliers() -> None:
+    rng = np.random.default_rng(1)
+    s = np.linspace(-50, 50, 200)
+    xy = np.stack([3 + 0.6 * s, -2 + 0.8 * s], axis=1) + rng.normal(0, 0.01, (200, 2))
+    xy[::10] += rng.normal(0, 20, (20, 2))  # 10 % gross outliers
+    c, d, inl = fit_line_robust(xy)
+    assert abs(abs(d @ np.array([0.6, 0.8])) - 1) < 1e-5
+    assert inl.sum() >= 175 and not inl[::10].all()
+
+
+def test_lines_recover_the_world_line_through_distortion() -> None:
+    times = desk_times()
+    rng = np.random.default_rng(0)
+    corrupt = rng.random(times.shape) < 0.01
+    times[corrupt] += rng.normal(0, 10, corrupt.sum())  # wrong shadow times
+    spec = PlaneSpec("desk", np.zeros(3), np.array([0, 0, 1.0]), ((0, 0, 160, 15), (0, 100, 160, 120)))
+    n_frames = 60
+    lines = measure_reference_lines(times, n_frames, spec, CAMERA, POSE)
+    found = np.flatnonzero(lines.found)
+    assert len(found) > 40
+    for t in found:
+        p_world = POSE.camera_to_world(lines.point[t])
+        d_world = POSE.R.T @ lines.direction[t]
+        assert abs(p_world[2]) < 1e-6  # on the desk
+        assert p_world[0] == pytest.approx(X0 + SPEED * t, abs=0.02)  # 0.02 mm ≪ a pixel (~2.7 mm)
+        assert abs(abs(d_world[1]) - 1) < 1e-6  # along world y
+
+
+def test_lamp_planes_contain_lamp_and_line() -> None:
+    times = desk_times()
+    spec = PlaneSpec("desk", np.zeros(3), np.array([0, 0, 1.0]), ((0, 0, 160, 15), (0, 100, 160, 120)))
+    lines = measure_reference_lines(times, 60, spec, CAMERA, POSE)
+    lamp_world = np.array([-300.0, 0.0, 500.0])
+    lamp_cam = POSE.world_to_camera(lamp_world)
+    planes, degenerate = lamp_shadow_planes([lines], lamp_cam)
+    assert degenerate == 0
+    for t in np.flatnonzero(lines.found):
+        n, d = planes[t, :3], planes[t, 3]
+        assert abs(np.linalg.norm(n) - 1) < 1e-12
+        assert abs(n @ lamp_cam - d) < 1e-9
+        for s in (-100.0, 100.0):
+            q = lines.point[t] + s * lines.direction[t]
+            assert abs(n @ q - d) < 1e-9
+    # consistently oriented normals, so interpolation between frames is safe
+    valid = planes[np.isfinite(planes[:, 0])]
+    assert np.all(np.sum(valid[1:, :3] * valid[:-1, :3], axis=1) > 0)
