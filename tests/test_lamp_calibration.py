@@ -1,0 +1,319 @@
+"""The lamp from pencil shadows (METHOD.md §2), on synthetic photos.
+
+The photos are made here, independently of gnomon's geometry: the shadow tip
+is the desk point on the line from the lamp through the pencil's top, and
+pixels come straight from cv2.projectPoints with the scene's rvec/tvec.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+
+from gnomon import toml_io
+from gnomon.camera import OpenCVCamera, Pose
+from gnomon.errors import GnomonError
+from gnomon.light import calibrate_lamp_cli, calibrate_lamp_from_pencil, load_pencil_log
+
+SIGMA_PX = 0.3
+
+
+@dataclasses.dataclass
+class Scene:
+    camera: OpenCVCamera
+    pose: Pose
+    rvec: np.ndarray
+    tvec: np.ndarray
+    lamp: np.ndarray
+    height: float
+    bases: np.ndarray  # world, on the desk z = 0
+    tips: np.ndarray  # shadow tips, world
+
+    def project(self, points_world: np.ndarray) -> np.ndarray:
+        pix, _ = cv2.projectPoints(points_world.reshape(-1, 1, 3), self.rvec, self.tvec,
+                                   self.camera.K, self.camera.dist_coeffs)
+        return pix.reshape(-1, 2)
+
+    @property
+    def distance(self) -> float:
+        """Lamp to scene (the pencils' centroid), mm."""
+        return float(np.linalg.norm(self.lamp - self.bases.mean(axis=0)))
+
+
+def make_scene(lamp=(-250.0, 80.0, 480.0), height=150.0,
+               bases=((-120.0, -100.0), (70.0, -80.0), (0.0, 110.0))) -> Scene:
+    """A 1280x960 webcam with some distortion, 600 mm from a desk (z = 0, mm), looking
+    down at 42°; a bare-bulb lamp up and to the left; a 150 mm pencil at 3 spots."""
+    camera = OpenCVCamera(1280, 960, 1100.0, 1100.0, 639.5, 479.5, (-0.1, 0.02, 0.001, -0.0005, 0.0))
+    centre = np.array([0.0, -450.0, 400.0])
+    z = -centre / np.linalg.norm(centre)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    R = np.stack([x, np.cross(z, x), z])  # rows: camera axes in the world (x right, y down, z forward)
+    tvec = -R @ centre
+    lamp = np.asarray(lamp, dtype=np.float64)
+    b = np.array([[u, v, 0.0] for u, v in bases])
+    top = b + [0.0, 0.0, height]
+    tips = lamp + (top - lamp) * (lamp[2] / (lamp[2] - top[:, 2]))[:, None]
+    return Scene(camera, Pose(R, tvec), cv2.Rodrigues(R)[0].ravel(), tvec, lamp, height, b, tips)
+
+
+def observe(scene: Scene, rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+    b, t = scene.project(scene.bases), scene.project(scene.tips)
+    assert np.all((b >= 0) & (b <= [1279, 959])) and np.all((t >= 0) & (t <= [1279, 959]))
+    if rng is not None:
+        b = b + rng.normal(0.0, SIGMA_PX, b.shape)
+        t = t + rng.normal(0.0, SIGMA_PX, t.shape)
+    return b, t
+
+
+def calibrate(scene: Scene, b: np.ndarray, t: np.ndarray, **kw):
+    return calibrate_lamp_from_pencil(scene.camera, scene.pose, [0, 0, 0], [0, 0, 1], b, t, scene.height,
+                                      kw.pop("sigma_px", SIGMA_PX), **kw)
+
+
+def test_exact_photos_give_the_lamp_exactly():
+    scene = make_scene()
+    cal = calibrate(scene, *observe(scene))
+    assert np.linalg.norm(cal.position_world - scene.lamp) < 1e-6
+    assert np.all(cal.residuals < 1e-6)
+    np.testing.assert_allclose(cal.bases_world, scene.bases, atol=1e-6)
+    np.testing.assert_allclose(cal.shadow_tips_world, scene.tips, atol=1e-6)
+    np.testing.assert_allclose(cal.tops_world[:, 2], scene.height, atol=1e-6)
+    assert cal.warnings == []
+    assert cal.covariance.shape == (3, 3) and np.all(np.linalg.eigvalsh(cal.covariance) > 0)
+    assert cal.dof == 3
+
+
+def test_normal_sign_does_not_matter():
+    scene = make_scene()
+    b, t = observe(scene)
+    up = calibrate(scene, b, t)
+    down = calibrate_lamp_from_pencil(scene.camera, scene.pose, [5.0, -3.0, 0.0], [0, 0, -2.0], b, t,
+                                      scene.height, SIGMA_PX)
+    np.testing.assert_allclose(down.position_world, up.position_world, atol=1e-9)
+
+
+def test_noisy_photos_locate_the_lamp_within_one_percent():
+    scene = make_scene()
+    cal = calibrate(scene, *observe(scene, np.random.default_rng(20240417)))
+    error = np.linalg.norm(cal.position_world - scene.lamp)
+    assert error < 0.01 * scene.distance, (error, scene.distance)
+    # ... and within what its own covariance says (χ², 3 dof, 99.9 %: 16.3).
+    e = cal.position_world - scene.lamp
+    assert e @ np.linalg.solve(cal.covariance, e) < 16.3
+    assert np.all(cal.residuals < 3.0)  # mm; lines miss each other by ~σ_px × footprint
+
+
+def test_reported_covariance_matches_monte_carlo():
+    scene = make_scene()
+    b0, t0 = observe(scene)
+    reference = calibrate(scene, b0, t0)
+    rng = np.random.default_rng(7)
+    errors, d2, chi2 = [], [], []
+    for _ in range(100):
+        cal = calibrate(scene, *observe(scene, rng))
+        e = cal.position_world - scene.lamp
+        errors.append(e)
+        d2.append(e @ np.linalg.solve(cal.covariance, e))
+        chi2.append(cal.chi2)
+    errors = np.array(errors)
+    ratio = errors.std(axis=0, ddof=1) / reference.sigma_world
+    assert np.all((ratio > 1 / 1.3) & (ratio < 1.3)), ratio
+    assert 2.3 <= np.mean(d2) <= 3.8, np.mean(d2)  # Mahalanobis² has mean 3 for 3 dof
+    assert 2.3 <= np.mean(chi2) <= 3.8, np.mean(chi2)  # residual χ², 2N − 3 = 3 dof
+    assert np.all(np.linalg.norm(errors, axis=1) < 0.02 * scene.distance)
+
+
+def test_height_uncertainty_acts_along_the_normal_only():
+    scene = make_scene()
+    b, t = observe(scene)
+    plain = calibrate(scene, b, t)
+    with_h = calibrate(scene, b, t, sigma_height=1.0)
+    # A wrong height scales the lamp's height and keeps its foot (similar triangles).
+    extra = with_h.covariance - plain.covariance
+    np.testing.assert_allclose(extra[:2, :], 0.0, atol=1e-6)
+    assert extra[2, 2] == pytest.approx((scene.lamp[2] / scene.height) ** 2, rel=1e-3)
+    wrong = calibrate_lamp_from_pencil(scene.camera, scene.pose, [0, 0, 0], [0, 0, 1], b, t, 0.8 * scene.height)
+    np.testing.assert_allclose(wrong.position_world, scene.lamp * [1, 1, 0.8], atol=1e-6)
+    zero = calibrate(scene, b, t, sigma_px=0.0)
+    assert np.all(zero.covariance == 0) and np.isnan(zero.chi2)
+
+
+def test_nearly_parallel_lines_warn():
+    # Two pencil spots 8 mm apart: their lines to the lamp are ~1° apart.
+    scene = make_scene(bases=((-40.0, -60.0), (-34.0, -55.0)))
+    cal = calibrate(scene, *observe(scene))
+    assert cal.line_spread_deg < 5.0
+    assert any("close to parallel" in w for w in cal.warnings)
+    assert any("uncertain" in w for w in cal.warnings)
+
+
+def test_a_misplaced_click_fails_the_consistency_check():
+    scene = make_scene(bases=((-120.0, -100.0), (70.0, -80.0), (0.0, 110.0), (-150.0, 60.0)))
+    b, t = observe(scene, np.random.default_rng(3))
+    assert calibrate(scene, b, t).warnings == []
+    t[1] += [4.0, -3.0]  # 5 px off
+    cal = calibrate(scene, b, t)
+    assert cal.dof == 5 and cal.chi2 > 50
+    assert any("χ²" in w for w in cal.warnings)
+
+
+def test_swapped_base_and_tip_warns():
+    scene = make_scene()
+    b, t = observe(scene)
+    b[0], t[0] = t[0].copy(), b[0].copy()
+    cal = calibrate(scene, b, t)
+    assert any("photo(s) 1" in w for w in cal.warnings)
+
+
+def _one_line_error(excinfo) -> str:
+    message = str(excinfo.value)
+    assert "\n" not in message
+    return message
+
+
+@pytest.mark.parametrize("height", [0.0, -10.0, float("nan")])
+def test_height_must_be_positive(height):
+    scene = make_scene()
+    b, t = observe(scene)
+    with pytest.raises(GnomonError) as excinfo:
+        calibrate_lamp_from_pencil(scene.camera, scene.pose, [0, 0, 0], [0, 0, 1], b, t, height)
+    assert "height must be > 0" in _one_line_error(excinfo)
+
+
+def test_one_photo_is_not_enough():
+    scene = make_scene()
+    b, t = observe(scene)
+    with pytest.raises(GnomonError) as excinfo:
+        calibrate(scene, b[:1], t[:1])
+    assert "at least 2 pencil photos, got 1" in _one_line_error(excinfo)
+
+
+def test_mismatched_shapes():
+    scene = make_scene()
+    b, t = observe(scene)
+    with pytest.raises(GnomonError) as excinfo:
+        calibrate(scene, b, t[:2])
+    assert "(N, 2)" in _one_line_error(excinfo)
+
+
+def test_ray_missing_the_plane():
+    scene = make_scene()
+    scene = dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, dist=(0.0,) * 5))
+    b, t = observe(scene)
+    t[1] = [640.0, -1500.0]  # 54° above the optical axis: above the horizon
+    with pytest.raises(GnomonError) as excinfo:
+        calibrate(scene, b, t)
+    message = _one_line_error(excinfo)
+    assert "photo 2" in message and "shadow tip" in message and "does not see the plane" in message
+
+
+# ------------------------------------------------------------------ the field log and the CLI hook
+
+
+def write_pencil_log(folder, scene: Scene, b: np.ndarray, t: np.ndarray, pencil_extra=None, extra=None):
+    cam = scene.camera
+    log = {
+        "camera": {
+            "model": "opencv", "width": cam.width, "height": cam.height,
+            "fx": cam.fx, "fy": cam.fy, "cx": cam.cx, "cy": cam.cy, "dist": list(cam.dist),
+            "pose": {"rvec": scene.rvec.tolist(), "tvec": scene.tvec.tolist()},
+        },
+        "planes": [{"name": "desk", "point": [0, 0, 0], "normal": [0, 0, 1], "regions": [[0, 0, 100, 100]]}],
+        "pencil": {
+            "height": scene.height,
+            "sigma_px": SIGMA_PX,
+            "photos": [{"base": bi.tolist(), "tip": ti.tolist(), "image": f"pencil{i + 1}.jpg"}
+                       for i, (bi, ti) in enumerate(zip(b, t))],
+            **(pencil_extra or {}),
+        },
+        **(extra or {}),
+    }
+    path = folder / "pencil.toml"
+    toml_io.dump(log, path)
+    return path
+
+
+def test_cli_writes_lamp_toml(tmp_path, capsys):
+    scene = make_scene()
+    b, t = observe(scene, np.random.default_rng(11))
+    path = write_pencil_log(tmp_path, scene, b, t, extra={"light": {"kind": "lamp", "position": [0, 0, 1]}})
+    assert calibrate_lamp_cli(argparse.Namespace(field_log=path)) == 0
+    out = capsys.readouterr().out
+    assert "position (world, mm)" in out and "±" in out and "photo 3" in out
+    written = toml_io.load(tmp_path / "lamp.toml")
+    assert written["light"]["kind"] == "lamp"
+    position = np.array(written["light"]["position"])
+    assert np.linalg.norm(position - scene.lamp) < 0.01 * scene.distance
+    cov = np.array(written["lamp_calibration"]["covariance"])
+    assert cov.shape == (3, 3) and np.allclose(cov, cov.T)
+    assert written["lamp_calibration"]["units"] == "mm"
+    assert len(written["lamp_calibration"]["residuals"]) == 3
+
+
+def test_field_log_parsing(tmp_path):
+    scene = make_scene()
+    b, t = observe(scene)
+    path = write_pencil_log(tmp_path, scene, b, t, pencil_extra={"units": "m", "sigma_height": 0.5})
+    log = load_pencil_log(path)
+    assert log.units == "m" and log.sigma_height == 0.5 and log.plane_name == "desk"
+    assert log.images == ("pencil1.jpg", "pencil2.jpg", "pencil3.jpg")
+    np.testing.assert_allclose(log.bases_px, b)
+
+
+@pytest.mark.parametrize(
+    "pencil_extra, extra, expected",
+    [
+        ({"height": -5.0}, None, "[pencil] height: must be > 0, got -5.0"),
+        ({"height": 0}, None, "[pencil] height: must be > 0"),
+        ({"hieght": 80.0}, None, "[pencil] unknown key 'hieght'"),
+        ({"plane": "wall"}, None, "[pencil] plane: no [[planes]] entry is named 'wall'"),
+        ({"sigma_px": -1.0}, None, "[pencil] sigma_px: must be ≥ 0"),
+        (None, {"lamp": {"x": 1}}, "[field log] unknown key 'lamp'"),
+    ],
+)
+def test_field_log_errors(tmp_path, pencil_extra, extra, expected):
+    scene = make_scene()
+    b, t = observe(scene)
+    path = write_pencil_log(tmp_path, scene, b, t, pencil_extra=pencil_extra, extra=extra)
+    with pytest.raises(GnomonError) as excinfo:
+        calibrate_lamp_cli(argparse.Namespace(field_log=path))
+    message = _one_line_error(excinfo)
+    assert expected in message and str(path) in message
+    assert not (tmp_path / "lamp.toml").exists()
+
+
+def test_field_log_with_one_photo(tmp_path):
+    scene = make_scene()
+    b, t = observe(scene)
+    path = write_pencil_log(tmp_path, scene, b[:1], t[:1])
+    with pytest.raises(GnomonError) as excinfo:
+        calibrate_lamp_cli(argparse.Namespace(field_log=path))
+    assert "[pencil] photos: the lamp needs at least 2 pencil photos, got 1" in _one_line_error(excinfo)
+
+
+def test_field_log_pixel_outside_the_image(tmp_path):
+    scene = make_scene()
+    b, t = observe(scene)
+    t[2] = [1500.0, 300.0]
+    path = write_pencil_log(tmp_path, scene, b, t)
+    with pytest.raises(GnomonError) as excinfo:
+        calibrate_lamp_cli(argparse.Namespace(field_log=path))
+    assert "[pencil.photos.2] tip: pixel [1500.0, 300.0] is outside the 1280x960 image" in _one_line_error(excinfo)
+
+
+def test_field_log_missing_pencil_table(tmp_path):
+    scene = make_scene()
+    b, t = observe(scene)
+    path = write_pencil_log(tmp_path, scene, b, t)
+    data = toml_io.load(path)
+    del data["pencil"]
+    toml_io.dump(data, path)
+    with pytest.raises(GnomonError) as excinfo:
+        calibrate_lamp_cli(argparse.Namespace(field_log=path))
+    assert "missing required table [pencil]" in _one_line_error(excinfo)
