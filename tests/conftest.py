@@ -11,8 +11,12 @@ import pytest
 
 from gnomon import toml_io
 
-# Tests never talk to the network and never open a viewer.
-os.environ.setdefault("RERUN_TELEMETRY_ENABLED", "false")
+# Tests never talk to the network and never open a viewer: rerun 0.41 turns its
+# analytics off when CI is set, and a viewer can only start with a display.
+os.environ.setdefault("CI", "1")
+os.environ["TELEMETRY_ENABLED"] = "false"
+os.environ.pop("DISPLAY", None)
+os.environ.pop("WAYLAND_DISPLAY", None)
 
 
 def write_tiny_capture(folder: Path, *, n_frames: int = 12, width: int = 48, height: int = 36,
