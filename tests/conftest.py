@@ -28,7 +28,7 @@ def write_tiny_capture(folder: Path, *, n_frames: int = 12, width: int = 48, hei
     u = np.arange(width)
     for i in range(n_frames):
         centre = -4 + (width + 8) * i / (n_frames - 1)
-        shadow = np.clip(np.abs(u - centre) - 2.0, 0, 1)  # 1 = lit
+        shadow = np.clip((np.abs(u - centre) - 4.0) / 4.0, 0, 1)  # 1 = lit, soft edges
         row = (40 + 160 * shadow).astype(np.uint8)
         cv2.imwrite(str(frames / f"frame_{i:04d}.png"), np.tile(row, (height, 1)))
     log = {

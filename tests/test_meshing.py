@@ -43,7 +43,9 @@ def test_invalid_pixels_leave_holes() -> None:
     valid[1, 1] = False
     depth[1, 1] = np.nan
     mesh = grid_mesh(grid_points(depth), depth, valid, 0.02)
-    assert len(mesh.vertices) == 8 and len(mesh.faces) == 0
+    # one triangle per quad survives: the one without the hole
+    assert len(mesh.vertices) == 8 and len(mesh.faces) == 4
+    assert 4 not in mesh.pixel_index[mesh.faces]
 
 
 def test_isolated_spike_is_rejected_but_a_step_is_kept() -> None:

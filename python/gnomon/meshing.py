@@ -41,13 +41,17 @@ def grid_mesh(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, max_rela
 
     def close(*zs: np.ndarray) -> np.ndarray:
         stack = np.stack(zs)
-        with np.errstate(invalid="ignore"):
-            spread = np.nanmax(stack, axis=0) - np.nanmin(stack, axis=0)
-            return np.all(np.isfinite(stack), axis=0) & (spread <= max_relative_jump * np.nanmin(stack, axis=0))
+        finite = np.all(np.isfinite(stack), axis=0)
+        filled = np.where(finite, stack, 0.0)
+        spread = filled.max(axis=0) - filled.min(axis=0)
+        return finite & (spread <= max_relative_jump * filled.min(axis=0))
 
-    # Split each quad along the diagonal whose ends are closer in depth.
+    # Split each quad along the diagonal whose ends are closer in depth; with
+    # one corner missing, along the diagonal that leaves a whole triangle.
     with np.errstate(invalid="ignore"):
         split_ad = np.abs(za - zd) <= np.abs(zb - zc)
+    split_ad = np.where(np.isnan(zb) | np.isnan(zc), True, split_ad)
+    split_ad = np.where(np.isnan(za) | np.isnan(zd), False, split_ad)
     tris = []
     for (p, q, r), zs, use in (
         ((a, c, d), (za, zc, zd), split_ad),

@@ -22,8 +22,6 @@ line in plane coordinates.
 
 from __future__ import annotations
 
-import contextlib
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +30,8 @@ from gnomon.camera import CameraModel, Pose
 from gnomon.fieldlog import PlaneSpec
 
 MIN_POINTS_PER_REGION = 5
+# How many measured frames (at most this far away) set an extrapolated line's direction.
+EXTRAPOLATION_FRAMES = 8
 
 
 @dataclass(frozen=True)
@@ -77,7 +77,8 @@ class ReferenceLines:
     ``point[t]`` and ``direction[t]`` (unit) define the line at frame t; rows of
     NaN mark frames without a reliable line. ``rms`` is the fit's residual RMS
     in world units, ``count`` its inliers, ``pixels[t]`` the inlier crossings
-    (image pixels, for display).
+    (image pixels, for display). ``extrapolated[t]``: the line was seen in one
+    region only, so its direction comes from the neighbouring frames.
     """
 
     plane_name: str
@@ -87,17 +88,24 @@ class ReferenceLines:
     rms: np.ndarray  # (N,)
     count: np.ndarray  # (N,) int
     pixels: list[np.ndarray]
+    extrapolated: np.ndarray  # (N,) bool: direction taken from neighbouring frames
 
     @property
     def found(self) -> np.ndarray:
         return np.isfinite(self.point[:, 0])
 
 
-@contextlib.contextmanager
-def _quiet_nan_warnings():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN slices are handled by the caller
-        yield
+def _typical_step(times: np.ndarray, axis: int) -> float:
+    """Median non-zero change of the shadow time between neighbours along ``axis``.
+
+    Zero steps are left out: a sharp edge sampled by few frames gives plateaus
+    of equal times, and the sweep's direction shows only in the steps between them.
+    """
+    if times.shape[axis] < 2:
+        return 0.0
+    d = np.diff(times, axis=axis)
+    d = d[np.isfinite(d) & (d != 0)]
+    return float(np.median(d)) if d.size else 0.0
 
 
 def isochrone_crossings(times: np.ndarray, n_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -111,11 +119,9 @@ def isochrone_crossings(times: np.ndarray, n_frames: int) -> tuple[np.ndarray, n
     if times.size == 0:
         empty = np.zeros(0)
         return empty.astype(np.int64), empty, empty
-    with np.errstate(invalid="ignore"), _quiet_nan_warnings():
-        du = np.nanmedian(np.diff(times, axis=1)) if times.shape[1] > 1 else np.nan
-        dv = np.nanmedian(np.diff(times, axis=0)) if times.shape[0] > 1 else np.nan
-    along_rows = not (abs(np.nan_to_num(dv)) > abs(np.nan_to_num(du)))
-    direction = np.sign(np.nan_to_num(du if along_rows else dv))
+    du, dv = _typical_step(times, axis=1), _typical_step(times, axis=0)
+    along_rows = not (abs(dv) > abs(du))
+    direction = np.sign(du if along_rows else dv)
     t = times if along_rows else times.T
     a, b = t[:, :-1], t[:, 1:]
     # Only crossings in the sweep's own direction: a wrong shadow time in a
@@ -204,8 +210,9 @@ def measure_reference_lines(
     rms = np.full(n_frames, np.nan)
     count = np.zeros(n_frames, dtype=np.int64)
     pixels: list[np.ndarray] = [np.zeros((0, 2)) for _ in range(n_frames)]
+    extrapolated = np.zeros(n_frames, dtype=bool)
     if len(frame) == 0:
-        return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels)
+        return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels, extrapolated)
 
     on_plane = plane.intersect(camera.rays(pix))
     good = np.isfinite(on_plane[:, 0])
@@ -215,21 +222,54 @@ def measure_reference_lines(
     regions_needed = min(2, len(plane_spec.regions))
     order = np.argsort(frame, kind="stable")
     bounds = np.searchsorted(frame[order], np.arange(n_frames + 1))
-    for t in range(n_frames):
-        idx = order[bounds[t]:bounds[t + 1]]
+    per_frame = [order[bounds[t]:bounds[t + 1]] for t in range(n_frames)]
+    angle = np.full(n_frames, np.nan)  # line direction in plane coordinates
+
+    def keep(t: int, idx: np.ndarray, centre: np.ndarray, d2: np.ndarray, inl: np.ndarray) -> None:
+        normal2 = np.array([-d2[1], d2[0]])
+        res = (xy[idx][inl] - centre) @ normal2
+        d3 = d2[0] * plane.e1 + d2[1] * plane.e2
+        point[t], direction[t] = plane.from_plane_coords(centre), d3 / np.linalg.norm(d3)
+        rms[t] = float(np.sqrt(np.mean(res**2)))
+        count[t] = int(inl.sum())
+        sel = pix[idx][inl]
+        pixels[t] = sel[np.argsort(sel[:, 1])]
+
+    for t, idx in enumerate(per_frame):
         if len(idx) < MIN_POINTS_PER_REGION * regions_needed:
             continue
         centre, d2, inl = fit_line_robust(xy[idx])
         per_region = np.bincount(region[idx][inl], minlength=len(plane_spec.regions))
         if np.count_nonzero(per_region >= MIN_POINTS_PER_REGION) < regions_needed:
             continue
-        normal2 = np.array([-d2[1], d2[0]])
-        res = (xy[idx][inl] - centre) @ normal2
-        p3 = plane.from_plane_coords(centre)
-        d3 = d2[0] * plane.e1 + d2[1] * plane.e2
-        point[t], direction[t] = p3, d3 / np.linalg.norm(d3)
-        rms[t] = float(np.sqrt(np.mean(res**2)))
-        count[t] = int(inl.sum())
-        sel = pix[idx][inl]
-        pixels[t] = sel[np.argsort(sel[:, 1])]
-    return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels)
+        if angle[np.isfinite(angle)].size and np.cos(np.arctan2(d2[1], d2[0]) - angle[np.isfinite(angle)][-1]) < 0:
+            d2 = -d2  # keep a consistent sense, so angles can be extrapolated
+        angle[t] = np.arctan2(d2[1], d2[0])
+        keep(t, idx, centre, d2, inl)
+
+    # At the ends of the sweep a slanted shadow line has entered one region
+    # but not yet the other. Its direction changes slowly, so take it from
+    # the nearest measured frames (linear in t) and fit only its offset.
+    measured = np.flatnonzero(np.isfinite(angle))
+    if len(measured) >= 3 and regions_needed == 2:
+        for t, idx in enumerate(per_frame):
+            if np.isfinite(angle[t]) or len(idx) < 2 * MIN_POINTS_PER_REGION:
+                continue
+            near = measured[np.argsort(np.abs(measured - t))[:EXTRAPOLATION_FRAMES]]
+            if np.min(np.abs(near - t)) > EXTRAPOLATION_FRAMES:
+                continue
+            slope, intercept = np.polyfit(near, np.unwrap(angle[near]), 1)
+            theta = slope * t + intercept
+            d2 = np.array([np.cos(theta), np.sin(theta)])
+            normal2 = np.array([-d2[1], d2[0]])
+            offsets = xy[idx] @ normal2
+            med = np.median(offsets)
+            mad = 1.4826 * np.median(np.abs(offsets - med))
+            inl = np.abs(offsets - med) <= 3.0 * max(mad, 1e-9 * (1.0 + abs(med)))
+            if inl.sum() < 2 * MIN_POINTS_PER_REGION:
+                continue
+            along = xy[idx][inl] @ d2
+            centre = np.mean(offsets[inl]) * normal2 + np.mean(along) * d2
+            keep(t, idx, centre, d2, inl)
+            extrapolated[t] = True
+    return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels, extrapolated)
