@@ -1,0 +1,571 @@
+"""Camera calibration from chessboard photos, and the camera file.
+
+* :func:`detect_chessboard` — automatic corner detection
+  (``cv2.findChessboardCornersSB``, then ``cv2.cornerSubPix`` with a window
+  sized to the board's squares in the image).
+* :func:`calibrate_zhang` — Zhang's multi-view method through OpenCV
+  (``cv2.calibrateCameraExtended``, 5 coefficients k1, k2, p1, p2, k3), with
+  per-view reprojection errors, parameter standard deviations and rejection of
+  outlier views.
+* :func:`calibrate_images` — photos → :class:`CameraCalibration`, with either
+  Zhang's method or our Tsai implementation (:mod:`gnomon.tsai`).
+* :func:`write_camera_file`, :func:`load_camera_file`, :func:`camera_from_table` —
+  the camera file (TOML) that field logs reference.
+
+Conventions: pixel centres at integer coordinates; the board's inner corners
+are at ``(i·square, j·square, 0)`` in OpenCV's order (i < cols fastest);
+``--board COLSxROWS`` counts *inner* corners, as OpenCV's ``patternSize``.
+Reprojection errors are RMS lengths of the 2D residual vectors (pixels), as
+OpenCV reports them (for isotropic noise σ per axis that is ≈ σ·√2).
+
+Camera file format (TOML; lengths in the board's units where any)::
+
+    model = "opencv"             # or "tsai"
+    width = 1280                 # pixels
+    height = 960
+    # model = "opencv": pixels; dist = [k1, k2, p1, p2, k3] on normalised coordinates
+    fx = 1050.2
+    fy = 1048.1
+    cx = 647.0
+    cy = 474.2
+    dist = [-0.12, 0.08, 0.0004, -0.0003, -0.02]
+    # model = "tsai": f_mm (mm), kappa1 (1/mm², Xu = Xd·(1 + kappa1·r²)),
+    # cx, cy (pixels), sx (-), dx_mm, dy_mm (frame-buffer pixel pitch, mm)
+
+    [calibration]                # optional: how the numbers were obtained
+    method = "zhang"             # "zhang" | "tsai-coplanar" | "tsai-views" | ... (+ "+full")
+    rms_px = 0.28                # over the views used
+    n_views = 12
+    images = ["a.png", ...]      # views used, and their RMS:
+    per_view_rms_px = [0.27, ...]
+    rejected = ["k.png"]         # outlier views, and their RMS before rejection
+    rejected_rms_px = [2.4]
+    skipped = ["blank.png"]      # no board found
+    board = "9x6"                # inner corners
+    square = 25.0                # board units
+
+    [calibration.std]            # 1-σ standard deviations of the parameters
+    fx = 0.9                     # (opencv: fx fy cx cy k1 k2 p1 p2 k3;
+    ...                          #  tsai: f_mm kappa1 [cx cy sx])
+
+The field log's inline ``[camera]`` uses the same keys.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import cv2
+import numpy as np
+
+from gnomon import toml_io
+from gnomon.camera import OpenCVCamera, Pose, TsaiCamera
+from gnomon.errors import GnomonError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".webp")
+OPENCV_STD_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+MIN_ZHANG_VIEWS = 3
+
+_OPENCV_KEYS = {"model", "width", "height", "fx", "fy", "cx", "cy", "dist"}
+_TSAI_KEYS = {"model", "width", "height", "f_mm", "kappa1", "cx", "cy", "sx", "dx_mm", "dy_mm"}
+_SB_FLAGS = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+_LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+
+
+# --------------------------------------------------------------------------- boards and images
+
+
+def parse_board(text: str) -> tuple[int, int]:
+    """``"9x6"`` → (9, 6): inner corners per row (cols) and per column (rows)."""
+    try:
+        cols, rows = (int(x) for x in str(text).lower().replace("×", "x").split("x"))
+    except ValueError:
+        raise GnomonError(f"board '{text}': expected COLSxROWS inner corners, e.g. 9x6") from None
+    if cols < 2 or rows < 2:
+        raise GnomonError(f"board '{text}': needs at least 2x2 inner corners")
+    return cols, rows
+
+
+def board_points(cols: int, rows: int, square: float) -> np.ndarray:
+    """Inner-corner coordinates (cols·rows, 3) on the board plane (board units), OpenCV's order."""
+    i, j = np.meshgrid(np.arange(cols, dtype=np.float64), np.arange(rows, dtype=np.float64))
+    return np.stack([i.ravel() * square, j.ravel() * square, np.zeros(i.size)], axis=1)
+
+
+def read_grey(path: str | os.PathLike) -> np.ndarray:
+    """Read an image file as a 2-D grey array (uint8 or uint16). Unreadable → GnomonError naming it."""
+    p = Path(path)
+    if not p.is_file():
+        raise GnomonError(f"{p}: image not found")
+    img = cv2.imread(str(p), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise GnomonError(f"{p}: not a readable image")
+    return img
+
+
+def to_grey_u8(image: np.ndarray) -> np.ndarray:
+    """Any grey or BGR image → 8-bit grey (16-bit and float data are rescaled to their range)."""
+    img = np.asarray(image)
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY if img.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
+    if img.dtype == np.uint8:
+        return img
+    f = img.astype(np.float64)
+    lo, hi = float(np.nanmin(f)), float(np.nanmax(f))
+    return np.clip(np.rint((f - lo) * (255.0 / max(hi - lo, 1e-12))), 0, 255).astype(np.uint8)
+
+
+def expand_image_args(items: Sequence[str | os.PathLike]) -> list[Path]:
+    """Command-line image arguments → files: a directory stands for its images, sorted by name."""
+    out: list[Path] = []
+    for it in items:
+        p = Path(it)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES)
+            if not found:
+                raise GnomonError(f"{p}: directory holds no images ({', '.join(IMAGE_SUFFIXES)})")
+            out.extend(found)
+        else:
+            out.append(p)
+    return out
+
+
+def detect_chessboard(image: np.ndarray, board: tuple[int, int], *, refine: bool = True) -> np.ndarray | None:
+    """Find the chessboard's inner corners: (cols·rows, 2) pixels in OpenCV's order, or None.
+
+    ``cv2.findChessboardCornersSB`` finds the board; ``cv2.cornerSubPix``
+    then refines each corner in a window of 0.4× the smallest corner spacing
+    (larger windows average more gradient; on our rendered views this halves
+    the SB detector's error, to ≈0.03–0.06 px RMS).
+    """
+    grey = to_grey_u8(image)
+    cols, rows = board
+    ok, corners = cv2.findChessboardCornersSB(grey, (cols, rows), flags=_SB_FLAGS)
+    if not ok or corners is None:
+        return None
+    pts = corners.reshape(-1, 2).astype(np.float64)
+    if not refine:
+        return pts
+    grid = pts.reshape(rows, cols, 2)
+    spacing = min(
+        float(np.linalg.norm(np.diff(grid, axis=0), axis=2).min()),
+        float(np.linalg.norm(np.diff(grid, axis=1), axis=2).min()),
+    )
+    win = int(np.clip(np.floor(0.4 * spacing), 2, 15))
+    refined = cv2.cornerSubPix(grey, pts.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1), _SUBPIX_CRITERIA)
+    refined = refined.reshape(-1, 2).astype(np.float64)
+    # cornerSubPix can slide off a corner in a blurred or cluttered window: keep SB's there.
+    moved = np.linalg.norm(refined - pts, axis=1) > 0.25 * spacing
+    refined[moved] = pts[moved]
+    return refined
+
+
+# --------------------------------------------------------------------------- Zhang
+
+
+@dataclass(frozen=True)
+class ZhangResult:
+    """Zhang's calibration of the views kept.
+
+    ``names``/``per_view_rms_px``/``poses`` for the views used (board → camera
+    poses); ``rejected`` = ((name, rms_px before rejection), ...); ``std`` the
+    1-σ standard deviations of fx, fy, cx, cy, k1, k2, p1, p2, k3 (OpenCV's,
+    from the Jacobian and the residual variance).
+    """
+
+    camera: OpenCVCamera
+    rms_px: float
+    names: tuple[str, ...]
+    per_view_rms_px: tuple[float, ...]
+    poses: tuple[Pose, ...]
+    std: dict[str, float]
+    rejected: tuple[tuple[str, float], ...] = ()
+    warnings: tuple[str, ...] = ()
+
+
+def _zhang_once(objs, pixs, size, flags):
+    K0 = np.eye(3)
+    d0 = np.zeros(5)
+    o = [np.ascontiguousarray(x, dtype=np.float32).reshape(-1, 1, 3) for x in objs]
+    p = [np.ascontiguousarray(x, dtype=np.float32).reshape(-1, 1, 2) for x in pixs]
+    try:
+        rms, K, dist, rvecs, tvecs, std_i, _std_e, _per_view = cv2.calibrateCameraExtended(
+            o, p, size, K0, d0, flags=flags, criteria=_LM_CRITERIA
+        )
+    except cv2.error as exc:  # degenerate views (e.g. all alike) make OpenCV give up
+        raise GnomonError(f"Zhang's calibration failed on these views: {exc.err}") from None
+    dist = np.asarray(dist, dtype=np.float64).ravel()[:5]
+    cam = OpenCVCamera(
+        width=int(size[0]),
+        height=int(size[1]),
+        fx=float(K[0, 0]),
+        fy=float(K[1, 1]),
+        cx=float(K[0, 2]),
+        cy=float(K[1, 2]),
+        dist=tuple(float(x) for x in dist),
+    )
+    poses = [Pose.from_rvec_tvec(r, t) for r, t in zip(rvecs, tvecs)]
+    # Our own per-view RMS in float64 (length of the 2D residual, as OpenCV's).
+    per_view = []
+    for obj, pix, pose in zip(objs, pixs, poses):
+        res = np.asarray(pix, dtype=np.float64).reshape(-1, 2) - cam.project(pose.world_to_camera(np.asarray(obj, dtype=np.float64)))
+        per_view.append(float(np.sqrt(np.mean(np.sum(res * res, axis=1)))))
+    std_i = np.asarray(std_i, dtype=np.float64).ravel()
+    std = {k: float(std_i[i]) for i, k in enumerate(OPENCV_STD_NAMES)}
+    all_sq = sum(r * r * len(o) for r, o in zip(per_view, objs))
+    total = float(np.sqrt(all_sq / sum(len(o) for o in objs)))
+    return cam, total, per_view, poses, std
+
+
+def calibrate_zhang(
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    *,
+    names: Sequence[str] | None = None,
+    fix_k3: bool = False,
+    reject_factor: float = 3.0,
+    reject_floor_px: float = 0.5,
+    min_views: int = MIN_ZHANG_VIEWS,
+) -> ZhangResult:
+    """Zhang's multi-view calibration through OpenCV, with outlier views rejected.
+
+    ``object_points``: per view (N, 3) board coordinates (z = 0, board units);
+    ``image_points``: per view (N, 2) pixels; ``image_size``: (width, height).
+    A view whose RMS exceeds ``max(reject_factor × median RMS, reject_floor_px)``
+    is dropped, worst first, recalibrating after each, while more than
+    ``min_views`` remain; each drop is a warning. ``fix_k3`` holds k3 at 0
+    (advisable for narrow fields of view). Fewer than ``min_views`` views → GnomonError.
+    """
+    n = len(object_points)
+    names = list(names) if names is not None else [f"view {i}" for i in range(n)]
+    if n < min_views:
+        raise GnomonError(f"Zhang's calibration needs at least {min_views} views with a board, got {n}")
+    flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    keep = list(range(n))
+    rejected: list[tuple[str, float]] = []
+    warns: list[str] = []
+    while True:
+        cam, rms, per_view, poses, std = _zhang_once([object_points[i] for i in keep], [image_points[i] for i in keep], image_size, flags)
+        med = float(np.median(per_view))
+        limit = max(reject_factor * med, reject_floor_px)
+        worst = int(np.argmax(per_view))
+        if per_view[worst] <= limit:
+            break
+        if len(keep) <= min_views:
+            warns.append(
+                f"{names[keep[worst]]}: reprojection RMS {per_view[worst]:.2f} px is an outlier (> {limit:.2f} px) "
+                f"but only {len(keep)} views are left: kept"
+            )
+            break
+        name = names[keep[worst]]
+        rejected.append((name, per_view[worst]))
+        warns.append(
+            f"{name}: rejected as an outlier view (reprojection RMS {per_view[worst]:.2f} px > {limit:.2f} px = "
+            f"max({reject_factor:g}× median {med:.2f}, {reject_floor_px:g}))"
+        )
+        keep.pop(worst)
+    return ZhangResult(
+        camera=cam,
+        rms_px=rms,
+        names=tuple(names[i] for i in keep),
+        per_view_rms_px=tuple(per_view),
+        poses=tuple(poses),
+        std=std,
+        rejected=tuple(rejected),
+        warnings=tuple(warns),
+    )
+
+
+# --------------------------------------------------------------------------- photos → camera
+
+
+@dataclass(frozen=True)
+class CameraCalibration:
+    """A calibrated camera and how it was obtained: what a camera file holds.
+
+    ``method``: "zhang", or "tsai-coplanar" / "tsai-views" (+ "+full");
+    ``names``/``per_view_rms_px``/``poses``: the views used (board → camera);
+    ``rejected``: ((name, rms_px), ...) outlier views; ``skipped``: images
+    without a board; ``std``: 1-σ parameter standard deviations.
+    """
+
+    camera: OpenCVCamera | TsaiCamera
+    method: str
+    rms_px: float
+    names: tuple[str, ...]
+    per_view_rms_px: tuple[float, ...]
+    poses: tuple[Pose, ...]
+    std: dict[str, float]
+    board: tuple[int, int]
+    square: float
+    rejected: tuple[tuple[str, float], ...] = ()
+    skipped: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    per_view_tsai: tuple[Any, ...] = ()
+
+    @property
+    def n_views(self) -> int:
+        return len(self.names)
+
+
+def detect_in_images(
+    paths: Sequence[str | os.PathLike],
+    board: tuple[int, int],
+    *,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> tuple[list[str], list[np.ndarray], tuple[int, int], list[str], list[str]]:
+    """Read the images and find the board in each.
+
+    Returns (names with a board, their corners, image size (w, h), names
+    skipped, warnings). Images of different sizes, or unreadable ones, are a
+    GnomonError naming the image; an image without a board is skipped with a
+    warning.
+    """
+    if len(paths) == 0:
+        raise GnomonError("no images given")
+    names, corners, skipped, warns = [], [], [], []
+    size: tuple[int, int] | None = None
+    first = ""
+    for k, path in enumerate(paths):
+        p = Path(path)
+        if progress:
+            progress(k, len(paths), p.name)
+        img = read_grey(p)
+        h, w = img.shape[:2]
+        if size is None:
+            size, first = (w, h), str(p)
+        elif (w, h) != size:
+            raise GnomonError(f"{p}: image size {w}x{h} differs from {size[0]}x{size[1]} of {first}; all views must come from one camera setting")
+        c = detect_chessboard(img, board)
+        if c is None:
+            skipped.append(str(p))
+            warns.append(f"{p}: no {board[0]}x{board[1]} chessboard found (inner corners); skipped")
+            continue
+        names.append(str(p))
+        corners.append(c)
+    if progress:
+        progress(len(paths), len(paths), "")
+    assert size is not None
+    return names, corners, size, skipped, warns
+
+
+def calibrate_images(
+    paths: Sequence[str | os.PathLike],
+    board: tuple[int, int],
+    square: float,
+    *,
+    model: str = "zhang",
+    pixel_pitch_mm: tuple[float, float] | None = None,
+    sx: float = 1.0,
+    full: bool = False,
+    fix_k3: bool = False,
+    reject_factor: float = 3.0,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> CameraCalibration:
+    """Chessboard photos → a calibrated camera.
+
+    ``board``: inner corners (cols, rows); ``square``: the square's side
+    (board units, e.g. mm). ``model="zhang"``: OpenCV's 5-coefficient model
+    by Zhang's method, ≥ 3 views. ``model="tsai"``: Tsai's model; each view by
+    Tsai's coplanar two-stage method, then, with several views, a joint
+    refinement (see :func:`gnomon.tsai.calibrate_views`); needs
+    ``pixel_pitch_mm = (dx, dy)`` and takes ``sx`` a priori; ``full``
+    optimises Cx, Cy (and sx with several views) too.
+    """
+    if model not in ("zhang", "tsai"):
+        raise GnomonError(f"model '{model}': expected 'zhang' or 'tsai'")
+    if not square > 0:
+        raise GnomonError(f"square {square}: the square's side must be positive")
+    if model == "tsai" and pixel_pitch_mm is None:
+        raise GnomonError("--model tsai needs the sensor's pixel pitch (--pixel-pitch DX[,DY] in mm, e.g. 0.0028): Tsai's method takes dx, dy a priori")
+    names, corners, size, skipped, warns = detect_in_images(paths, board, progress=progress)
+    obj = board_points(board[0], board[1], square)
+    if model == "zhang":
+        if len(names) < MIN_ZHANG_VIEWS:
+            missing = f" (none in {', '.join(Path(s).name for s in skipped)})" if skipped else ""
+            raise GnomonError(
+                f"only {len(names)} of {len(paths)} images show the {board[0]}x{board[1]} chessboard{missing}; "
+                f"Zhang's method needs at least {MIN_ZHANG_VIEWS}"
+            )
+        z = calibrate_zhang([obj] * len(names), corners, size, names=names, fix_k3=fix_k3, reject_factor=reject_factor)
+        return CameraCalibration(
+            camera=z.camera,
+            method="zhang",
+            rms_px=z.rms_px,
+            names=z.names,
+            per_view_rms_px=z.per_view_rms_px,
+            poses=z.poses,
+            std=z.std,
+            board=board,
+            square=float(square),
+            rejected=z.rejected,
+            skipped=tuple(skipped),
+            warnings=tuple(warns) + z.warnings,
+        )
+    from gnomon import tsai
+
+    if len(names) < 1:
+        raise GnomonError(f"none of the {len(paths)} images shows the {board[0]}x{board[1]} chessboard")
+    dx, dy = pixel_pitch_mm
+    r = tsai.calibrate_views([(obj, c) for c in corners], size[0], size[1], dx, dy, sx=sx, full=full, names=names)
+    method = "tsai-coplanar" if len(r.names) == 1 else "tsai-views"
+    if full:
+        method += "+full"
+    return CameraCalibration(
+        camera=r.camera,
+        method=method,
+        rms_px=r.rms_px,
+        names=r.names,
+        per_view_rms_px=r.per_view_rms_px,
+        poses=r.poses,
+        std=r.std,
+        board=board,
+        square=float(square),
+        rejected=tuple((n, float("nan")) for n in names if n not in r.names),  # Tsai failed on these
+        skipped=tuple(skipped),
+        warnings=tuple(warns) + r.warnings,
+        per_view_tsai=r.per_view,
+    )
+
+
+# --------------------------------------------------------------------------- camera file
+
+
+def camera_to_table(camera: OpenCVCamera | TsaiCamera) -> dict[str, Any]:
+    """The camera's keys, as in a camera file or a field log's inline [camera]."""
+    if isinstance(camera, OpenCVCamera):
+        return {
+            "model": "opencv",
+            "width": int(camera.width),
+            "height": int(camera.height),
+            "fx": float(camera.fx),
+            "fy": float(camera.fy),
+            "cx": float(camera.cx),
+            "cy": float(camera.cy),
+            "dist": [float(x) for x in camera.dist],
+        }
+    if isinstance(camera, TsaiCamera):
+        return {
+            "model": "tsai",
+            "width": int(camera.width),
+            "height": int(camera.height),
+            "f_mm": float(camera.f_mm),
+            "kappa1": float(camera.kappa1),
+            "cx": float(camera.cx),
+            "cy": float(camera.cy),
+            "sx": float(camera.sx),
+            "dx_mm": float(camera.dx_mm),
+            "dy_mm": float(camera.dy_mm),
+        }
+    raise TypeError(f"not a camera model: {type(camera).__name__}")
+
+
+def calibration_to_table(cal: CameraCalibration) -> dict[str, Any]:
+    """The whole camera file as nested dicts: camera keys plus a [calibration] table."""
+    t = camera_to_table(cal.camera)
+    t["calibration"] = {
+        "method": cal.method,
+        "rms_px": float(cal.rms_px),
+        "n_views": cal.n_views,
+        "images": [Path(n).name for n in cal.names],
+        "per_view_rms_px": [float(x) for x in cal.per_view_rms_px],
+        "rejected": [Path(n).name for n, _ in cal.rejected],
+        "rejected_rms_px": [float(r) for _, r in cal.rejected],
+        "skipped": [Path(n).name for n in cal.skipped],
+        "board": f"{cal.board[0]}x{cal.board[1]}",
+        "square": float(cal.square),
+        "std": {k: float(v) for k, v in cal.std.items()},
+    }
+    return t
+
+
+_HEADER = """Gnomon camera file, written by `gnomon calibrate camera`.
+Pixels: centre of the top-left pixel at (0, 0). Camera frame: x right, y down, z forward.
+model "opencv": fx fy cx cy in pixels; dist = [k1, k2, p1, p2, k3] (OpenCV's model).
+model "tsai": f_mm (mm), kappa1 (1/mm^2, Xu = Xd*(1 + kappa1*r^2)), cx cy (px), sx, dx_mm dy_mm (pixel pitch, mm).
+[calibration]: reprojection RMS in pixels (length of the 2D error); std = 1-sigma standard deviations."""
+
+
+def write_camera_file(path: str | os.PathLike, cal: CameraCalibration | OpenCVCamera | TsaiCamera) -> None:
+    """Write a camera file (TOML) atomically; a bare camera has no [calibration] table."""
+    table = calibration_to_table(cal) if isinstance(cal, CameraCalibration) else camera_to_table(cal)
+    toml_io.dump(table, path, header=_HEADER)
+
+
+def _number(table: Mapping[str, Any], key: str, where: str, *, positive: bool = False, integer: bool = False) -> float:
+    if key not in table:
+        raise GnomonError(f"{where}: missing key '{key}'")
+    v = table[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise GnomonError(f"{where}: key '{key}' must be a number, got {v!r}")
+    if integer and (not isinstance(v, int) or v <= 0):
+        raise GnomonError(f"{where}: key '{key}' must be a positive integer, got {v!r}")
+    if not np.isfinite(v):
+        raise GnomonError(f"{where}: key '{key}' must be finite, got {v!r}")
+    if positive and not v > 0:
+        raise GnomonError(f"{where}: key '{key}' must be positive, got {v!r}")
+    return v
+
+
+def camera_from_table(table: Mapping[str, Any], where: str, *, extra_keys: Sequence[str] = ()) -> OpenCVCamera | TsaiCamera:
+    """Build the camera from a camera file's keys or a field log's inline [camera].
+
+    ``where`` names the file/table in messages (e.g. ``"scan.toml: [camera]"``).
+    Keys other than the model's, ``calibration`` and ``extra_keys`` (e.g.
+    ``("file", "pose")`` for a field log) are an error naming the key.
+    """
+    model = table.get("model", "opencv")
+    if model not in ("opencv", "tsai"):
+        raise GnomonError(f"{where}: key 'model' must be \"opencv\" or \"tsai\", got {model!r}")
+    allowed = (_OPENCV_KEYS if model == "opencv" else _TSAI_KEYS) | {"calibration"} | set(extra_keys)
+    for k in table:
+        if k not in allowed:
+            raise GnomonError(f"{where}: unknown key '{k}' for model \"{model}\"")
+    width = int(_number(table, "width", where, integer=True))
+    height = int(_number(table, "height", where, integer=True))
+    if model == "opencv":
+        dist = table.get("dist", [0.0] * 5)
+        if (
+            not isinstance(dist, list)
+            or len(dist) != 5
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in dist)
+        ):
+            raise GnomonError(f"{where}: key 'dist' must be 5 numbers [k1, k2, p1, p2, k3], got {dist!r}")
+        return OpenCVCamera(
+            width=width,
+            height=height,
+            fx=float(_number(table, "fx", where, positive=True)),
+            fy=float(_number(table, "fy", where, positive=True)),
+            cx=float(_number(table, "cx", where)),
+            cy=float(_number(table, "cy", where)),
+            dist=tuple(float(x) for x in dist),
+        )
+    return TsaiCamera(
+        width=width,
+        height=height,
+        f_mm=float(_number(table, "f_mm", where, positive=True)),
+        kappa1=float(_number(table, "kappa1", where)),
+        cx=float(_number(table, "cx", where)),
+        cy=float(_number(table, "cy", where)),
+        dx_mm=float(_number(table, "dx_mm", where, positive=True)),
+        dy_mm=float(_number(table, "dy_mm", where, positive=True)),
+        sx=float(_number(table, "sx", where, positive=True)) if "sx" in table else 1.0,
+    )
+
+
+def load_camera_file(path: str | os.PathLike) -> OpenCVCamera | TsaiCamera:
+    """Read a camera file written by :func:`write_camera_file` (or by hand)."""
+    return camera_from_table(toml_io.load(path), str(path))
+
+
+def load_calibration_info(path: str | os.PathLike) -> dict[str, Any]:
+    """The camera file's [calibration] table (empty if absent), e.g. for report.json."""
+    t = toml_io.load(path).get("calibration", {})
+    if not isinstance(t, dict):
+        raise GnomonError(f"{path}: [calibration] must be a table")
+    return t

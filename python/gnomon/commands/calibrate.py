@@ -1,0 +1,156 @@
+"""`gnomon calibrate camera IMAGES... --board COLSxROWS --square S [--model zhang|tsai]`
+and `gnomon calibrate lamp FIELD_LOG`.
+
+`camera` finds the chessboard in each photo, calibrates (Zhang's method
+through OpenCV, or our Tsai implementation), prints per-view reprojection
+errors and the parameters with their standard deviations, and writes the
+camera file (TOML) that field logs reference. Warnings (a photo without a
+board, a rejected outlier view, a degenerate Tsai set-up) go to stderr, one
+line each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from gnomon.errors import GnomonError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "calibrate",
+        help="calibrate the camera (chessboard photos) or the lamp (pencil photos)",
+        description="Calibrate the camera from chessboard photos, or the lamp from pencil photos.",
+    )
+    sub = p.add_subparsers(dest="what", metavar="WHAT", required=True)
+
+    c = sub.add_parser(
+        "camera",
+        help="chessboard photos → camera file (TOML)",
+        description=(
+            "Find a chessboard in each photo and calibrate the camera: Zhang's method (OpenCV's "
+            "5-coefficient model, >= 3 views) or Tsai's two-stage method (one view or several). "
+            "Writes a camera file for field logs ([camera] file = ...)."
+        ),
+    )
+    c.add_argument("images", nargs="+", metavar="IMAGE", help="chessboard photos (files or directories of images)")
+    c.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners per row and per column, e.g. 9x6")
+    c.add_argument("--square", required=True, type=float, metavar="S", help="side of one square, in world units (e.g. mm)")
+    c.add_argument("--model", choices=("zhang", "tsai"), default="zhang", help="calibration method and camera model (default: zhang)")
+    c.add_argument("--out", "-o", default="camera.toml", metavar="FILE", help="camera file to write (default: camera.toml)")
+    c.add_argument(
+        "--pixel-pitch",
+        metavar="DX[,DY]",
+        help="tsai: the sensor's pixel pitch in mm (e.g. 0.0028, or 0.0028,0.0028); Tsai's method needs it a priori",
+    )
+    c.add_argument("--sx", type=float, default=1.0, help="tsai: horizontal scale factor a priori (default 1)")
+    c.add_argument(
+        "--full",
+        action="store_true",
+        help="tsai: also optimise the image centre (Cx, Cy) (and sx with several views), from the two-stage result",
+    )
+    c.add_argument("--fix-k3", action="store_true", help="zhang: hold k3 at 0 (advisable for narrow fields of view)")
+    c.add_argument(
+        "--reject",
+        type=float,
+        default=3.0,
+        metavar="FACTOR",
+        help="zhang: reject views whose RMS exceeds FACTOR x the median (and 0.5 px); default 3",
+    )
+    c.set_defaults(func=run)
+
+    lamp = sub.add_parser(
+        "lamp",
+        help="pencil photos → lamp position ± uncertainty",
+        description="Locate the lamp from 2+ photos of a standing pencil and its shadow (described in the field log).",
+    )
+    lamp.add_argument("field_log", type=Path, metavar="FIELD_LOG", help="field log describing the pencil photos")
+    lamp.set_defaults(func=run_lamp)
+
+
+def _pitch(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise GnomonError(f"--pixel-pitch '{text}': expected DX or DX,DY in mm") from None
+    if len(vals) == 1:
+        vals = vals * 2
+    if len(vals) != 2 or not all(v > 0 for v in vals):
+        raise GnomonError(f"--pixel-pitch '{text}': expected one or two positive numbers (mm)")
+    return vals[0], vals[1]
+
+
+def _fmt(v: float, s: float | None) -> str:
+    return f"{v:.6g}" if s is None else f"{v:.6g} ± {s:.2g}"
+
+
+def run(args: argparse.Namespace) -> int:
+    from gnomon import calibration
+    from gnomon.progress import Progress
+
+    board = calibration.parse_board(args.board)
+    pitch = _pitch(args.pixel_pitch)
+    if args.model == "zhang" and (pitch is not None or args.full or args.sx != 1.0):
+        raise GnomonError("--pixel-pitch, --sx and --full apply to --model tsai only")
+    paths = calibration.expand_image_args(args.images)
+    with Progress("boards", len(paths)) as bar:
+        cal = calibration.calibrate_images(
+            paths,
+            board,
+            args.square,
+            model=args.model,
+            pixel_pitch_mm=pitch,
+            sx=args.sx,
+            full=args.full,
+            fix_k3=args.fix_k3,
+            reject_factor=args.reject,
+            progress=lambda k, n, name: bar.update(k),
+        )
+    for w in cal.warnings:
+        print(f"gnomon: warning: {w}", file=sys.stderr)
+
+    print(f"{'view':40s} {'RMS px':>8s}  status")
+    rms = dict(zip(cal.names, cal.per_view_rms_px))
+    rejected = dict(cal.rejected)
+    for p in paths:
+        key = str(p)
+        if key in rms:
+            extra = ""
+            if cal.per_view_tsai:
+                r = cal.per_view_tsai[cal.names.index(key)]
+                extra = f"  (own Tsai: f {r.camera.f_mm:.5g} mm, kappa1 {r.camera.kappa1:.4g}, RMS {r.rms_px:.3f} px)"
+            print(f"{Path(key).name:40s} {rms[key]:8.3f}  used{extra}")
+        elif key in rejected:
+            print(f"{Path(key).name:40s} {rejected[key]:8.3f}  rejected (see the warning)")
+        else:
+            print(f"{Path(key).name:40s} {'-':>8s}  no board")
+    cam = calibration.camera_to_table(cal.camera)
+    std = cal.std
+    print(f"method {cal.method}: {cal.n_views} views, reprojection RMS {cal.rms_px:.3f} px")
+    for k, v in cam.items():
+        if k in ("model", "width", "height"):
+            continue
+        if k == "dist":
+            names = ("k1", "k2", "p1", "p2", "k3")
+            print("  dist " + ", ".join(f"{n} {_fmt(x, std.get(n))}" for n, x in zip(names, v)))
+        else:
+            print(f"  {k} {_fmt(v, std.get(k))}")
+    calibration.write_camera_file(args.out, cal)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def run_lamp(args: argparse.Namespace) -> int:
+    try:
+        from gnomon.light import calibrate_lamp_cli
+    except ModuleNotFoundError as exc:
+        if exc.name not in ("gnomon.light",):
+            raise
+        raise GnomonError("calibrate lamp: not available in this build (gnomon.light is missing)") from None
+    except ImportError:
+        raise GnomonError("calibrate lamp: not available in this build (gnomon.light has no calibrate_lamp_cli)") from None
+    return int(calibrate_lamp_cli(args) or 0)
