@@ -19,7 +19,7 @@ os.environ.pop("DISPLAY", None)
 os.environ.pop("WAYLAND_DISPLAY", None)
 
 
-def write_tiny_capture(folder: Path, *, n_frames: int = 12, width: int = 48, height: int = 36,
+def write_tiny_capture(folder: Path, *, n_frames: int = 24, width: int = 48, height: int = 36,
                        lamp=(-200.0, 0.0, 400.0), extra: dict | None = None) -> Path:
     """A minimal, valid capture: a dark band sweeping left→right, a camera looking
     straight down at the desk from 500 mm, and its field log. Returns the log's path."""
@@ -27,8 +27,8 @@ def write_tiny_capture(folder: Path, *, n_frames: int = 12, width: int = 48, hei
     frames.mkdir(parents=True, exist_ok=True)
     u = np.arange(width)
     for i in range(n_frames):
-        centre = -4 + (width + 8) * i / (n_frames - 1)
-        shadow = np.clip((np.abs(u - centre) - 4.0) / 4.0, 0, 1)  # 1 = lit, soft edges
+        centre = -12 + (width + 24) * i / (n_frames - 1)
+        shadow = np.clip((np.abs(u - centre) - 5.0) / 6.0, 0, 1)  # 1 = lit, soft edges
         row = (40 + 160 * shadow).astype(np.uint8)
         cv2.imwrite(str(frames / f"frame_{i:04d}.png"), np.tile(row, (height, 1)))
     log = {

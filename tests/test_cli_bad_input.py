@@ -107,9 +107,9 @@ def test_video_that_ends_early(tmp_path: Path, capsys) -> None:
     for f in frames[:8]:
         writer.write(cv2.imread(str(f), cv2.IMREAD_GRAYSCALE))
     writer.release()
-    edit_log(log, lambda d: d["capture"].update(frames="sweep.avi", frame_count=12))
+    edit_log(log, lambda d: d["capture"].update(frames="sweep.avi", frame_count=24))
     out = tmp_path / "out"
-    assert_clean_failure(*run_scan(log, out, capsys), out, "sweep.avi", "ended after 8 frames, expected 12")
+    assert_clean_failure(*run_scan(log, out, capsys), out, "sweep.avi", "ended after 8 frames, expected 24")
 
 
 def test_console_script_exit_code(tmp_path: Path) -> None:

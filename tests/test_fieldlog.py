@@ -22,13 +22,13 @@ def rewrite(path: Path, edit) -> Path:
 
 def test_valid_log_loads(tiny_capture: Path) -> None:
     log = load_field_log(tiny_capture)
-    assert len(log.capture.image_files) == 12
+    assert len(log.capture.image_files) == 24
     assert log.capture.units == "mm" and log.capture.gamma == 1.0
     assert log.camera.width == 48 and log.camera.height == 36
     # Camera 500 mm above the desk origin.
     np.testing.assert_allclose(log.pose.camera_centre_world, [0, 0, 500], atol=1e-9)
     assert log.planes[0].regions[1] == (0, 30, 48, 36)
-    assert log.scan.edge == "enter" and log.scan.min_contrast == 20
+    assert log.scan.edge == "both" and log.scan.min_contrast == 20
 
 
 @pytest.mark.parametrize(

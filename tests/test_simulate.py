@@ -355,3 +355,281 @@ def test_no_bare_desk_band_is_an_error(small_scene):
             sc._desk_regions()
     finally:
         sc.swept = saved
+
+
+# ------------------------------------------------------------------ desk_lamp_right: the mirrored lamp
+
+RIGHT = DeskLampConfig(width=320, height=240, frames=96, jpeg_quality=0, seed=0, lamp_side="right",
+                       pencil_photos=0)
+
+
+@pytest.fixture(scope="module")
+def right_scene():
+    return DeskLampScene(RIGHT)
+
+
+def test_right_lamp_is_the_mirror_image(small_scene, right_scene):
+    left, right = small_scene, right_scene
+    # Same camera, same pixel grid, same surfaces and texture.
+    np.testing.assert_array_equal(left.lens.K, right.lens.K)
+    np.testing.assert_array_equal(left.R, right.R)
+    np.testing.assert_array_equal(left.t, right.t)
+    np.testing.assert_array_equal(left.depth, right.depth)
+    np.testing.assert_array_equal(left.object_id, right.object_id)
+    np.testing.assert_array_equal(left.albedo, right.albedo)
+    # The lamp: mirrored across the vertical plane through the camera and the scene centre.
+    SL, SR, C = left.S, right.S, left.C
+    centre = np.zeros(3)
+    m = np.cross([0.0, 0.0, 1.0], C - centre)
+    m /= np.linalg.norm(m)
+    np.testing.assert_allclose(SR, SL - 2 * (SL @ m) * m, atol=1e-9)
+    assert SR[2] == pytest.approx(SL[2])
+    assert np.linalg.norm(SR - C) == pytest.approx(np.linalg.norm(SL - C))
+    assert np.linalg.norm(SR) == pytest.approx(np.linalg.norm(SL))
+    # Left of the camera vs right of it (camera x).
+    assert (left.R @ (SL - C))[0] < -200 and (right.R @ (SR - C))[0] > 200
+
+
+def test_right_scan_fills_other_cast_shadows(small, right_scene):
+    _, gt = small
+    right = right_scene.ground_truth_arrays()
+    assert set(gt) - {k for k in gt if k.startswith("pencil_")} == set(right)
+    sl, sr = gt["swept"], right["swept"]
+    assert sr.mean() > 0.85
+    # The cast shadows differ: each scan sweeps pixels the other cannot.
+    only_right, only_left = (sr & ~sl).sum(), (sl & ~sr).sum()
+    assert only_right > 0.01 * sl.size and only_left > 0.01 * sl.size
+    assert (sl | sr).mean() > max(sl.mean(), sr.mean())
+    # The stick sweeps the same way: on the desk, shadow times grow with the column.
+    for g in (gt, right):
+        desk = g["swept"] & (g["object_id"] == 0)
+        v, u = np.nonzero(desk)
+        assert np.corrcoef(u, g["enter_time"][desk])[0, 1] > 0.95
+    np.testing.assert_allclose(right["shadow_planes_enter"][:, :3] @ right["lamp"] - right["shadow_planes_enter"][:, 3],
+                               0, atol=1e-9)
+
+
+def test_right_capture_files(tmp_path, small):
+    r = simulate_desk_lamp(tmp_path, RIGHT)
+    log = tomllib.loads(r.field_log.read_text())
+    gt = np.load(r.ground_truth)
+    assert "desk_lamp_right" in r.field_log.read_text().splitlines()[0]
+    assert log["light"] == {"kind": "lamp", "position": list(gt["lamp"])}
+    assert gt["lamp"][0] > 300
+    _, left = small
+    assert set(gt.files) == set(left)
+    info = json.loads(r.ground_truth_json.read_text())
+    assert info["scene"] == "desk_lamp_right" and info["lamp_side"] == "right"
+    assert r.pencil_log is None and not (tmp_path / "pencil_log.toml").exists()
+    assert gt["pencil_bases_world"].shape == (0, 3)
+    for (u0, v0, u1, v1) in log["planes"][0]["regions"]:
+        assert (gt["object_id"][v0:v1, u0:u1] == 0).all() and gt["swept"][v0:v1, u0:u1].all()
+
+
+def test_right_capture_has_its_own_noise(tmp_path, small, small_scene, right_scene):
+    """Another recording, another noise draw: the two captures' noise is uncorrelated."""
+    left_result, _ = small
+    right_result = simulate_desk_lamp(tmp_path, RIGHT)
+    residuals = []
+    for result, sc in ((left_result, small_scene), (right_result, right_scene)):
+        dn = cv2.imread(str(result.frames[0]), cv2.IMREAD_UNCHANGED).astype(np.float64)
+        clean = 255.0 * np.clip(sc.lit_image(), 0, 1) ** (1 / SMALL.gamma)
+        residuals.append((dn - clean).ravel())
+    assert 1.2 < residuals[0].std() < 2.0 and 1.2 < residuals[1].std() < 2.0
+    assert abs(np.corrcoef(residuals[0], residuals[1])[0, 1]) < 0.05
+
+
+# ------------------------------------------------------------------ a wide stick
+
+
+@pytest.fixture(scope="module")
+def wide_scene():
+    return DeskLampScene(DeskLampConfig(width=320, height=240, frames=96, stick_radius=6.0, pencil_photos=0))
+
+
+def test_wide_stick_planes_are_tangent_on_both_sides(wide_scene):
+    sc = wide_scene
+    gt = sc.ground_truth_arrays()
+    assert float(gt["stick_radius"]) == 6.0
+    S = gt["lamp"]
+    QA, QB = gt["stick_axis"][:, 0], gt["stick_axis"][:, 1]
+    D = (QB - QA) / np.linalg.norm(QB - QA, axis=1, keepdims=True)
+    foot = QA + np.einsum("ij,ij->i", S - QA, D)[:, None] * D   # the axis point nearest the lamp
+    en, le = gt["shadow_planes_enter"], gt["shadow_planes_leave"]
+    g_en = np.einsum("ij,ij->i", en[:, :3], foot) - en[:, 3]
+    g_le = np.einsum("ij,ij->i", le[:, :3], foot) - le[:, 3]
+    # Each plane is tangent to the stick (its axis 6 mm away), the stick between them:
+    # at the stick the two planes are 12 mm apart, the stick's width.
+    np.testing.assert_allclose(g_en, -6.0, atol=1e-9)
+    np.testing.assert_allclose(g_le, 6.0, atol=1e-9)
+    # Both contain the axis direction and the lamp; they open at 2·asin(r/h) from the lamp.
+    np.testing.assert_allclose(en[:, :3] @ S - en[:, 3], 0, atol=1e-9)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", en[:, :3], D), 0, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("ij,ij->i", le[:, :3], D), 0, atol=1e-12)
+    h = np.linalg.norm(foot - S, axis=1)
+    angle = np.arccos(np.clip(np.einsum("ij,ij->i", en[:, :3], le[:, :3]), -1, 1))
+    np.testing.assert_allclose(angle, 2 * np.arcsin(6.0 / h), atol=1e-9)
+    assert gt["swept"].mean() > 0.85
+
+
+def test_wide_stick_times_are_exact(wide_scene, small_scene):
+    """Both edges of the wide shadow are where the ground truth puts them: half of the
+    lamp hidden at enter_time and at leave_time, and a longer shadow than the thin stick's."""
+    sc = wide_scene
+    sw = sc.swept
+    rng = np.random.default_rng(5)
+    ys, xs = np.nonzero(sw)
+    for i in rng.choice(len(ys), 40, replace=False):
+        y, x = ys[i], xs[i]
+        e, l = sc.enter_time[y, x], sc.leave_time[y, x]
+        assert sc.occlusion(e)[y, x] == pytest.approx(0.5, abs=1e-6)
+        assert sc.occlusion(l)[y, x] == pytest.approx(0.5, abs=1e-6)
+        assert sc.occlusion((e + l) / 2)[y, x] == pytest.approx(1.0, abs=1e-6)   # the umbra between
+    both = sw & small_scene.swept
+    wide_len = (sc.leave_time - sc.enter_time)[both]
+    thin_len = (small_scene.leave_time - small_scene.enter_time)[both]
+    assert np.median(wide_len) > 2.0 * np.median(thin_len)
+
+
+# ------------------------------------------------------------------ pencil photos
+
+
+@pytest.fixture(scope="module")
+def pencil_capture(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pencil")
+    cfg = DeskLampConfig(width=320, height=240, frames=24, jpeg_quality=0, seed=0, pencil_photos=4)
+    return simulate_desk_lamp(out, cfg), cfg
+
+
+def test_pencil_log_and_truth(pencil_capture):
+    r, cfg = pencil_capture
+    assert r.pencil_log == r.out_dir / "pencil_log.toml"
+    log = tomllib.loads(r.pencil_log.read_text())
+    gt = np.load(r.ground_truth)
+    assert set(log) == {"camera", "planes", "pencil"}
+    pen = log["pencil"]
+    assert pen["height"] == 150.0 and pen["units"] == "mm" and pen["plane"] == "desk" and pen["sigma_px"] > 0
+    photos = pen["photos"]
+    assert len(photos) == 4 == len(r.pencil_photos)
+    S = gt["lamp"]
+    B, T, Ts = gt["pencil_bases_world"], gt["pencil_tops_world"], gt["pencil_tips_world"]
+    np.testing.assert_allclose(B[:, 2], 0) and np.testing.assert_allclose(Ts[:, 2], 0, atol=1e-9)
+    np.testing.assert_allclose(T - B, np.tile([0.0, 0.0, 150.0], (4, 1)))
+    # The tip is on the line from the lamp through the pencil's top.
+    d1, d2 = T - S, Ts - S
+    np.testing.assert_allclose(np.cross(d1, d2) / np.linalg.norm(d1, axis=1)[:, None]
+                               / np.linalg.norm(d2, axis=1)[:, None], 0, atol=1e-12)
+    # Pixels: cv2's projection of the truth, rounded to 0.1 px; inside the image.
+    for key, pts in (("base", B), ("tip", Ts)):
+        proj, _ = cv2.projectPoints(pts.reshape(-1, 1, 3), gt["rvec"], gt["tvec"], gt["K"], gt["dist"])
+        logged = np.array([p[key] for p in photos])
+        assert np.abs(logged - proj.reshape(-1, 2)).max() <= 0.05 + 1e-9
+        assert (logged >= 0).all() and (logged[:, 0] <= 319).all() and (logged[:, 1] <= 239).all()
+    for p in photos:
+        assert (r.out_dir / p["image"]).is_file() and p["image"].startswith("pencil/pencil_")
+    # Well spread: no two bases closer than 100 mm.
+    dists = np.linalg.norm(B[:, None, :2] - B[None, :, :2], axis=-1)
+    assert dists[~np.eye(4, dtype=bool)].min() > 100
+    info = json.loads(r.ground_truth_json.read_text())
+    assert info["pencil"]["photos"] == 4
+
+
+def test_pencil_photos_show_pencil_and_shadow(pencil_capture):
+    r, cfg = pencil_capture
+    gt = np.load(r.ground_truth)
+    sc = DeskLampScene(cfg)
+    lit, dark = sc.lit_image(), sc.shadowed_image()
+    for k, path in enumerate(r.pencil_photos):
+        img = linearise(cv2.imread(str(path), cv2.IMREAD_UNCHANGED).astype(np.float64), cfg.gamma)
+        level = np.divide(img - dark, lit - dark, out=np.zeros_like(img), where=lit > dark + 1e-3)
+        b, t = gt["pencil_base_pixels"][k], gt["pencil_tip_pixels"][k]
+        # Half-way along the shadow, the desk is dark (the umbra, up to blur and noise).
+        mid = np.rint((b + t) / 2).astype(int)
+        assert level[mid[1], mid[0]] < 0.3
+        # Beyond the tip (8 px further along, away from the pencil) the desk is lit.
+        beyond = np.rint(t + 8.0 * (t - b) / np.linalg.norm(t - b)).astype(int)
+        if 0 <= beyond[0] < cfg.width and 0 <= beyond[1] < cfg.height:
+            assert level[beyond[1], beyond[0]] > 0.85
+        # Away from pencil and shadow, the photo is the stick-free lit image.
+        far = np.abs(img - lit) < 0.03
+        assert far.mean() > 0.9
+
+
+def test_pencil_photos_calibrate_the_lamp(pencil_capture):
+    """gnomon.light (the pipeline) recovers the simulator's lamp from the pencil log."""
+    from gnomon.light import calibrate_lamp_from_pencil, load_pencil_log
+
+    r, _ = pencil_capture
+    gt = np.load(r.ground_truth)
+    log = load_pencil_log(r.pencil_log)
+    assert [str(x) for x in log.images] == [f"pencil/pencil_{k}.png" for k in range(4)]
+    cal = calibrate_lamp_from_pencil(log.camera, log.pose, log.plane_point, log.plane_normal,
+                                     log.bases_px, log.tips_px, log.height, log.sigma_px)
+    S = gt["lamp"]
+    distance = np.linalg.norm(S - gt["pencil_bases_world"].mean(axis=0))
+    assert np.linalg.norm(cal.position_world - S) < 0.01 * distance
+    assert not cal.warnings
+
+
+def test_pencil_log_calibrates_either_lamp_closely(tmp_path):
+    """The log's pixels (no rendering needed) pin both lamps to 0.1 % of their distance."""
+    from gnomon.light import calibrate_lamp_from_pencil, load_pencil_log
+    from gnomon.simulate import pencil
+
+    for side in ("left", "right"):
+        sc = DeskLampScene(DeskLampConfig(width=400, height=300, frames=8, lamp_side=side))
+        xy = pencil.pencil_positions(sc, 3)
+        pens = [pencil.Pencil(p) for p in xy]
+        ph = pencil.PencilPhotos(np.array([p.base for p in pens]), np.array([p.top for p in pens]),
+                                 np.array([p.shadow_tip(sc.S) for p in pens]),
+                                 sc.project(np.array([p.base for p in pens])),
+                                 sc.project(np.array([p.shadow_tip(sc.S) for p in pens])), [],
+                                 [f"pencil/pencil_{k}.jpg" for k in range(3)])
+        path = tmp_path / f"{side}.toml"
+        pencil.write_pencil_log(sc, ph, path)
+        log = load_pencil_log(path)
+        cal = calibrate_lamp_from_pencil(log.camera, log.pose, log.plane_point, log.plane_normal,
+                                         log.bases_px, log.tips_px, log.height, log.sigma_px)
+        assert np.linalg.norm(cal.position_world - sc.S) < 0.001 * np.linalg.norm(sc.S)
+
+
+def test_pencil_cone_and_body():
+    from gnomon.simulate.pencil import Pencil
+
+    p = Pencil((10.0, -20.0))
+    # Straight down from above, 0.5 mm off the axis: the cone where its radius is 0.5 mm.
+    t = p.intersect(np.array([10.5, -20.0, 300.0]), np.array([0.0, 0.0, -1.0]))
+    assert t == pytest.approx(150.0 + 0.5 * 18.0 / 3.5)
+    # Horizontally at mid-height: the body.
+    t = p.intersect(np.array([-90.0, -20.0, 60.0]), np.array([1.0, 0.0, 0.0]))
+    assert t == pytest.approx(100.0 - 3.5)
+    # Through the sharpened part, half-way up the cone: radius 1.75.
+    z = 150.0 - 9.0
+    t = p.intersect(np.array([-90.0, -20.0, z]), np.array([1.0, 0.0, 0.0]))
+    assert t == pytest.approx(100.0 - 1.75)
+    X = np.array([[10.0 - 1.75, -20.0, z]])
+    n = p.normal(X)[0]
+    assert n[0] < 0 and n[2] > 0 and np.linalg.norm(n) == pytest.approx(1.0)
+    # Just above the apex: a miss.
+    assert not np.isfinite(p.intersect(np.array([-90.0, -20.0, 150.5]), np.array([1.0, 0.0, 0.0])))
+
+
+def test_bad_pencil_photo_count(tmp_path):
+    parser = make_parser()
+    args = parser.parse_args(["simulate", "desk_lamp", "--out", str(tmp_path / "x"), "--pencil-photos", "1"])
+    with pytest.raises(GnomonError, match="pencil-photos"):
+        args.func(args)
+
+
+def test_command_line_right_and_two_plane(tmp_path, capsys):
+    parser = make_parser()
+    for scene in ("desk_lamp_right", "two_plane"):
+        args = parser.parse_args(["simulate", scene, "--out", str(tmp_path / scene), "--width", "160",
+                                  "--height", "120", "--frames", "16", "--pencil-photos", "2", "--quiet"])
+        assert args.func(args) == 0
+        info = json.loads((tmp_path / scene / "ground_truth.json").read_text())
+        assert info["scene"] == scene
+    out = capsys.readouterr().out
+    assert "2 pencil photos" in out and out.count("wrote 16 frames") == 2
+    assert len(list((tmp_path / "desk_lamp_right" / "pencil").glob("*.jpg"))) == 2
+    assert not (tmp_path / "two_plane" / "pencil").exists()

@@ -21,7 +21,8 @@ from gnomon.errors import FieldLogError
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
 UNITS = ("mm", "m")
-EDGES = ("enter", "leave")
+EDGES = ("enter", "leave", "both")
+LIGHT_KINDS = ("lamp", "two-plane")
 
 
 class _Table:
@@ -123,7 +124,7 @@ class LightSpec:
 class ScanSettings:
     min_contrast: float = 20.0
     window: int = 4
-    edge: str = "enter"
+    edge: str = "both"
     max_depth_jump: float = 0.02
 
 
@@ -239,11 +240,19 @@ def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
     return PlaneSpec(name, point, normal / np.linalg.norm(normal), tuple(regions))
 
 
-def _parse_light(t: _Table) -> LightSpec:
+def _parse_light(t: _Table, base: Path) -> LightSpec:
     kind = t.string("kind")
-    if kind != "lamp":
-        raise t.error("kind", f"light kind {kind!r} is not supported yet (supported: 'lamp')")
-    position = t.vector("position", 3)
+    if kind not in LIGHT_KINDS:
+        raise t.error("kind", f"expected one of {', '.join(map(repr, LIGHT_KINDS))}, got {kind!r}")
+    position = None
+    if kind == "lamp":
+        if "file" in t.data:
+            # the output of `gnomon calibrate lamp`: its [light] table
+            lamp_file = base / t.string("file")
+            data = toml_io.load(lamp_file)
+            position = _Table(lamp_file, "light", data.get("light", {})).vector("position", 3)
+        else:
+            position = t.vector("position", 3)
     t.done()
     return LightSpec(kind, position)
 
@@ -254,7 +263,7 @@ def _parse_scan(t: _Table | None) -> ScanSettings:
     s = ScanSettings(
         min_contrast=t.number("min_contrast", 20.0, positive=True),
         window=t.integer("window", 4, minimum=1),
-        edge=t.string("edge", "enter", EDGES),
+        edge=t.string("edge", "both", EDGES),
         max_depth_jump=t.number("max_depth_jump", 0.02, positive=True),
     )
     t.done()
@@ -286,9 +295,13 @@ def load_field_log(path: str | Path) -> FieldLog:
     planes = tuple(
         _parse_plane(_Table(p, f"planes.{i}", d), i, camera.width, camera.height) for i, d in enumerate(raw_planes)
     )
-    light = _parse_light(section("light"))  # type: ignore[arg-type]
+    light = _parse_light(section("light"), base)  # type: ignore[arg-type]
     scan = _parse_scan(section("scan", required=False))
+    # Sections read by other commands (`gnomon calibrate lamp` reads [pencil]).
+    root.data.pop("pencil", None)
     root.done()
+    if light.kind == "two-plane" and len(planes) < 2:
+        raise FieldLogError(f"{p}: [light] kind 'two-plane' needs two [[planes]] (e.g. desk and wall)")
 
     log = FieldLog(p, capture, camera, pose, planes, light, scan, camera_file, calibration)
     _check_geometry(log)

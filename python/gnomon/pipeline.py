@@ -1,8 +1,9 @@
 """`gnomon scan`: one field log in, points, mesh, maps, report and recording out.
 
-Data flow (DESIGN.md): frames → streaming tracker (kernel) → shadow-time map →
-per-frame shadow lines on the reference planes → shadow planes from the light
-→ triangulation (kernel) → outlier rejection → mesh → outputs + recording.
+Data flow (DESIGN.md): frames → streaming tracker (kernel) → shadow-time maps
+(entering and leaving edge) → per edge: shadow lines on the reference planes
+→ shadow planes from the light → triangulation (kernel) and σZ → fusion of
+the two edges → outlier rejection → mesh → outputs + recording.
 
 All outputs are first written into a staging folder beside the output folder
 and moved into place only when the whole scan has succeeded, each by an atomic
@@ -20,19 +21,30 @@ from pathlib import Path
 
 import numpy as np
 
-from gnomon import __version__, atomic, ply
-from gnomon.errors import FrameError
+from gnomon import __version__, _kernel, atomic, ply
+from gnomon.camera import Pose
+from gnomon.errors import FrameError, GnomonError
 from gnomon.fieldlog import FieldLog, load_field_log
 from gnomon.frames import FrameSource, sha256_file
-from gnomon.meshing import GridMesh, grid_mesh
+from gnomon.meshing import GridMesh, grid_mesh, remove_small_components, write_obj
 from gnomon.progress import Progress
 from gnomon.reference_lines import ReferenceLines, measure_reference_lines
-from gnomon.shadow_planes import lamp_shadow_planes
+from gnomon.shadow_planes import lamp_shadow_planes, light_point_from_planes, two_plane_shadow_planes
 from gnomon.tracking import ShadowTimes, decoding_lut
-from gnomon import _kernel
-from gnomon.triangulation import Triangulation, supported_by_neighbours, triangulate
+from gnomon.triangulation import supported_by_neighbours, triangulate
+from gnomon.uncertainty import (
+    depth_sigma,
+    image_noise_dn,
+    line_time_sigma,
+    linear_noise_at_threshold,
+    undersampled,
+)
 
-OUTPUT_FILES = ("points.ply", "mesh.ply", "depth.npy", "shadow_time.npy", "report.json", "scan.rrd")
+OUTPUT_FILES = ("points.ply", "mesh.ply", "mesh.obj", "depth.npy", "sigma.npy", "shadow_time.npy",
+                "report.json", "scan.rrd")
+# Two edges whose depths differ by more than this many combined σ do not see
+# the same surface point (a mixed pixel, a glint): the pixel is dropped.
+EDGE_CONFLICT_SIGMAS = 6.0
 
 
 @dataclass
@@ -45,16 +57,28 @@ class ScanOptions:
 
 
 @dataclass
+class EdgeResult:
+    """One shadow edge's reconstruction (camera frame, world units)."""
+
+    name: str  # "enter" | "leave"
+    times: np.ndarray  # (H, W) frames, NaN = none
+    lines: list[ReferenceLines]
+    planes: np.ndarray  # (N, 4)
+    depth: np.ndarray  # (H, W) camera Z, NaN = none
+    sigma: np.ndarray  # (H, W) σZ
+    degenerate: int
+
+
+@dataclass
 class ScanResult:
     """Everything a scan produced, in memory (the files hold the same)."""
 
     field_log: FieldLog
     times: ShadowTimes
-    shadow_time: np.ndarray  # (H, W) frames of the edge used, NaN = none
-    lines: list[ReferenceLines]
-    planes: np.ndarray  # (N, 4) camera frame
-    triangulation: Triangulation
-    depth: np.ndarray  # (H, W) camera Z after outlier rejection, NaN = none
+    edges: list[EdgeResult]
+    shadow_time: np.ndarray  # (H, W) frames (the fused edges' mean), NaN = none
+    depth: np.ndarray  # (H, W) camera Z after fusion and outlier rejection, NaN = none
+    sigma: np.ndarray  # (H, W) σZ, NaN = none
     valid: np.ndarray  # (H, W)
     points_world: np.ndarray  # (N, 3) float32, row-major over valid pixels
     colors: np.ndarray  # (N, 3) uint8 RGB
@@ -63,23 +87,40 @@ class ScanResult:
     warnings: list[str] = field(default_factory=list)
     out_dir: Path | None = None
 
+    @property
+    def planes(self) -> np.ndarray:
+        """The first edge's shadow planes (camera frame)."""
+        return self.edges[0].planes
+
+    @property
+    def lines(self) -> list[ReferenceLines]:
+        return self.edges[0].lines
+
+
+@dataclass
+class _Tracked:
+    times: ShadowTimes
+    n_frames: int
+    first_grey: np.ndarray
+    first_color: np.ndarray | None
+    noise_dn: float
+    lut: np.ndarray
+
 
 def _colors(first_color: np.ndarray | None, first_grey: np.ndarray) -> np.ndarray:
     """Per-pixel RGB uint8 (H, W, 3) from the first (fully lit) frame."""
-    if first_color is not None:
-        rgb = first_color[:, :, ::-1]
-    else:
-        rgb = np.repeat(first_grey[:, :, None], 3, axis=2)
+    rgb = first_color[:, :, ::-1] if first_color is not None else np.repeat(first_grey[:, :, None], 3, axis=2)
     if rgb.dtype == np.uint16:
         rgb = (rgb >> 8).astype(np.uint8)
     return np.ascontiguousarray(rgb, dtype=np.uint8)
 
 
-def _track(log: FieldLog, source: FrameSource, recorder, progress: bool):
+def _track(log: FieldLog, source: FrameSource, recorder, progress: bool) -> _Tracked:
     """One streaming pass over the frames: the kernel tracker, plus recording of a subsample."""
     cam = log.camera
     tracker = None
-    first_grey = first_color = None
+    first_grey = first_color = previous = None
+    noise_samples: list[float] = []
     with Progress("tracking", source.count, enabled=progress) as bar:
         for frame in source:
             g = frame.grey
@@ -93,6 +134,11 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool):
                 tracker = _kernel.TemporalTracker(g.shape[0], g.shape[1], dtype=dtype, window=log.scan.window)
                 first_grey, first_color = g, frame.color
             tracker.update(g)
+            # Image noise from the first few frame pairs (cheap, and before any
+            # illumination drift has accumulated).
+            if previous is not None and len(noise_samples) < 4:
+                noise_samples.append(image_noise_dn(previous, g))
+            previous = g
             if recorder is not None:
                 recorder.log_frame(frame.index, g)
             bar.update(frame.index + 1)
@@ -102,52 +148,135 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool):
         raise FrameError(f"{source.name}: only {n} frames, expected {source.expected_count}")
     lut = decoding_lut(log.capture.gamma, first_grey.dtype)
     times = ShadowTimes.from_kernel(tracker.finish(log.scan.min_contrast, lut))
-    return times, n, first_grey, first_color
+    noise = float(np.median(noise_samples)) if noise_samples else 1.0
+    return _Tracked(times, n, first_grey, first_color, noise, lut)
+
+
+def _planes_for(log: FieldLog, lines: list[ReferenceLines], pose: Pose) -> tuple[np.ndarray, int]:
+    """Shadow planes (camera frame) from the light model of the field log."""
+    if log.light.kind == "lamp":
+        return lamp_shadow_planes(lines, pose.world_to_camera(log.light.position))
+    if log.light.kind == "two-plane":
+        return two_plane_shadow_planes(lines)
+    raise GnomonError(f"{log.path}: [light] kind {log.light.kind!r} is not supported by this version")
+
+
+def _reconstruct_edge(name: str, times_map: np.ndarray, slope: np.ndarray, log: FieldLog, tracked: _Tracked,
+                      ray_map: np.ndarray) -> EdgeResult:
+    cam, pose = log.camera, log.pose
+    lines = [measure_reference_lines(times_map, tracked.n_frames, p, cam, pose) for p in log.planes]
+    planes, degenerate = _planes_for(log, lines, pose)
+    tri = triangulate(ray_map, times_map, planes)
+    sigma_lin = linear_noise_at_threshold(tracked.noise_dn, tracked.times.threshold, tracked.lut)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sigma_t_pixel = np.where(slope > 0, sigma_lin / slope, np.nan)
+    per_plane = np.stack([line_time_sigma(ln) for ln in lines])
+    with np.errstate(invalid="ignore"):
+        # Several planes constrain the same shadow plane: the best-measured line dominates.
+        sigma_t_line = np.nanmin(np.where(np.isfinite(per_plane), per_plane, np.inf), axis=0)
+    sigma_t_line[~np.isfinite(sigma_t_line)] = np.nan
+    unc = depth_sigma(ray_map, times_map, planes, tri.depth, sigma_t_pixel, sigma_t_line)
+    sigma = unc.sigma_z
+    # A depth whose σ could not be propagated (no neighbouring plane for the
+    # derivative, no measured slope) keeps its point with the typical σ.
+    missing = np.isfinite(tri.depth) & ~(np.isfinite(sigma) & (sigma > 0))
+    if missing.any():
+        typical = np.nanmedian(sigma[np.isfinite(sigma) & (sigma > 0)]) if (np.isfinite(sigma) & (sigma > 0)).any() else 1.0
+        sigma = np.where(missing, np.float32(typical), sigma)
+    return EdgeResult(name, times_map, lines, planes, tri.depth, sigma, degenerate)
+
+
+def fuse_depths(depths: list[np.ndarray], sigmas: list[np.ndarray],
+                max_relative_jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inverse-variance fusion of per-pixel depth estimates.
+
+    Returns (depth, σ, conflict): where several estimates exist the weighted
+    mean with ``σ = 1/sqrt(Σ 1/σi²)``. Where they differ by more than
+    ``EDGE_CONFLICT_SIGMAS`` combined σ *and* by more than a depth jump
+    (``max_relative_jump·Z``), they cannot be the same surface point: NaN and
+    ``conflict`` True. (σ models noise only; sampling and model errors stay
+    below the jump threshold and are averaged, not discarded.)
+    """
+    z = np.stack(depths).astype(np.float64)
+    s = np.stack(sigmas).astype(np.float64)
+    ok = np.isfinite(z) & np.isfinite(s) & (s > 0)
+    w = np.where(ok, 1.0 / np.where(ok, s, 1.0) ** 2, 0.0)
+    wsum = w.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fused = np.where(wsum > 0, (w * np.where(ok, z, 0.0)).sum(axis=0) / wsum, np.nan)
+        sigma = np.where(wsum > 0, 1.0 / np.sqrt(wsum), np.nan)
+        spread = np.where(ok, z, np.nan)
+        lo, hi = np.nanmin(np.where(ok, spread, np.inf), axis=0), np.nanmax(np.where(ok, spread, -np.inf), axis=0)
+        combined = np.sqrt(np.sum(np.where(ok, s, 0.0) ** 2, axis=0))
+    conflict = (ok.sum(axis=0) >= 2) & (hi - lo > np.maximum(EDGE_CONFLICT_SIGMAS * combined,
+                                                             max_relative_jump * np.abs(fused)))
+    fused[conflict] = np.nan
+    sigma[conflict] = np.nan
+    return fused.astype(np.float32), sigma.astype(np.float32), conflict
+
+
+def _mean_ignoring_nan(maps: list[np.ndarray]) -> np.ndarray:
+    stack = np.stack(maps)
+    n = np.isfinite(stack).sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 0, np.nansum(stack, axis=0) / np.maximum(n, 1), np.nan).astype(np.float32)
+
+
+def points_from_depth(ray_map: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Camera-frame points (H, W, 3) on each pixel's ray at camera Z = depth."""
+    return (ray_map * (depth / ray_map[..., 2])[..., None]).astype(np.float32)
 
 
 def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | None = None) -> ScanResult:
     """Run a scan end to end and write its outputs into ``out_dir``."""
     opts = options or ScanOptions()
     t0 = time.perf_counter()
-    timings: dict[str, float] = {}
     log = load_field_log(field_log)
-    out = Path(out_dir)
     source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
-
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
-    try:
-        result = _scan_into(log, source, staging, opts, timings, t0)
-        out.mkdir(parents=True, exist_ok=True)
-        for name in OUTPUT_FILES:
-            if (staging / name).exists():
-                target = opts.rrd_path if (name == "scan.rrd" and opts.rrd_path) else out / name
-                Path(target).parent.mkdir(parents=True, exist_ok=True)
-                (staging / name).replace(target)
-        result.out_dir = out
-        return result
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+    with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
+        result = _scan_into(log, source, staging, opts, t0)
+    result.out_dir = Path(out_dir)
+    return result
 
 
-def _open_recorder(log: FieldLog, staging: Path, opts: ScanOptions):
+class staged_outputs:
+    """Context manager: a staging folder whose files move into ``out`` on success only."""
+
+    def __init__(self, out: Path, rrd_path: Path | None = None):
+        self.out, self.rrd_path = out, rrd_path
+
+    def __enter__(self) -> Path:
+        self.out.parent.mkdir(parents=True, exist_ok=True)
+        self.staging = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.partial-", dir=self.out.parent))
+        return self.staging
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is None:
+                self.out.mkdir(parents=True, exist_ok=True)
+                for name in OUTPUT_FILES:
+                    if (self.staging / name).exists():
+                        target = self.rrd_path if (name == "scan.rrd" and self.rrd_path) else self.out / name
+                        Path(target).parent.mkdir(parents=True, exist_ok=True)
+                        (self.staging / name).replace(target)
+        finally:
+            shutil.rmtree(self.staging, ignore_errors=True)
+
+
+def open_recorder(staging: Path, opts: ScanOptions, name: str):
     if not (opts.rrd or opts.view):
         return None
     from gnomon.recording import ScanRecording
 
-    return ScanRecording(
-        staging / "scan.rrd" if opts.rrd else None,
-        recording_name=f"scan {log.path.name}",
-        spawn_viewer=opts.view,
-        frame_stride=opts.frame_stride,
-    )
+    return ScanRecording(staging / "scan.rrd" if opts.rrd else None, recording_name=name,
+                         spawn_viewer=opts.view, frame_stride=opts.frame_stride)
 
 
-def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOptions,
-               timings: dict[str, float], t0: float) -> ScanResult:
+def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOptions, t0: float) -> ScanResult:
+    timings: dict[str, float] = {}
     warnings: list[str] = []
     cam, pose = log.camera, log.pose
-    recorder = _open_recorder(log, staging, opts)
+    recorder = open_recorder(staging, opts, f"scan {log.path.name}")
     try:
         if recorder is not None:
             recorder.log_camera(cam.K, cam.width, cam.height, pose.R, pose.t, log.capture.units)
@@ -155,117 +284,199 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
                 recorder.log_lamp(log.light.position)
 
         t = time.perf_counter()
-        times, n_frames, first_grey, first_color = _track(log, source, recorder, opts.progress)
+        tracked = _track(log, source, recorder, opts.progress)
+        times = tracked.times
         timings["tracking_s"] = time.perf_counter() - t
-        shadow_time = times.enter if log.scan.edge == "enter" else times.leave
 
         t = time.perf_counter()
         ray_map = cam.ray_map()
         timings["ray_map_s"] = time.perf_counter() - t
 
         t = time.perf_counter()
-        lines = [measure_reference_lines(shadow_time, n_frames, p, cam, pose) for p in log.planes]
-        lamp_cam = pose.world_to_camera(log.light.position)
-        planes, degenerate = lamp_shadow_planes(lines, lamp_cam)
-        timings["planes_s"] = time.perf_counter() - t
-        n_planes = int(np.isfinite(planes[:, 0]).sum())
-        if degenerate:
-            warnings.append(f"{degenerate} frames dropped: the lamp is nearly on the shadow line's axis")
+        wanted = ("enter", "leave") if log.scan.edge == "both" else (log.scan.edge,)
+        edges = []
+        for name in wanted:
+            tmap, slope = (times.enter, times.enter_slope) if name == "enter" else (times.leave, times.leave_slope)
+            edges.append(_reconstruct_edge(name, tmap, slope, log, tracked, ray_map))
+        timings["planes_and_triangulation_s"] = time.perf_counter() - t
+        for e in edges:
+            if e.degenerate:
+                warnings.append(f"{e.name} edge: {e.degenerate} frames dropped as degenerate shadow planes")
+        n_planes = max(int(np.isfinite(e.planes[:, 0]).sum()) for e in edges)
         if n_planes < 2:
             raise FrameError(
                 f"{log.path}: the shadow line was found on the reference regions in {n_planes} of "
-                f"{n_frames} frames; check [[planes]] regions (bare, swept by the shadow) and [scan] min_contrast"
+                f"{tracked.n_frames} frames; check [[planes]] regions (bare, swept by the shadow) "
+                f"and [scan] min_contrast"
             )
 
         t = time.perf_counter()
-        tri = triangulate(ray_map, shadow_time, planes)
-        keep = supported_by_neighbours(tri.depth, log.scan.max_depth_jump)
-        depth = np.where(keep, tri.depth, np.nan).astype(np.float32)
-        points_cam = tri.points_cam
-        points_world = pose.camera_to_world(points_cam[keep].astype(np.float64)).astype(np.float32)
-        rgb = _colors(first_color, first_grey)
-        colors = rgb[keep]
+        depth, sigma, conflict = fuse_depths([e.depth for e in edges], [e.sigma for e in edges],
+                                             log.scan.max_depth_jump)
+        keep = supported_by_neighbours(depth, log.scan.max_depth_jump)
+        depth = np.where(keep, depth, np.nan).astype(np.float32)
+        sigma = np.where(keep, sigma, np.nan).astype(np.float32)
+        shadow_time = _mean_ignoring_nan([e.times for e in edges])
+        points_cam = points_from_depth(ray_map, depth)
         world_grid = np.full(points_cam.shape, np.nan, dtype=np.float32)
-        world_grid[keep] = points_world
-        mesh = grid_mesh(world_grid, depth, keep, log.scan.max_depth_jump)
-        timings["triangulation_s"] = time.perf_counter() - t
+        world_grid[keep] = pose.camera_to_world(points_cam[keep].astype(np.float64))
+        points_world = world_grid[keep]
+        rgb = _colors(tracked.first_color, tracked.first_grey)
+        colors = rgb[keep]
+        mesh = remove_small_components(grid_mesh(world_grid, depth, keep, log.scan.max_depth_jump, sigma=sigma))
+        timings["fusion_and_mesh_s"] = time.perf_counter() - t
 
-        dropped_spikes = int(tri.valid.sum() - keep.sum())
-        contrast_ok = int(times.valid.sum())
-        found_lines = [int(ln.found.sum()) for ln in lines]
-        line_rms = [float(np.nanmedian(ln.rms)) if ln.found.any() else None for ln in lines]
-        report = {
-            "gnomon_version": __version__,
-            "field_log": str(log.path),
-            "units": log.capture.units,
-            "inputs": {
-                "field_log_sha256": sha256_file(log.path),
-                "frames_sha256": source.frames_digest(),
-                "camera_file_sha256": sha256_file(log.camera_file) if log.camera_file else None,
-                "frames": n_frames,
-                "image_size": [cam.width, cam.height],
-            },
-            "calibration": log.calibration,
-            "light": {"kind": log.light.kind, "position": log.light.position.tolist()},
-            "settings": {
-                "min_contrast_dn": log.scan.min_contrast,
-                "window": log.scan.window,
-                "edge": log.scan.edge,
-                "max_depth_jump": log.scan.max_depth_jump,
-                "gamma": log.capture.gamma,
-            },
-            "reference_lines": [
-                {"plane": ln.plane_name, "frames_with_line": f, "median_rms": r}
-                for ln, f, r in zip(lines, found_lines, line_rms)
-            ],
-            "coverage": {
-                "pixels": cam.width * cam.height,
-                "contrast_ok": contrast_ok,
-                "with_shadow_time": int(np.isfinite(shadow_time).sum()),
-                "triangulated": int(tri.valid.sum()),
-                "rejected_as_spikes": dropped_spikes,
-                "points": int(keep.sum()),
-                "fraction_of_image": float(keep.mean()),
-                "fraction_of_contrast_ok": float(keep.sum() / max(contrast_ok, 1)),
-                "shadow_planes": n_planes,
-                "mesh_faces": int(len(mesh.faces)),
-            },
-            "timings_s": timings,
-            "warnings": warnings,
-        }
+        lut = tracked.lut
+        under = np.zeros(keep.shape, dtype=bool)
+        for e in edges:
+            slope = times.enter_slope if e.name == "enter" else times.leave_slope
+            imax = lut[np.clip(np.nan_to_num(times.imax), 0, len(lut) - 1).astype(np.int64)]
+            imin = lut[np.clip(np.nan_to_num(times.imin), 0, len(lut) - 1).astype(np.int64)]
+            under |= undersampled(slope, imax, imin) & keep
+        report = _report(log, source, tracked, edges, depth, sigma, keep, conflict, under, mesh, timings, warnings)
+        if under.mean() > 0.2 * max(keep.mean(), 1e-9):
+            warnings.append(
+                f"{int(under.sum())} points ({100 * under.sum() / max(keep.sum(), 1):.0f} %) are under-sampled: "
+                "the shadow edge crossed them in fewer than 2 frames; sweep more slowly or film faster"
+            )
 
         t = time.perf_counter()
-        uv = np.stack(np.nonzero(keep)[::-1], axis=1).astype(np.float32)
-        ply.write_points_ply(
-            staging / "points.ply", points_world, colors, None, uv,
-            comments=[f"gnomon {__version__}", f"units {log.capture.units}", "frame world"],
-        )
-        ply.write_mesh_ply(staging / "mesh.ply", mesh.vertices, mesh.faces, rgb.reshape(-1, 3)[mesh.pixel_index])
+        v, u = np.nonzero(keep)
+        uv = np.stack([u, v], axis=1).astype(np.float32)
+        vertex_rgb = rgb.reshape(-1, 3)[mesh.pixel_index]
+        comments = [f"gnomon {__version__}", ply.units_comment(log.capture.units), "frame world"]
+        ply.write_points_ply(staging / "points.ply", points_world, colors, sigma[keep], uv, comments=comments)
+        ply.write_mesh_ply(staging / "mesh.ply", mesh.vertices, mesh.faces, vertex_rgb, comments=comments)
+        write_obj(staging / "mesh.obj", mesh.vertices, mesh.faces, vertex_rgb)
         atomic.save_npy(staging / "depth.npy", depth)
+        atomic.save_npy(staging / "sigma.npy", sigma)
         atomic.save_npy(staging / "shadow_time.npy", shadow_time.astype(np.float32))
         if recorder is not None:
-            for ln in lines:
-                for i in np.flatnonzero(ln.found):
-                    if i % max(opts.frame_stride, 1) == 0:
-                        recorder.log_edges(int(i), [ln.pixels[i]])
-            recorder.log_points(points_world, colors, None)
-            recorder.log_mesh(mesh.vertices, mesh.faces, rgb.reshape(-1, 3)[mesh.pixel_index])
-            recorder.log_maps(shadow_time, depth, None)
-            for w in warnings:
-                recorder.log_warning(w)
-            recorder.log_metrics({k: float(v) for k, v in report["coverage"].items()})
+            _record(recorder, log, edges, points_world, colors, sigma[keep], uv, mesh, vertex_rgb,
+                    shadow_time, depth, sigma, warnings, report, opts.frame_stride)
         timings["outputs_s"] = time.perf_counter() - t
         timings["total_s"] = time.perf_counter() - t0
+        report["warnings"] = warnings
         atomic.write_text(staging / "report.json", json.dumps(report, indent=2, default=_json_default))
         if recorder is not None:
             recorder.close()
             recorder = None
     finally:
         if recorder is not None:
-            recorder.abort() if hasattr(recorder, "abort") else None
+            recorder.abort()
 
-    return ScanResult(log, times, shadow_time, lines, planes, tri, depth, keep, points_world, colors, mesh,
+    return ScanResult(log, times, edges, shadow_time, depth, sigma, keep, points_world, colors, mesh,
                       report, warnings)
+
+
+def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[EdgeResult], depth: np.ndarray,
+            sigma: np.ndarray, keep: np.ndarray, conflict: np.ndarray, under: np.ndarray, mesh: GridMesh,
+            timings: dict, warnings: list[str]) -> dict:
+    cam, pose = log.camera, log.pose
+    times = tracked.times
+    report: dict = {
+        "gnomon_version": __version__,
+        "field_log": str(log.path),
+        "units": log.capture.units,
+        "inputs": {
+            "field_log_sha256": sha256_file(log.path),
+            "frames_sha256": source.frames_digest(),
+            "camera_file_sha256": sha256_file(log.camera_file) if log.camera_file else None,
+            "frames": tracked.n_frames,
+            "image_size": [cam.width, cam.height],
+        },
+        "camera": {"width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx,
+                   "cy": cam.cy, "dist": list(cam.dist), "rvec": pose.rvec.tolist(), "tvec": pose.t.tolist()},
+        "calibration": log.calibration,
+        "light": {"kind": log.light.kind,
+                  "position": None if log.light.position is None else log.light.position.tolist()},
+        "settings": {
+            "min_contrast_dn": log.scan.min_contrast, "window": log.scan.window, "edge": log.scan.edge,
+            "max_depth_jump": log.scan.max_depth_jump, "gamma": log.capture.gamma,
+        },
+        "noise": {"image_noise_dn": tracked.noise_dn,
+                  "median_sigma_z": float(np.nanmedian(sigma)) if np.isfinite(sigma).any() else None},
+        "edges": {},
+        "coverage": {
+            "pixels": cam.width * cam.height,
+            "contrast_ok": int(times.valid.sum()),
+            "points": int(keep.sum()),
+            "fraction_of_image": float(keep.mean()),
+            "fraction_of_contrast_ok": float(keep.sum() / max(int(times.valid.sum()), 1)),
+            "edge_conflicts": int(conflict.sum()),
+            "undersampled": int(under.sum()),
+            "mesh_vertices": int(len(mesh.vertices)),
+            "mesh_faces": int(len(mesh.faces)),
+        },
+        "timings_s": timings,
+    }
+    for e in edges:
+        report["edges"][e.name] = {
+            "shadow_planes": int(np.isfinite(e.planes[:, 0]).sum()),
+            "degenerate_frames": e.degenerate,
+            "triangulated": int(np.isfinite(e.depth).sum()),
+            "reference_lines": [
+                {"plane": ln.plane_name, "frames_with_line": int(ln.found.sum()),
+                 "extrapolated": int(ln.extrapolated.sum()),
+                 "median_rms": float(np.nanmedian(ln.rms)) if ln.found.any() else None}
+                for ln in e.lines
+            ],
+        }
+    if log.light.kind == "two-plane":
+        planes = edges[0].planes
+        if np.isfinite(planes[:, 0]).sum() >= 3:
+            point_cam, rms = light_point_from_planes(planes)
+            report["light"]["estimated_position"] = pose.camera_to_world(point_cam).tolist()
+            report["light"]["estimated_position_plane_rms"] = float(rms)
+    if len(edges) == 2:
+        both = np.isfinite(edges[0].depth) & np.isfinite(edges[1].depth)
+        diff = (edges[0].depth - edges[1].depth)[both]
+        comb = np.sqrt(edges[0].sigma ** 2 + edges[1].sigma ** 2)[both]
+        if diff.size:
+            report["edges"]["disagreement"] = {
+                "pixels": int(both.sum()),
+                "mean": float(np.mean(diff)),
+                "rms": float(np.sqrt(np.mean(diff**2))),
+                "median_abs": float(np.median(np.abs(diff))),
+                "rms_in_sigmas": float(np.sqrt(np.nanmean((diff / comb) ** 2))),
+            }
+    return report
+
+
+def _record(recorder, log: FieldLog, edges: list[EdgeResult], points_world, colors, point_sigma, uv, mesh,
+            vertex_rgb, shadow_time, depth, sigma, warnings, report, stride: int) -> None:
+    pose = log.pose
+    first = edges[0]
+    for ln in first.lines:
+        corners = []
+        for (u0, v0, u1, v1) in next(p for p in log.planes if p.name == ln.plane_name).regions:
+            pix = np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]], dtype=np.float64)
+            corners.append(ln.plane.intersect(log.camera.rays(pix)))
+        for i, c in enumerate(corners):
+            if np.all(np.isfinite(c)):
+                recorder.log_reference_plane(f"{ln.plane_name}_{i}", pose.camera_to_world(c))
+    for t in range(0, len(first.planes), max(stride, 1)):
+        polylines = [ln.pixels[t] for ln in first.lines if len(ln.pixels[t]) >= 2]
+        if polylines:
+            recorder.log_edges(t, polylines)
+        ends = []
+        for ln in first.lines:
+            if len(ln.pixels[t]) >= 2:
+                p = ln.plane.intersect(log.camera.rays(ln.pixels[t][[0, -1]]))
+                if np.all(np.isfinite(p)):
+                    ends.append(pose.camera_to_world(p))
+        if ends and log.light.position is not None:
+            a, b = ends[0]
+            s = log.light.position
+            recorder.log_shadow_plane(t, np.array([a, b, b + 0.6 * (s - b), a + 0.6 * (s - a)]))
+        elif len(ends) >= 2:
+            recorder.log_shadow_plane(t, np.array([ends[0][0], ends[0][1], ends[1][1], ends[1][0]]))
+    recorder.log_points(points_world, colors, point_sigma, uv=uv)
+    recorder.log_mesh(mesh.vertices, mesh.faces, vertex_rgb)
+    recorder.log_maps(shadow_time, depth, sigma)
+    for w in warnings:
+        recorder.log_warning(w)
+    recorder.log_metrics({"coverage": report["coverage"], "noise": report["noise"]})
 
 
 def _json_default(o):

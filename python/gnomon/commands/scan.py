@@ -25,6 +25,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from gnomon.pipeline import ScanOptions, run_scan
 
     out = args.out if args.out is not None else args.field_log.parent / "scan"
@@ -32,8 +34,9 @@ def run(args: argparse.Namespace) -> int:
                        progress=not args.quiet, frame_stride=max(1, args.frame_stride))
     result = run_scan(args.field_log, out, opts)
     cov = result.report["coverage"]
+    planes = ", ".join(f"{e.name} edge {int(np.isfinite(e.planes[:, 0]).sum())}" for e in result.edges)
     print(f"{cov['points']} points ({100 * cov['fraction_of_image']:.1f} % of the image), "
-          f"{cov['shadow_planes']} shadow planes, {cov['mesh_faces']} mesh faces -> {out}")
+          f"shadow planes: {planes}; {cov['mesh_faces']} mesh faces -> {out}")
     for w in result.warnings:
         print(f"warning: {w}")
     return 0
