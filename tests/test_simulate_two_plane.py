@@ -66,8 +66,8 @@ def test_depth_points_and_surfaces(capture):
     # Both planes are seen well: each covers a good part of the image.
     assert 0.3 < (oid == DESK).mean() < 0.6 and 0.3 < (oid == WALL).mean() < 0.6
     # The wall is above the desk in the image.
-    rows = np.arange(oid.shape[0])[:, None]
-    assert np.median(np.broadcast_to(rows, oid.shape)[oid == WALL]) < np.median(np.broadcast_to(rows, oid.shape)[oid == DESK])
+    rows = np.broadcast_to(np.arange(oid.shape[0])[:, None], oid.shape)
+    assert np.median(rows[oid == WALL]) < np.median(rows[oid == DESK])
 
 
 def test_cv2_projectpoints_lands_on_pixel_centres(capture):

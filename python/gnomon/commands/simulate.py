@@ -7,6 +7,8 @@ import time
 
 from gnomon.errors import GnomonError
 
+SCENE_CHOICES = ("desk_lamp", "desk_lamp_right", "two_plane")
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -14,12 +16,16 @@ def register(subparsers) -> None:
         help="write a synthetic capture + field log + ground truth",
         description=(
             "Render a synthetic shadow-sweep capture with exact ground truth. "
-            "desk_lamp: a desk with a sphere, a box and a cylinder, a point-like lamp, a stick "
-            "whose shadow sweeps the view. Writes DIR/frames/, DIR/ground_truth.npz, "
-            "DIR/ground_truth.json and (last) DIR/field_log.toml, runnable with `gnomon scan`."),
+            "desk_lamp: a desk with a sphere, a box and a cylinder, a point-like lamp left of the "
+            "camera, a stick whose shadow sweeps the view, plus pencil photos for lamp calibration "
+            "(DIR/pencil/, DIR/pencil_log.toml). desk_lamp_right: the same scene and pixel grid with "
+            "the lamp mirrored to the right of the camera (fuse the two scans). two_plane: a desk and "
+            "a wall meeting in a corner, printed 2x2 checker markers on both, a lamp the field log "
+            "does not give (the shadow planes come from the lines on both planes). Writes DIR/frames/, "
+            "DIR/ground_truth.npz, DIR/ground_truth.json and (last) DIR/field_log.toml."),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    p.add_argument("scene", choices=["desk_lamp"], help="which synthetic scene")
+    p.add_argument("scene", choices=SCENE_CHOICES, help="which synthetic scene")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--width", type=int, default=800, help="image width, px (the field of view is kept)")
     p.add_argument("--height", type=int, default=600, help="image height, px")
@@ -30,29 +36,42 @@ def register(subparsers) -> None:
     p.add_argument("--no-distortion", action="store_true", help="an ideal lens (all distortion coefficients 0)")
     p.add_argument("--blur", type=float, default=0.7, metavar="SIGMA_PX", help="optical blur σ, px")
     p.add_argument("--lamp-radius", type=float, default=3.0, metavar="MM", help="lamp radius, mm")
-    p.add_argument("--stick-radius", type=float, default=2.0, metavar="MM", help="stick radius, mm")
+    p.add_argument("--stick-radius", type=float, default=2.0, metavar="MM",
+                   help="stick radius, mm (the shadow is twice as wide, and more)")
     p.add_argument("--gamma", type=float, default=2.2, help="the camera's encoding gamma")
+    p.add_argument("--pencil-photos", type=int, default=3, metavar="N",
+                   help="desk_lamp scenes: pencil photos for `gnomon calibrate lamp` (0: none)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from gnomon.progress import Progress
-    from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
+    from gnomon.simulate import DeskLampConfig, TwoPlaneConfig, simulate_desk_lamp, simulate_two_plane
 
-    if args.scene != "desk_lamp":  # pragma: no cover - argparse restricts choices
-        raise GnomonError(f"simulate: unknown scene {args.scene!r}")
-    config = DeskLampConfig(
+    common = dict(
         width=args.width, height=args.height, frames=args.frames, noise=args.noise,
         jpeg_quality=args.jpeg_quality, seed=args.seed, distortion=not args.no_distortion,
         blur=args.blur, lamp_radius=args.lamp_radius, stick_radius=args.stick_radius,
         gamma=args.gamma,
     )
+    if args.scene in ("desk_lamp", "desk_lamp_right"):
+        config = DeskLampConfig(**common, lamp_side="left" if args.scene == "desk_lamp" else "right",
+                                pencil_photos=args.pencil_photos)
+        simulate = simulate_desk_lamp
+    elif args.scene == "two_plane":
+        config = TwoPlaneConfig(**common)
+        simulate = simulate_two_plane
+    else:  # pragma: no cover - argparse restricts choices
+        raise GnomonError(f"simulate: unknown scene {args.scene!r}")
     config.validate()
     t0 = time.perf_counter()
     with Progress("simulate", config.frames, enabled=not args.quiet) as bar:
-        result = simulate_desk_lamp(args.out, config, progress=lambda done, total: bar.update(done))
-    print(f"wrote {len(result.frames)} frames, ground truth and {result.field_log} "
+        result = simulate(args.out, config, progress=lambda done, total: bar.update(done))
+    extra = ""
+    if result.pencil_log is not None:
+        extra = f", {len(result.pencil_photos)} pencil photos and {result.pencil_log.name}"
+    print(f"wrote {len(result.frames)} frames{extra}, ground truth and {result.field_log} "
           f"({result.swept_fraction:.1%} of pixels swept, camera {result.camera_distance_mm:.1f} mm "
           f"from the scene) in {time.perf_counter() - t0:.1f} s")
     return 0

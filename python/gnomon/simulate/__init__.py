@@ -6,16 +6,34 @@ inversion, ray casting and lighting (:mod:`gnomon.simulate.geometry`,
 :mod:`gnomon.simulate.shadow`), and shares only the file formats (field log,
 frames, ``.npz``). Scenes:
 
-* ``desk_lamp`` — :func:`simulate_desk_lamp` (:mod:`gnomon.simulate.desk_lamp`).
+* ``desk_lamp`` — :func:`simulate_desk_lamp` (:mod:`gnomon.simulate.desk_lamp`),
+  with pencil photos for lamp calibration (:mod:`gnomon.simulate.pencil`);
+* ``desk_lamp_right`` — the same scene with the lamp mirrored to the other
+  side of the camera (``DeskLampConfig(lamp_side="right")``), for dual-scan
+  fusion on the same pixel grid;
+* ``two_plane`` — :func:`simulate_two_plane` (:mod:`gnomon.simulate.two_plane`):
+  desk + wall, printed markers, a lamp the field log does not give.
 """
 
 from gnomon.simulate.desk_lamp import (
     DeskLampConfig,
     DeskLampScene,
     SimulationResult,
+    SweepConfig,
     simulate_desk_lamp,
 )
+from gnomon.simulate.two_plane import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
 
-SCENES = ("desk_lamp",)
+SCENES = ("desk_lamp", "desk_lamp_right", "two_plane")
 
-__all__ = ["SCENES", "DeskLampConfig", "DeskLampScene", "SimulationResult", "simulate_desk_lamp"]
+__all__ = [
+    "SCENES",
+    "DeskLampConfig",
+    "DeskLampScene",
+    "SimulationResult",
+    "SweepConfig",
+    "TwoPlaneConfig",
+    "TwoPlaneScene",
+    "simulate_desk_lamp",
+    "simulate_two_plane",
+]

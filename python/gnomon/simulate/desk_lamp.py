@@ -17,11 +17,22 @@ Scene (world frame = the desk, millimetres, z up out of the desk)
   S = (−360, −220, 380), 568 mm from the scene centre, to the left of and in
   front of the camera, so shadow planes cut the viewing rays at a good angle.
 
+``desk_lamp_right`` (``DeskLampConfig(lamp_side="right")``) is the same
+scene, camera, objects, texture and hand motion with the lamp mirrored
+across the vertical plane through the camera centre and the scene centre
+(S ≈ (387.1, −167.8, 380): as far from camera, scene and desk as the left
+one), and its own sensor-noise draw. The two captures share the pixel grid,
+so a left and a right scan can be fused pixel by pixel; each sweeps much of
+what the other's cast shadows hide. The stick sweeps the same way (left to
+right in the image).
+
 The stick
 ---------
-A straight cylinder of radius ``stick_radius`` (2 mm), long enough that its
-ends never shadow the view, held between the lamp and the scene at ~55 % of
-the way from S to the desk. Its pose at each frame is set so that the centre
+A straight cylinder of radius ``stick_radius`` (2 mm; ``--stick-radius 6``
+gives a 12 mm wide stick, whose two edges stay exact: each is the plane
+through S tangent to the stick on its side), long enough that its ends never
+shadow the view, held between the lamp and the scene at ~55 % of the way
+from S to the desk. Its pose at each frame is set so that the centre
 of its shadow on the desk runs along a nearly vertical image line at column
 u(t), tilted by a few degrees; u(t) sweeps from beyond the left edge to beyond
 the right edge with a smooth hand-like wobble in speed (±30 %), tilt (±1.5°)
@@ -86,7 +97,18 @@ Ground truth (``ground_truth.npz``)
   cast shadow mixes lit and unlit surface just as one straddling a
   silhouette mixes depths, and biases the pixel's shadow time alike;
 * the camera (``K``, ``dist``, ``rvec``, ``tvec``, ``R``, ``t``), ``lamp``,
-  ``image_size`` (W, H) and ``camera_distance_mm``.
+  ``image_size`` (W, H) and ``camera_distance_mm``;
+* the stick: ``stick_axis`` (N, 2, 3), two points of its axis per frame (the
+  pose moves linearly between frames), and ``stick_radius``;
+* the pencil photos' truth (``pencil_*`` keys, see :mod:`gnomon.simulate.pencil`;
+  length 0 with ``pencil_photos = 0``).
+
+Pencil photos
+-------------
+``pencil_photos`` (default 3) photos of the same scene without the stick and
+with a 150 mm pencil standing on bare desk, one position per photo, and
+``pencil_log.toml`` for ``gnomon calibrate lamp``: see
+:mod:`gnomon.simulate.pencil`.
 
 The field log's desk regions are two bands (near the top and the bottom of
 the image, 96 % of its width, 5 % of its height) chosen from this ground
@@ -144,11 +166,20 @@ def _objects() -> dict[int, tuple[object, float]]:
     }
 
 
+def mirror_across_view(X, camera_centre, scene_centre) -> np.ndarray:
+    """Mirror image of X across the vertical plane through the camera and the scene centre."""
+    h = np.asarray(camera_centre, dtype=np.float64) - np.asarray(scene_centre, dtype=np.float64)
+    m = np.cross([0.0, 0.0, 1.0], h)
+    m /= np.linalg.norm(m)
+    X = np.asarray(X, dtype=np.float64)
+    return X - 2.0 * float((X - scene_centre) @ m) * m
+
+
 # ----------------------------------------------------------------- configuration / result
 
 @dataclass(frozen=True)
-class DeskLampConfig:
-    """Parameters of ``gnomon simulate desk_lamp`` (see the module docstring)."""
+class SweepConfig:
+    """What every shadow-sweep scene shares: image, frames, nuisance, lamp and stick sizes."""
 
     width: int = 800
     height: int = 600
@@ -162,10 +193,15 @@ class DeskLampConfig:
     stick_radius: float = 2.0     # mm
     gamma: float = 2.2
 
-    def validate(self) -> None:
-        def bad(msg: str) -> GnomonError:
-            return GnomonError(f"simulate desk_lamp: {msg}")
+    @property
+    def scene_name(self) -> str:
+        return "sweep"
 
+    def error(self, msg: str) -> GnomonError:
+        return GnomonError(f"simulate {self.scene_name}: {msg}")
+
+    def validate(self) -> None:
+        bad = self.error
         if not (128 <= self.width <= 8192 and 96 <= self.height <= 8192):
             raise bad(f"image size {self.width}x{self.height} out of range (128..8192 x 96..8192)")
         if not 8 <= self.frames <= 100000:
@@ -188,6 +224,36 @@ class DeskLampConfig:
         return "png" if self.jpeg_quality == 0 else "jpg"
 
 
+LAMP_SIDES = ("left", "right")
+MAX_PENCIL_PHOTOS = 12
+
+
+@dataclass(frozen=True)
+class DeskLampConfig(SweepConfig):
+    """Parameters of ``gnomon simulate desk_lamp`` / ``desk_lamp_right`` (see the module docstring).
+
+    ``lamp_side``: ``"left"`` (the lamp at ``LAMP``) or ``"right"`` (mirrored
+    to the other side of the camera; everything else unchanged).
+    ``pencil_photos``: how many pencil photos (and ``pencil_log.toml``) to
+    write beside the capture; 0 for none, else 2 to 12.
+    """
+
+    lamp_side: str = "left"
+    pencil_photos: int = 3
+
+    @property
+    def scene_name(self) -> str:
+        return "desk_lamp" if self.lamp_side == "left" else f"desk_lamp_{self.lamp_side}"
+
+    def validate(self) -> None:
+        if self.lamp_side not in LAMP_SIDES:
+            raise GnomonError(f"simulate desk_lamp: lamp_side {self.lamp_side!r}: must be 'left' or 'right'")
+        super().validate()
+        if not (self.pencil_photos == 0 or 2 <= self.pencil_photos <= MAX_PENCIL_PHOTOS):
+            raise self.error(f"--pencil-photos {self.pencil_photos}: must be 0 (none) or 2 to "
+                             f"{MAX_PENCIL_PHOTOS}")
+
+
 @dataclass
 class SimulationResult:
     """What :func:`simulate_desk_lamp` wrote, and the headline numbers."""
@@ -199,11 +265,13 @@ class SimulationResult:
     ground_truth_json: Path
     camera_distance_mm: float
     lamp: tuple[float, float, float]
-    regions: list[list[int]]
+    regions: list[list[int]] | dict[str, list[list[int]]]   # per plane name for several planes
     swept_pixels: int
     swept_fraction: float              # of all pixels
     seconds: float
-    config: DeskLampConfig = field(default_factory=DeskLampConfig)
+    config: SweepConfig = field(default_factory=DeskLampConfig)
+    pencil_log: Path | None = None     # DIR/pencil_log.toml (desk_lamp scenes with pencil photos)
+    pencil_photos: list[Path] = field(default_factory=list)
 
 
 # ----------------------------------------------------------------- the scene
@@ -215,11 +283,22 @@ class DeskLampScene:
     are produced by :meth:`linear_image` / :meth:`encode`.
     """
 
-    def __init__(self, config: DeskLampConfig) -> None:
+    # Camera placement (overridden by other scenes that reuse this machinery).
+    SCENE_CENTRE = SCENE_CENTRE
+    CAMERA_DISTANCE = CAMERA_DISTANCE
+    CAMERA_ELEVATION_DEG = CAMERA_ELEVATION_DEG
+    CAMERA_AZIMUTH_DEG = CAMERA_AZIMUTH_DEG
+    CAMERA_ROLL_DEG = CAMERA_ROLL_DEG
+    # Surfaces whose brightest lit pixel sets the irradiance scale (DESK_PEAK).
+    REFERENCE_IDS: tuple[int, ...] = (DESK,)
+
+    def __init__(self, config: SweepConfig) -> None:
         config.validate()
         self.config = config
+        self.name = config.scene_name
         self.W, self.H, self.N = config.width, config.height, config.frames
-        self.S = LAMP.astype(np.float64)
+        self._setup_camera()
+        self.S = self.lamp_position()
         # Everything per pixel is computed on a grid padded by ``pad`` pixels on
         # each side (the scene beyond the image border is real: the blur and
         # the mixed-pixel test see it), then cropped to the image.
@@ -229,7 +308,6 @@ class DeskLampScene:
         self.pad = max(int(math.ceil(4.0 * config.blur)), self.footprint_radius) + 3
         p = self.pad
         self.crop = (slice(p, p + self.H), slice(p, p + self.W))
-        self._setup_camera()
         self._cast_primary_rays()
         self._light()
         for name in ("hit", "object_id", "points", "depth", "normals", "albedo", "direct", "ambient",
@@ -246,13 +324,26 @@ class DeskLampScene:
         cx, cy = (REF_CX + 0.5) * sx - 0.5, (REF_CY + 0.5) * sy - 0.5
         dist = DISTORTION if c.distortion else (0.0,) * 5
         self.lens = geo.PinholeLens(fx, fy, cx, cy, dist)
-        el, az = math.radians(CAMERA_ELEVATION_DEG), math.radians(CAMERA_AZIMUTH_DEG)
-        eye = SCENE_CENTRE + CAMERA_DISTANCE * np.array(
+        el, az = math.radians(self.CAMERA_ELEVATION_DEG), math.radians(self.CAMERA_AZIMUTH_DEG)
+        centre = np.asarray(self.SCENE_CENTRE, dtype=np.float64)
+        eye = centre + self.CAMERA_DISTANCE * np.array(
             [math.sin(az) * math.cos(el), -math.cos(az) * math.cos(el), math.sin(el)])
-        self.R, self.t = geo.look_at(eye, SCENE_CENTRE, roll_deg=CAMERA_ROLL_DEG)
+        self.R, self.t = geo.look_at(eye, centre, roll_deg=self.CAMERA_ROLL_DEG)
         self.rvec = geo.rodrigues_from_rotation(self.R)
         self.C = -self.R.T @ self.t
-        self.camera_distance = float(np.linalg.norm(self.C - SCENE_CENTRE))
+        self.camera_distance = float(np.linalg.norm(self.C - centre))
+
+    def lamp_position(self) -> np.ndarray:
+        """The lamp's centre: ``LAMP``, or its mirror image for ``lamp_side="right"``.
+
+        The mirror is the vertical plane through the camera centre and the
+        scene centre, so the right lamp is exactly as far from the camera, the
+        scene and the desk as the left one, on the other side of the view.
+        """
+        S = LAMP.astype(np.float64)
+        if getattr(self.config, "lamp_side", "left") == "right":
+            S = mirror_across_view(S, self.C, self.SCENE_CENTRE)
+        return S
 
     def project(self, X_world: np.ndarray) -> np.ndarray:
         """World points (..., 3) → pixels (..., 2) through the distorted lens."""
@@ -267,38 +358,64 @@ class DeskLampScene:
         """Where the ray of pixel (u, v) meets the desk plane z = 0."""
         d = self.pixel_rays_world(u, v)
         if np.any(d[..., 2] >= -1e-9):
-            raise GnomonError("simulate desk_lamp: a pixel ray misses the desk (camera set-up)")
+            raise GnomonError(f"simulate {self.name}: a pixel ray misses the desk (camera set-up)")
         tt = -self.C[2] / d[..., 2]
         return self.C + tt[..., None] * d
+
+    def surface_point(self, u, v) -> np.ndarray:
+        """Where the ray of pixel (u, v) meets the reference surface (here: the desk).
+
+        The stick's motion is defined by two such points per frame (see
+        ``_stick_motion``); scenes with other reference surfaces override this.
+        """
+        return self.desk_point(u, v)
+
+    def shadow_columns(self, P: np.ndarray) -> np.ndarray:
+        """Image column of the central shadow line on the reference surface when it
+        falls on each lit point P (M, 3): P projected from S onto the desk."""
+        k = self.S[2] / (self.S[2] - P[:, 2])
+        Pd = self.S + k[:, None] * (P - self.S)
+        return self.project(Pd)[:, 0]
 
     # ------------------------------------------------------------- geometry
     def _cast_primary_rays(self) -> None:
         p = self.pad
-        H, W = self.H + 2 * p, self.W + 2 * p                 # the padded grid
         uu, vv = np.meshgrid(np.arange(-p, self.W + p, dtype=np.float64),
                              np.arange(-p, self.H + p, dtype=np.float64))
         d_cam = self.lens.rays_cam(uu, vv)                    # (H, W, 3)
         d = d_cam @ self.R                                    # world directions
-        self.objects = _objects()
-        desk = geo.Plane((0.0, 0.0, 1.0), 0.0)
-        ts = [desk.intersect(self.C, d)] + [obj.intersect(self.C, d) for obj, _ in self.objects.values()]
-        ts = np.stack(ts)                                     # (4, H, W)
+        self.rays_world_f = d
+        self.objects = self._objects()                        # solids: cast shadows, fixed albedo
+        self.planes = self._planes()                          # large textured planes
+        surfaces = {**{oid: pl for oid, pl in self.planes.items()},
+                    **{oid: obj for oid, (obj, _) in self.objects.items()}}
+        id_list = np.array(list(surfaces), dtype=np.int8)
+        ts = np.stack([s.intersect(self.C, d) for s in surfaces.values()])   # (n, H, W)
         ids = np.argmin(ts, axis=0)
         t_hit = np.take_along_axis(ts, ids[None], axis=0)[0]
         hit = np.isfinite(t_hit)
         self.hit_f = hit
-        self.object_id_f = np.where(hit, ids, -1).astype(np.int8)
+        self.object_id_f = np.where(hit, id_list[ids], -1).astype(np.int8)
         t_safe = np.where(hit, t_hit, 0.0)
         P = self.C + t_safe[..., None] * d
         self.points_f = np.where(hit[..., None], P, np.nan)
         self.depth_f = np.where(hit, t_safe * d_cam[..., 2], np.nan)
         n = np.zeros_like(P)
-        n[...] = (0.0, 0.0, 1.0)
-        for oid, (obj, _) in self.objects.items():
+        for oid, surf in surfaces.items():
             m = self.object_id_f == oid
-            n[m] = obj.normal(P[m])
+            n[m] = surf.normal(P[m])
         self.normals_f = n
-        # albedo
+        self.albedo_f = np.where(hit, self._albedo(P), 0.0)
+
+    def _objects(self) -> dict[int, tuple[object, float]]:
+        return _objects()
+
+    def _planes(self) -> dict[int, geo.Plane]:
+        return {DESK: geo.Plane((0.0, 0.0, 1.0), 0.0)}
+
+    def _albedo(self, P: np.ndarray) -> np.ndarray:
+        """Albedo at the (padded) grid's surface points: the desk texture, objects uniform."""
+        H, W = P.shape[:2]
         rng = np.random.default_rng([self.config.seed, 1])
         tex = np.zeros((H, W))
         amp_sum = 0.0
@@ -312,7 +429,7 @@ class DeskLampScene:
         albedo = 0.6 + 0.15 * tex / amp_sum
         for oid, (_, a) in self.objects.items():
             albedo = np.where(self.object_id_f == oid, a, albedo)
-        self.albedo_f = np.where(hit, albedo, 0.0)
+        return albedo
 
     def _light(self) -> None:
         P, n, hit = self.points_f, self.normals_f, self.hit_f
@@ -337,9 +454,9 @@ class DeskLampScene:
         amb = self.albedo_f * AMBIENT
         # Normalise on the image proper (not the padding).
         raw_c, amb_c = raw[self.crop], amb[self.crop]
-        desk_lit = (visible_light & (self.object_id_f == DESK))[self.crop]
+        desk_lit = (visible_light & np.isin(self.object_id_f, self.REFERENCE_IDS))[self.crop]
         if not desk_lit.any():
-            raise GnomonError("simulate desk_lamp: no lit desk in view")
+            raise GnomonError(f"simulate {self.name}: no lit reference surface in view")
         i_desk = np.argmax(np.where(desk_lit, raw_c, -1.0))
         E = (DESK_PEAK - amb_c.flat[i_desk]) / raw_c.flat[i_desk]
         peak = np.max(amb + E * raw)
@@ -369,8 +486,8 @@ class DeskLampScene:
         tilt = np.radians(tilt0 + 1.5 * np.sin(2 * np.pi * 1.3 * s + ph_t))
         lam = STICK_FRACTION * (1.0 + 0.015 * np.sin(2 * np.pi * 0.8 * s + ph_l))
         half = np.tan(tilt) * (self.H - 1) / 2.0
-        A = self.desk_point(u + half, np.zeros_like(u))
-        B = self.desk_point(u - half, np.full_like(u, self.H - 1.0))
+        A = self.surface_point(u + half, np.zeros_like(u))
+        B = self.surface_point(u - half, np.full_like(u, self.H - 1.0))
         QA = self.S + lam[..., None] * (A - self.S)
         QB = self.S + lam[..., None] * (B - self.S)
         return QA, QB
@@ -380,13 +497,10 @@ class DeskLampScene:
         frames = np.arange(self.N, dtype=np.float64)
         # Where would the shadow's centre line be (image column) when it falls on
         # each lit point? Project the point from S onto the desk and read its column.
-        P = self.points_f[self.receives_light_f]
-        k = self.S[2] / (self.S[2] - P[:, 2])
-        Pd = self.S + k[:, None] * (P - self.S)
-        cols = self.project(Pd)[:, 0]
+        cols = self.shadow_columns(self.points_f[self.receives_light_f])
         lo, hi = float(cols.min()), float(cols.max())
-        self.motion = self.desk_point(np.array(hi), np.array((self.H - 1) / 2.0)) - \
-            self.desk_point(np.array(lo), np.array((self.H - 1) / 2.0))
+        self.motion = self.surface_point(np.array(hi), np.array((self.H - 1) / 2.0)) - \
+            self.surface_point(np.array(lo), np.array((self.H - 1) / 2.0))
         tilt_px = math.tan(math.radians(4.5)) * (self.H - 1) / 2.0
         margin = 0.03 * self.W + tilt_px + 2.0
         for _ in range(12):
@@ -521,6 +635,9 @@ class DeskLampScene:
         # Pixels not lit directly count as boundaries too: a footprint that is partly
         # in an object's cast shadow mixes lit and unlit surface.
         edge |= ~self.lit_f
+        extra = self._extra_edges_f()
+        if extra is not None:
+            edge |= extra
         r = self.footprint_radius
         dv, du = np.mgrid[-r:r + 1, -r:r + 1]
         disc = (du * du + dv * dv <= r * r).astype(np.uint8)
@@ -528,8 +645,19 @@ class DeskLampScene:
                                borderValue=0).astype(bool)
         clean = (self.hit_f & ~near_edge)[self.crop]
         self.unmixed = clean
-        self.swept = self.lit & crossed & clean
-        self.regions = self._desk_regions()
+        self.swept = self._refine_swept(self.lit & crossed & clean)
+        self.regions = self._regions()
+
+    def _refine_swept(self, swept: np.ndarray) -> np.ndarray:
+        """Further conditions a scene puts on ``swept`` (none here)."""
+        return swept
+
+    def _extra_edges_f(self) -> np.ndarray | None:
+        """More pixels (padded grid) that mix what they see, e.g. printed albedo edges."""
+        return None
+
+    def _regions(self):
+        return self._desk_regions()
 
     def _desk_regions(self) -> list[list[int]]:
         H, W = self.H, self.W
@@ -549,7 +677,7 @@ class DeskLampScene:
                 break
         if top is None or bottom is None or top + band > bottom - band:
             raise GnomonError(
-                "simulate desk_lamp: this configuration leaves no bare, swept desk band near the "
+                f"simulate {self.name}: this configuration leaves no bare, swept desk band near the "
                 "top and bottom of the image for the field log's reference regions")
         regions = [[u0, top, u1, top + band], [u0, bottom - band, u1, bottom]]
         for r in regions:  # belt and braces: desk only, swept, never in a cast shadow
@@ -610,19 +738,28 @@ class DeskLampScene:
             "lamp": self.S.copy(),
             "image_size": np.array([self.W, self.H], dtype=np.int64),
             "camera_distance_mm": np.float64(self.camera_distance),
+            "stick_axis": np.stack([self.QA, self.QB], axis=1),
+            "stick_radius": np.float64(self.config.stick_radius),
+        }
+
+    def capture_table(self) -> dict:
+        c = self.config
+        return {"frames": f"frames/*.{c.extension}", "units": "mm", "gamma": float(c.gamma),
+                "frame_count": int(self.N)}
+
+    def camera_table(self) -> dict:
+        """``[camera]`` with ``[camera.pose]``: the true intrinsics, lens and pose."""
+        L = self.lens
+        return {
+            "model": "opencv", "width": int(self.W), "height": int(self.H),
+            "fx": L.fx, "fy": L.fy, "cx": L.cx, "cy": L.cy, "dist": [float(x) for x in L.dist],
+            "pose": {"rvec": [float(x) for x in self.rvec], "tvec": [float(x) for x in self.t]},
         }
 
     def field_log(self) -> dict:
-        c = self.config
-        L = self.lens
         return {
-            "capture": {"frames": f"frames/*.{c.extension}", "units": "mm", "gamma": float(c.gamma),
-                        "frame_count": int(self.N)},
-            "camera": {
-                "model": "opencv", "width": int(self.W), "height": int(self.H),
-                "fx": L.fx, "fy": L.fy, "cx": L.cx, "cy": L.cy, "dist": [float(x) for x in L.dist],
-                "pose": {"rvec": [float(x) for x in self.rvec], "tvec": [float(x) for x in self.t]},
-            },
+            "capture": self.capture_table(),
+            "camera": self.camera_table(),
             "planes": [{"name": "desk", "point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0],
                         "regions": [list(map(int, r)) for r in self.regions]}],
             "light": {"kind": "lamp", "position": [float(x) for x in self.S]},
@@ -633,7 +770,8 @@ class DeskLampScene:
         c = self.config
         lit_desk = self.receives_light & (self.object_id == DESK)
         return {
-            "scene": "desk_lamp",
+            "scene": self.name,
+            "lamp_side": c.lamp_side,
             "seed": c.seed,
             "config": dataclasses.asdict(c),
             "units": "mm",
@@ -672,70 +810,119 @@ class DeskLampScene:
 
 # ----------------------------------------------------------------- writing a capture
 
-def _clear_previous(out: Path) -> None:
+def clear_previous(out: Path) -> None:
     """Make a half-written or stale capture in ``out`` unrunnable and remove old frames."""
     (out / "field_log.toml").unlink(missing_ok=True)
-    frames = out / "frames"
-    if frames.is_dir():
-        for p in frames.iterdir():
-            if p.is_file() and p.name.startswith("frame_") and p.suffix in (".jpg", ".png"):
-                p.unlink()
+    (out / "pencil_log.toml").unlink(missing_ok=True)
+    for sub, prefix in (("frames", "frame_"), ("pencil", "pencil_")):
+        folder = out / sub
+        if folder.is_dir():
+            for p in folder.iterdir():
+                if p.is_file() and p.name.startswith(prefix) and p.suffix in (".jpg", ".png"):
+                    p.unlink()
+
+
+_clear_previous = clear_previous  # the old private name
+
+
+def encode_image(img: np.ndarray, config: SweepConfig) -> bytes:
+    """A u8 image as JPEG (``config.jpeg_quality``) or PNG (quality 0) bytes."""
+    ext = config.extension
+    params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if ext == "png" else [cv2.IMWRITE_JPEG_QUALITY, config.jpeg_quality]
+    ok, buf = cv2.imencode(f".{ext}", img, params)
+    if not ok:  # pragma: no cover
+        raise RuntimeError("cv2.imencode failed")
+    return buf.tobytes()
+
+
+def prepare_out_dir(out_dir) -> Path:
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise GnomonError(f"{out}: exists and is not a directory")
+    return out
+
+
+def write_frames(scene: DeskLampScene, out: Path, rng: np.random.Generator,
+                 progress: Callable[[int, int], None] | None) -> list[Path]:
+    """Render and write ``frames/frame_NNNN.ext`` (atomically, one by one)."""
+    config = scene.config
+    frames_dir = out / "frames"
+    frames_dir.mkdir(exist_ok=True)
+    digits = max(4, len(str(config.frames - 1)))
+    paths: list[Path] = []
+    for k in range(config.frames):
+        path = frames_dir / f"frame_{k:0{digits}d}.{config.extension}"
+        atomic.write_bytes(path, encode_image(scene.frame(k, rng), config))
+        paths.append(path)
+        if progress is not None:
+            progress(k + 1, config.frames)
+    return paths
+
+
+def write_ground_truth(out: Path, arrays: dict, summary: dict) -> tuple[Path, Path]:
+    gt_path = out / "ground_truth.npz"
+    with atomic.atomic_path(gt_path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+    json_path = out / "ground_truth.json"
+    atomic.write_text(json_path, json.dumps(summary, indent=2) + "\n")
+    return gt_path, json_path
+
+
+def nuisance_text(config: SweepConfig) -> str:
+    ext = config.extension
+    return (f"{config.width}x{config.height}, {config.frames} frames, noise {config.noise} DN, "
+            f"{'PNG' if ext == 'png' else f'JPEG q{config.jpeg_quality}'}, blur {config.blur} px, "
+            f"lamp radius {config.lamp_radius} mm, stick radius {config.stick_radius} mm.")
 
 
 def simulate_desk_lamp(out_dir, config: DeskLampConfig | None = None, *,
                        progress: Callable[[int, int], None] | None = None) -> SimulationResult:
     """Render the desk-lamp capture into ``out_dir``; return what was written.
 
-    Writes ``frames/frame_NNNN.{jpg,png}``, ``ground_truth.npz``,
-    ``ground_truth.json`` and, last, ``field_log.toml`` — every file atomically,
-    so an interrupted run never leaves a runnable half capture.
-    ``progress(done, total)`` is called after each frame.
+    Writes ``frames/frame_NNNN.{jpg,png}``, the pencil photos
+    ``pencil/pencil_K.{jpg,png}`` (``config.pencil_photos``, see
+    :mod:`gnomon.simulate.pencil`), ``ground_truth.npz``,
+    ``ground_truth.json``, ``pencil_log.toml`` and, last, ``field_log.toml`` —
+    every file atomically, so an interrupted run never leaves a runnable half
+    capture. ``progress(done, total)`` is called after each frame.
+    ``config.lamp_side = "right"`` gives the ``desk_lamp_right`` capture: the
+    same scene and pixel grid with the lamp mirrored (independent sensor noise).
     """
+    from gnomon.simulate import pencil as pencil_mod
+
     config = config or DeskLampConfig()
     config.validate()
     t0 = time.perf_counter()
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise GnomonError(f"{out}: exists and is not a directory")
+    out = prepare_out_dir(out_dir)
     scene = DeskLampScene(config)
     out.mkdir(parents=True, exist_ok=True)
-    _clear_previous(out)
-    frames_dir = out / "frames"
-    frames_dir.mkdir(exist_ok=True)
+    clear_previous(out)
 
-    rng = np.random.default_rng([config.seed, 3])
-    digits = max(4, len(str(config.frames - 1)))
-    ext = config.extension
-    params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if ext == "png" else [cv2.IMWRITE_JPEG_QUALITY, config.jpeg_quality]
-    paths: list[Path] = []
-    for k in range(config.frames):
-        img = scene.frame(k, rng)
-        ok, buf = cv2.imencode(f".{ext}", img, params)
-        if not ok:  # pragma: no cover
-            raise RuntimeError(f"cv2.imencode failed for frame {k}")
-        path = frames_dir / f"frame_{k:0{digits}d}.{ext}"
-        atomic.write_bytes(path, buf.tobytes())
-        paths.append(path)
-        if progress is not None:
-            progress(k + 1, config.frames)
+    # The right-hand capture is another recording: its own sensor noise.
+    noise_key = [config.seed, 3] if config.lamp_side == "left" else [config.seed, 3, 1]
+    paths = write_frames(scene, out, np.random.default_rng(noise_key), progress)
 
-    gt_path = out / "ground_truth.npz"
-    with atomic.atomic_path(gt_path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **scene.ground_truth_arrays())
+    arrays = scene.ground_truth_arrays()
     summary = scene.summary()
-    json_path = out / "ground_truth.json"
-    atomic.write_text(json_path, json.dumps(summary, indent=2) + "\n")
+    pencil = None
+    if config.pencil_photos:
+        pencil = pencil_mod.write_pencil_photos(scene, out, config.pencil_photos)
+    arrays.update(pencil_mod.ground_truth_arrays(pencil))
+    summary["pencil"] = pencil_mod.ground_truth_summary(pencil)
+    gt_path, json_path = write_ground_truth(out, arrays, summary)
+    if pencil is not None:
+        pencil_mod.write_pencil_log(scene, pencil, out / "pencil_log.toml")
     log_path = out / "field_log.toml"
-    header = (f"Synthetic capture written by `gnomon simulate desk_lamp` (seed {config.seed}).\n"
+    header = (f"Synthetic capture written by `gnomon simulate {scene.name}` (seed {config.seed}).\n"
               "Ground truth: ground_truth.npz and ground_truth.json beside this file.\n"
-              f"{config.width}x{config.height}, {config.frames} frames, noise {config.noise} DN, "
-              f"{'PNG' if ext == 'png' else f'JPEG q{config.jpeg_quality}'}, blur {config.blur} px, "
-              f"lamp radius {config.lamp_radius} mm, stick radius {config.stick_radius} mm.")
+              + nuisance_text(config))
     toml_io.dump(scene.field_log(), log_path, header=header)
     return SimulationResult(
         out_dir=out, field_log=log_path, frames=paths, ground_truth=gt_path,
         ground_truth_json=json_path, camera_distance_mm=scene.camera_distance,
         lamp=tuple(float(x) for x in scene.S), regions=scene.regions,
         swept_pixels=int(scene.swept.sum()), swept_fraction=float(scene.swept.mean()),
-        seconds=time.perf_counter() - t0, config=config)
+        seconds=time.perf_counter() - t0, config=config,
+        pencil_log=(out / "pencil_log.toml") if pencil is not None else None,
+        pencil_photos=list(pencil.paths) if pencil is not None else [])
