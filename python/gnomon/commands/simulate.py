@@ -7,7 +7,7 @@ import time
 
 from gnomon.errors import GnomonError
 
-SCENE_CHOICES = ("desk_lamp", "desk_lamp_right", "two_plane")
+SCENE_CHOICES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun")
 
 
 def register(subparsers) -> None:
@@ -29,7 +29,8 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--width", type=int, default=800, help="image width, px (the field of view is kept)")
     p.add_argument("--height", type=int, default=600, help="image height, px")
-    p.add_argument("--frames", type=int, default=240, help="number of frames (the sweep always covers the view)")
+    p.add_argument("--frames", type=int, default=None,
+                   help="number of frames (the sweep always covers the view); default 240, facade_sun 200")
     p.add_argument("--noise", type=float, default=1.5, help="sensor noise σ, DN")
     p.add_argument("--jpeg-quality", type=int, default=90, help="JPEG quality; 0 writes PNG")
     p.add_argument("--seed", type=int, default=0, help="random seed (noise, texture, hand wobble)")
@@ -41,6 +42,11 @@ def register(subparsers) -> None:
     p.add_argument("--gamma", type=float, default=2.2, help="the camera's encoding gamma")
     p.add_argument("--pencil-photos", type=int, default=3, metavar="N",
                    help="desk_lamp scenes: pencil photos for `gnomon calibrate lamp` (0: none)")
+    p.add_argument("--start", default=None, metavar="ISO",
+                   help="facade_sun: the first frame's time, local at the site (Zurich) or with an offset "
+                        "(default 2026-11-12T11:40:00; the capture lasts 3 h 19 min)")
+    p.add_argument("--pole-radius", type=float, default=0.05, metavar="M", help="facade_sun: pole radius, m")
+    p.add_argument("--clouds", type=int, default=3, help="facade_sun: number of cloud dips (0-10)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -49,6 +55,8 @@ def run(args: argparse.Namespace) -> int:
     from gnomon.progress import Progress
     from gnomon.simulate import DeskLampConfig, TwoPlaneConfig, simulate_desk_lamp, simulate_two_plane
 
+    if args.frames is None:
+        args.frames = 200 if args.scene == "facade_sun" else 240
     common = dict(
         width=args.width, height=args.height, frames=args.frames, noise=args.noise,
         jpeg_quality=args.jpeg_quality, seed=args.seed, distortion=not args.no_distortion,
@@ -62,6 +70,14 @@ def run(args: argparse.Namespace) -> int:
     elif args.scene == "two_plane":
         config = TwoPlaneConfig(**common)
         simulate = simulate_two_plane
+    elif args.scene == "facade_sun":
+        from gnomon.simulate.facade_sun import FacadeSunConfig, simulate_facade_sun
+
+        sun = {k: v for k, v in common.items() if k not in ("lamp_radius", "stick_radius")}
+        if args.start is not None:
+            sun["start"] = args.start
+        config = FacadeSunConfig(**sun, pole_radius=args.pole_radius, clouds=args.clouds)
+        simulate = simulate_facade_sun
     else:  # pragma: no cover - argparse restricts choices
         raise GnomonError(f"simulate: unknown scene {args.scene!r}")
     config.validate()
@@ -71,7 +87,9 @@ def run(args: argparse.Namespace) -> int:
     extra = ""
     if result.pencil_log is not None:
         extra = f", {len(result.pencil_photos)} pencil photos and {result.pencil_log.name}"
+    units = getattr(result, "units", "mm")
+    distance = result.camera_distance if units == "m" else result.camera_distance_mm
     print(f"wrote {len(result.frames)} frames{extra}, ground truth and {result.field_log} "
-          f"({result.swept_fraction:.1%} of pixels swept, camera {result.camera_distance_mm:.1f} mm "
+          f"({result.swept_fraction:.1%} of pixels swept, camera {distance:.1f} {units} "
           f"from the scene) in {time.perf_counter() - t0:.1f} s")
     return 0

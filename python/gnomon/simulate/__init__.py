@@ -12,7 +12,9 @@ frames, ``.npz``). Scenes:
   side of the camera (``DeskLampConfig(lamp_side="right")``), for dual-scan
   fusion on the same pixel grid;
 * ``two_plane`` — :func:`simulate_two_plane` (:mod:`gnomon.simulate.two_plane`):
-  desk + wall, printed markers, a lamp the field log does not give.
+  desk + wall, printed markers, a lamp the field log does not give;
+* ``facade_sun`` — :func:`simulate_facade_sun` (:mod:`gnomon.simulate.facade_sun`):
+  a pole's shadow swept by the sun (pvlib) over ground and a building facade.
 """
 
 from gnomon.simulate.desk_lamp import (
@@ -24,10 +26,16 @@ from gnomon.simulate.desk_lamp import (
 )
 from gnomon.simulate.two_plane import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
 
-SCENES = ("desk_lamp", "desk_lamp_right", "two_plane")
+from gnomon.simulate.facade_sun import FacadeSunConfig, FacadeSunResult, FacadeSunScene, simulate_facade_sun
+
+SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun")
 
 __all__ = [
     "SCENES",
+    "FacadeSunConfig",
+    "FacadeSunResult",
+    "FacadeSunScene",
+    "simulate_facade_sun",
     "DeskLampConfig",
     "DeskLampScene",
     "SimulationResult",

@@ -277,6 +277,8 @@ class SimulationResult:
 # ----------------------------------------------------------------- the scene
 
 class DeskLampScene:
+    # Amplitude of the hand's rocking of the stick (degrees of the shadow's tilt).
+    TILT_WOBBLE_DEG = 1.5
     """The desk-lamp scene for one configuration: geometry, lighting, stick, ground truth.
 
     Building it does the ray casting and computes the ground truth; frames
@@ -483,7 +485,7 @@ class DeskLampScene:
         s_w = (s + a1 * np.sin(2 * np.pi * 2 * s) / (2 * np.pi * 2)
                + a2 * np.sin(2 * np.pi * 3 * s) / (2 * np.pi * 3))
         u = u_start + (u_end - u_start) * s_w
-        tilt = np.radians(tilt0 + 1.5 * np.sin(2 * np.pi * 1.3 * s + ph_t))
+        tilt = np.radians(tilt0 + self.TILT_WOBBLE_DEG * np.sin(2 * np.pi * 1.3 * s + ph_t))
         lam = STICK_FRACTION * (1.0 + 0.015 * np.sin(2 * np.pi * 0.8 * s + ph_l))
         half = np.tan(tilt) * (self.H - 1) / 2.0
         A = self.surface_point(u + half, np.zeros_like(u))
@@ -501,7 +503,7 @@ class DeskLampScene:
         lo, hi = float(cols.min()), float(cols.max())
         self.motion = self.surface_point(np.array(hi), np.array((self.H - 1) / 2.0)) - \
             self.surface_point(np.array(lo), np.array((self.H - 1) / 2.0))
-        tilt_px = math.tan(math.radians(4.5)) * (self.H - 1) / 2.0
+        tilt_px = math.tan(math.radians(3.0 + self.TILT_WOBBLE_DEG)) * (self.H - 1) / 2.0
         margin = 0.03 * self.W + tilt_px + 2.0
         for _ in range(12):
             u_start, u_end = lo - margin, hi + margin

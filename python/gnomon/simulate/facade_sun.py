@@ -12,7 +12,7 @@ Tied to local East-North-Up by a heading (DESIGN.md, :mod:`gnomon.sun`):
 world z is up, world x points at compass heading ``HEADING_DEG`` = 295°
 (WNW) and y = z × x at 205° (SSW). The facade is the plane y = 0 (the
 building behind it, y < 0, its outward normal +y facing 205°, so it is in
-the sun from late morning to mid-afternoon); the ground is z = 0 (y ≥ 0).
+the sun from late morning to late afternoon); the ground is z = 0 (y ≥ 0).
 ``v_world = R · v_enu`` with R's rows the world axes in ENU:
 x = (sin h, cos h, 0), y = (−cos h, sin h, 0), z = (0, 0, 1). The simulator
 builds R itself; it does not use the pipeline's :func:`gnomon.sun.R_world_from_enu`.
@@ -27,21 +27,28 @@ Scene
   - a ledge (string course) along the whole facade at z 2.90–3.15 m,
     protruding 0.25 m (albedo 0.70);
   - two balconies, solid-parapet boxes 3.2 m wide protruding 1.1 m, at
-    z 3.40–4.45 and 6.60–7.65 m (albedo 0.60);
+    x 17.65–20.85, z 3.40–4.45 and x 10.65–13.85, z 6.60–7.65 m (albedo 0.60);
 * the pole: a vertical cylinder of radius ``pole_radius`` (5 cm), base
-  (−4, 9, 0), top 12 m above it (albedo 0.35). It is rendered (it is in view)
-  and casts the swept shadow;
-* the camera on a tripod at (14, 24, 1.6), 1.6 m above the ground, looking
-  at the facade obliquely (≈ 50° from its normal), 29 m from the facade
-  centre (0, 0, 5); fx = 900, fy = 899 px at 800 × 600 (other sizes keep the
-  field of view), lens k1 = −0.06, k2 = 0.012, p1 = 4e-4, p2 = −3e-4.
+  (12, 16, 0), 16 m in front of the facade, 14 m tall (albedo 0.35). It is
+  rendered (its base is in view, its top above the image) and casts the
+  swept shadow; its ground shadow runs to the facade and climbs it to 5–9 m;
+* the camera on a tripod at (26, 25, 1.8), looking at the facade point
+  (6.5, 0, 3.2) — the "facade centre" of ``camera_distance`` (31.7 m) —
+  obliquely (≈ 38° from its normal) so that its rays cross the shadow planes
+  at ≥ 20°; fx = 900, fy = 899 px at 800 × 600 (other sizes keep the field of
+  view), lens k1 = −0.06, k2 = 0.012, p1 = 4e-4, p2 = −3e-4. The pole stands
+  near the right edge of the image; the shadow sweeps the left half of the
+  facade (from the left, towards the pole) and a strip of ground in front of
+  it, which a 1.8 m tripod 25 m away sees at a grazing angle (3–5°).
 
 The sun
 -------
 Site: Zürich (47.3769 N, 8.5417 E, 408 m, Europe/Zurich). Frames from
-``start`` (local time, default 2026-10-08 11:40 CEST) every
+``start`` (local time, default 2026-11-12 11:40 CET) every
 ``round(duration_s / (frames − 1))`` seconds (60 s for the default 200 frames
-over 3 h 19 min); the sun goes from azimuth ≈ 151° to 212°, elevation ≈ 31–33°.
+over 3 h 19 min, 10:40–13:59 UTC); the sun goes from azimuth 172° to 221°,
+elevation 25° → 15° (a low winter sun, so that the 14 m pole's shadow reaches
+the facade and climbs it).
 Its direction per frame is pvlib's SPA (``nrel_numpy``, ΔT = 67 s), apparent
 (refracted) elevation, pressure from the altitude (``alt2pres``), 12 °C — the
 same settings :mod:`gnomon.sun` uses for a site without pressure/temperature.
@@ -68,6 +75,13 @@ Shadows
   is fully lit or fully shadowed; elsewhere (the penumbra bands, about a
   pixel wide at this distance: 1.1 m × 0.0093 ≈ 1 cm) the visible fraction
   is averaged over 24 directions spread uniformly over the disc.
+
+Each pixel is point-sampled at its centre (as ``desk_lamp``; the blur stands
+for the lens PSF and pixel integration), so the ground truth is exact for the
+pixel-centre points. On the ground, seen at 3–5°, a pixel's footprint is far
+longer than the pole's shadow is wide (0.1–0.3 m): in a single frame the
+thin ground shadow looks dashed (aliased), while each pixel's temporal
+profile is the exact one of its centre point.
 
 Radiometry (linear, per pixel centre, per frame k)::
 
@@ -142,7 +156,9 @@ Ground truth (``ground_truth.npz``; arrays H × W unless noted)
   ``1 ≤ enter_time`` and ``leave_time ≤ N − 2``, on the shadow side, with
   the sun's ray passing the pole's axis at least 2 disc radii (angular)
   below its top; (3) not mixed: no pixel within the blur footprint (2 px, or
-  3σ) sees another object, no surface or a depth jump > 1 %, or fails (1);
+  3σ) sees another object, no surface or another surface (a neighbour with
+  another normal or off the pixel's plane — ``desk_lamp``'s depth change
+  > 1 % would flag the whole grazing ground), or fails (1);
 * ``cloud_free_passage``: swept and no cloud frame within
   [enter_time − 1, leave_time + 1];
 * per frame (N): ``frame_times_utc`` (ISO 8601 strings), ``frame_times_utc_ns``
@@ -164,7 +180,6 @@ import json
 import math
 import re
 import time
-import zoneinfo
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -327,6 +342,13 @@ class FacadeSunResult:
     seconds: float
     config: FacadeSunConfig = field(default_factory=FacadeSunConfig)
     units: str = "m"
+    # Duck-typing with desk_lamp's SimulationResult (what `gnomon simulate` prints).
+    pencil_log: Path | None = None
+    pencil_photos: list[Path] = field(default_factory=list)
+
+    @property
+    def camera_distance_mm(self) -> float:
+        return 1000.0 * self.camera_distance
 
 
 # ----------------------------------------------------------------- the building

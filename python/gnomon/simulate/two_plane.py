@@ -188,6 +188,12 @@ def marker_class(ab: np.ndarray) -> np.ndarray:
 class TwoPlaneScene(DeskLampScene):
     """The two-plane scene (see the module docstring); frames as for ``DeskLampScene``."""
 
+    # The stick is rocked by ±8° as it sweeps. With a stick that only
+    # translates, every shadow plane contains one line through the lamp, and
+    # the lamp — which this scene's scan must estimate from the planes — is
+    # fixed only along that line.
+    TILT_WOBBLE_DEG = 8.0
+
     SCENE_CENTRE = SCENE_CENTRE
     CAMERA_DISTANCE = 650.0
     CAMERA_ELEVATION_DEG = 32.0
