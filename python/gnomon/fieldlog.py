@@ -105,13 +105,35 @@ class CaptureSpec:
 
 
 @dataclass(frozen=True)
+class MarkerSpec:
+    """A printed 2×2 checker marker: its centre on the plane and a rough pixel hint."""
+
+    id: int
+    plane_xy: np.ndarray  # (2,) in the plane's own 2-D frame, world units
+    pixel_hint: np.ndarray  # (2,) pixels
+
+
+@dataclass(frozen=True)
 class PlaneSpec:
-    """A reference plane in world coordinates, with the image regions where it is bare."""
+    """A reference plane in world coordinates, with the image regions where it is bare.
+
+    The plane's own 2-D frame (for markers): origin ``point``, axes ``x_axis``
+    and ``normal × x_axis``.
+    """
 
     name: str
     point: np.ndarray
     normal: np.ndarray  # unit
     regions: tuple[tuple[int, int, int, int], ...]
+    x_axis: np.ndarray | None = None
+    markers: tuple[MarkerSpec, ...] = ()
+
+    def marker_world(self) -> np.ndarray:
+        """(N, 3) world coordinates of the markers' centres."""
+        assert self.x_axis is not None
+        y_axis = np.cross(self.normal, self.x_axis)
+        xy = np.array([m.plane_xy for m in self.markers]).reshape(-1, 2)
+        return self.point + xy[:, :1] * self.x_axis + xy[:, 1:] * y_axis
 
 
 @dataclass(frozen=True)
@@ -133,7 +155,7 @@ class FieldLog:
     path: Path
     capture: CaptureSpec
     camera: OpenCVCamera
-    pose: Pose
+    pose: Pose | None  # None: measured from the planes' markers by the scan
     planes: tuple[PlaneSpec, ...]
     light: LightSpec
     scan: ScanSettings
@@ -236,8 +258,28 @@ def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
         if not (0 <= u0 < u1 <= width and 0 <= v0 < v1 <= height):
             raise t.error("regions", f"region {r} is empty or outside the {width}x{height} image")
         regions.append((u0, v0, u1, v1))
+    normal = normal / np.linalg.norm(normal)
+    x_axis = None
+    if "x_axis" in t.data:
+        x_axis = t.vector("x_axis", 3)
+        x_axis = x_axis - (x_axis @ normal) * normal
+        if np.linalg.norm(x_axis) < 1e-9:
+            raise t.error("x_axis", "must not be parallel to the normal")
+        x_axis = x_axis / np.linalg.norm(x_axis)
+    markers = []
+    raw_markers = t.take("markers", [])
+    if not isinstance(raw_markers, list):
+        raise t.error("markers", "expected a list of { id, plane_xy = [x, y], pixel_hint = [u, v] } tables")
+    for k, m in enumerate(raw_markers):
+        mt = _Table(t.path, f"{t.name}.markers.{k}", m)
+        markers.append(MarkerSpec(mt.integer("id", k), mt.vector("plane_xy", 2), mt.vector("pixel_hint", 2)))
+        mt.done()
+    if markers and x_axis is None:
+        raise FieldLogError(f"{t.path}: [{t.name}] markers need 'x_axis' (the plane's 2-D frame)")
+    if markers and len(markers) < 4:
+        raise t.error("markers", f"a plane from markers needs at least 4, got {len(markers)}")
     t.done()
-    return PlaneSpec(name, point, normal / np.linalg.norm(normal), tuple(regions))
+    return PlaneSpec(name, point, normal, tuple(regions), x_axis, tuple(markers))
 
 
 def _parse_light(t: _Table, base: Path) -> LightSpec:
@@ -287,8 +329,6 @@ def load_field_log(path: str | Path) -> FieldLog:
 
     capture = _parse_capture(section("capture"), base)  # type: ignore[arg-type]
     camera, pose, camera_file, calibration = _parse_camera(section("camera"), base)  # type: ignore[arg-type]
-    if pose is None:
-        raise FieldLogError(f"{p}: missing required table [camera.pose] (the world → camera transform)")
     raw_planes = root.data.pop("planes", None)
     if not isinstance(raw_planes, list) or not raw_planes:
         raise FieldLogError(f"{p}: missing required [[planes]] (at least one reference plane)")
@@ -303,15 +343,21 @@ def load_field_log(path: str | Path) -> FieldLog:
     if light.kind == "two-plane" and len(planes) < 2:
         raise FieldLogError(f"{p}: [light] kind 'two-plane' needs two [[planes]] (e.g. desk and wall)")
 
+    if pose is None and not any(pl.markers for pl in planes):
+        raise FieldLogError(
+            f"{p}: missing required table [camera.pose] (the world → camera transform), "
+            "or markers on a [[planes]] entry to measure it"
+        )
     log = FieldLog(p, capture, camera, pose, planes, light, scan, camera_file, calibration)
-    _check_geometry(log)
+    if pose is not None:
+        check_geometry(log, pose)
     return log
 
 
-def _check_geometry(log: FieldLog) -> None:
+def check_geometry(log: FieldLog, pose: Pose) -> None:
     """The camera and the lamp must both be on the visible side of the first plane."""
     plane = log.planes[0]
-    cam_side = float(np.dot(log.pose.camera_centre_world - plane.point, plane.normal))
+    cam_side = float(np.dot(pose.camera_centre_world - plane.point, plane.normal))
     if abs(cam_side) < 1e-9:
         raise FieldLogError(f"{log.path}: [camera.pose] puts the camera in the plane '{plane.name}'")
     if log.light.kind == "lamp" and log.light.position is not None:

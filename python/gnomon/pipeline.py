@@ -12,6 +12,7 @@ rename: a failed or interrupted scan leaves no outputs behind.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import tempfile
@@ -24,8 +25,9 @@ import numpy as np
 from gnomon import __version__, _kernel, atomic, ply
 from gnomon.camera import Pose
 from gnomon.errors import FrameError, GnomonError
-from gnomon.fieldlog import FieldLog, load_field_log
+from gnomon.fieldlog import FieldLog, check_geometry, load_field_log
 from gnomon.frames import FrameSource, sha256_file
+from gnomon.fusion import fuse_depths
 from gnomon.meshing import GridMesh, grid_mesh, remove_small_components, write_obj
 from gnomon.progress import Progress
 from gnomon.reference_lines import ReferenceLines, measure_reference_lines
@@ -35,16 +37,14 @@ from gnomon.triangulation import supported_by_neighbours, triangulate
 from gnomon.uncertainty import (
     depth_sigma,
     image_noise_dn,
+    interpolation_time_sigma,
     line_time_sigma,
     linear_noise_at_threshold,
     undersampled,
 )
 
 OUTPUT_FILES = ("points.ply", "mesh.ply", "mesh.obj", "depth.npy", "sigma.npy", "shadow_time.npy",
-                "report.json", "scan.rrd")
-# Two edges whose depths differ by more than this many combined σ do not see
-# the same surface point (a mixed pixel, a glint): the pixel is dropped.
-EDGE_CONFLICT_SIGMAS = 6.0
+                "report.json", "scan.rrd", "merge.rrd")
 
 
 @dataclass
@@ -152,6 +152,11 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool) -> _Tra
     return _Tracked(times, n, first_grey, first_color, noise, lut)
 
 
+def _dn_index(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
+    """Integer LUT indices of per-pixel DN values (NaN → 0)."""
+    return np.clip(np.nan_to_num(values_dn), 0, len(lut) - 1).astype(np.int64)
+
+
 def _planes_for(log: FieldLog, lines: list[ReferenceLines], pose: Pose) -> tuple[np.ndarray, int]:
     """Shadow planes (camera frame) from the light model of the field log."""
     if log.light.kind == "lamp":
@@ -167,9 +172,12 @@ def _reconstruct_edge(name: str, times_map: np.ndarray, slope: np.ndarray, log: 
     lines = [measure_reference_lines(times_map, tracked.n_frames, p, cam, pose) for p in log.planes]
     planes, degenerate = _planes_for(log, lines, pose)
     tri = triangulate(ray_map, times_map, planes)
-    sigma_lin = linear_noise_at_threshold(tracked.noise_dn, tracked.times.threshold, tracked.lut)
+    times = tracked.times
+    sigma_lin = linear_noise_at_threshold(tracked.noise_dn, times.threshold, tracked.lut)
+    contrast_lin = 2.0 * (tracked.lut[_dn_index(times.imax, tracked.lut)] - times.threshold)
     with np.errstate(invalid="ignore", divide="ignore"):
-        sigma_t_pixel = np.where(slope > 0, sigma_lin / slope, np.nan)
+        sigma_t_noise = np.where(slope > 0, sigma_lin / slope, np.nan)
+    sigma_t_pixel = np.hypot(sigma_t_noise, interpolation_time_sigma(contrast_lin, slope))
     per_plane = np.stack([line_time_sigma(ln) for ln in lines])
     with np.errstate(invalid="ignore"):
         # Several planes constrain the same shadow plane: the best-measured line dominates.
@@ -186,33 +194,56 @@ def _reconstruct_edge(name: str, times_map: np.ndarray, slope: np.ndarray, log: 
     return EdgeResult(name, times_map, lines, planes, tri.depth, sigma, degenerate)
 
 
-def fuse_depths(depths: list[np.ndarray], sigmas: list[np.ndarray],
-                max_relative_jump: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Inverse-variance fusion of per-pixel depth estimates.
+@dataclass
+class Surface:
+    """A reconstructed surface on the pixel grid: what `scan` and `merge` write."""
 
-    Returns (depth, σ, conflict): where several estimates exist the weighted
-    mean with ``σ = 1/sqrt(Σ 1/σi²)``. Where they differ by more than
-    ``EDGE_CONFLICT_SIGMAS`` combined σ *and* by more than a depth jump
-    (``max_relative_jump·Z``), they cannot be the same surface point: NaN and
-    ``conflict`` True. (σ models noise only; sampling and model errors stay
-    below the jump threshold and are averaged, not discarded.)
-    """
-    z = np.stack(depths).astype(np.float64)
-    s = np.stack(sigmas).astype(np.float64)
-    ok = np.isfinite(z) & np.isfinite(s) & (s > 0)
-    w = np.where(ok, 1.0 / np.where(ok, s, 1.0) ** 2, 0.0)
-    wsum = w.sum(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        fused = np.where(wsum > 0, (w * np.where(ok, z, 0.0)).sum(axis=0) / wsum, np.nan)
-        sigma = np.where(wsum > 0, 1.0 / np.sqrt(wsum), np.nan)
-        spread = np.where(ok, z, np.nan)
-        lo, hi = np.nanmin(np.where(ok, spread, np.inf), axis=0), np.nanmax(np.where(ok, spread, -np.inf), axis=0)
-        combined = np.sqrt(np.sum(np.where(ok, s, 0.0) ** 2, axis=0))
-    conflict = (ok.sum(axis=0) >= 2) & (hi - lo > np.maximum(EDGE_CONFLICT_SIGMAS * combined,
-                                                             max_relative_jump * np.abs(fused)))
-    fused[conflict] = np.nan
-    sigma[conflict] = np.nan
-    return fused.astype(np.float32), sigma.astype(np.float32), conflict
+    depth: np.ndarray  # (H, W) camera Z, NaN = none
+    sigma: np.ndarray  # (H, W) σZ, NaN = none
+    valid: np.ndarray  # (H, W)
+    points_world: np.ndarray  # (N, 3) float32, row-major over valid pixels
+    colors: np.ndarray  # (N, 3) uint8
+    uv: np.ndarray  # (N, 2) float32 pixel of each point
+    mesh: GridMesh
+    vertex_rgb: np.ndarray  # (V, 3) uint8
+
+
+def build_surface(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np.ndarray, valid: np.ndarray,
+                  rgb: np.ndarray, max_relative_jump: float) -> Surface:
+    """Points (world frame), colours and the cut grid mesh of the valid pixels."""
+    depth = np.where(valid, depth, np.nan).astype(np.float32)
+    sigma = np.where(valid, sigma, np.nan).astype(np.float32)
+    points_cam = points_from_depth(ray_map, depth)
+    world_grid = np.full(points_cam.shape, np.nan, dtype=np.float32)
+    world_grid[valid] = pose.camera_to_world(points_cam[valid].astype(np.float64))
+    mesh = remove_small_components(grid_mesh(world_grid, depth, valid, max_relative_jump, sigma=sigma))
+    v, u = np.nonzero(valid)
+    uv = np.stack([u, v], axis=1).astype(np.float32)
+    return Surface(depth, sigma, valid, world_grid[valid], rgb[valid], uv, mesh,
+                   rgb.reshape(-1, 3)[mesh.pixel_index])
+
+
+def write_surface(folder: Path, surface: Surface, units: str) -> None:
+    """points.ply, mesh.ply, mesh.obj, depth.npy, sigma.npy (each atomically)."""
+    comments = [f"gnomon {__version__}", ply.units_comment(units), "frame world"]
+    ply.write_points_ply(folder / "points.ply", surface.points_world, surface.colors,
+                         surface.sigma[surface.valid], surface.uv, comments=comments)
+    ply.write_mesh_ply(folder / "mesh.ply", surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb,
+                       comments=comments)
+    write_obj(folder / "mesh.obj", surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb)
+    atomic.save_npy(folder / "depth.npy", surface.depth)
+    atomic.save_npy(folder / "sigma.npy", surface.sigma)
+
+
+def record_surface(recorder, surface: Surface, shadow_time: np.ndarray | None, warnings: list[str],
+                   metrics: dict) -> None:
+    recorder.log_points(surface.points_world, surface.colors, surface.sigma[surface.valid], uv=surface.uv)
+    recorder.log_mesh(surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb)
+    recorder.log_maps(shadow_time if shadow_time is not None else np.full(surface.depth.shape, np.nan, np.float32),
+                      surface.depth, surface.sigma)
+    for w in warnings:
+        recorder.log_warning(w)
+    recorder.log_metrics(metrics)
 
 
 def _mean_ignoring_nan(maps: list[np.ndarray]) -> np.ndarray:
@@ -233,10 +264,54 @@ def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | 
     t0 = time.perf_counter()
     log = load_field_log(field_log)
     source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
+    log, planes_report = resolve_reference_planes(log, source)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
-        result = _scan_into(log, source, staging, opts, t0)
+        result = _scan_into(log, source, staging, opts, t0, planes_report)
     result.out_dir = Path(out_dir)
     return result
+
+
+def _first_frame(source: FrameSource) -> np.ndarray:
+    for frame in source:
+        return frame.color if frame.color is not None else frame.grey
+    raise FrameError(f"{source.name}: no frames")
+
+
+def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldLog, list[dict]]:
+    """Measure the planes that carry printed markers in the first frame.
+
+    Marker centres are known on their plane (``plane_xy``), hence in the world
+    frame; finding them in the image gives the world → camera pose. Without a
+    ``[camera.pose]`` the first such plane sets it; with one, the markers check
+    it (their residuals and the angle between the measured and declared
+    planes go into report.json).
+    """
+    from gnomon.markers import plane_pose_from_markers
+
+    with_markers = [p for p in log.planes if p.markers]
+    if not with_markers:
+        return log, []
+    image = _first_frame(source)
+    name = log.capture.image_files[0].name if log.capture.image_files else f"{log.capture.video} frame 0"
+    measured = []
+    for plane in with_markers:
+        pp = plane_pose_from_markers(
+            image, log.camera, plane.marker_world(), np.array([m.pixel_hint for m in plane.markers]),
+            names=[f"{plane.name} marker {m.id}" for m in plane.markers], source=f"{log.path}: {name}",
+        )
+        measured.append((plane, pp))
+    pose = log.pose if log.pose is not None else measured[0][1].pose
+    report = []
+    for plane, pp in measured:
+        entry = {"plane": plane.name, **pp.to_report()}
+        declared_cam = pose.R @ plane.normal
+        cosang = abs(float(declared_cam @ pp.normal_cam))
+        entry["angle_to_declared_deg"] = float(np.degrees(np.arccos(min(1.0, cosang))))
+        report.append(entry)
+    if log.pose is None:
+        log = dataclasses.replace(log, pose=pose)
+        check_geometry(log, pose)
+    return log, report
 
 
 class staged_outputs:
@@ -263,16 +338,17 @@ class staged_outputs:
             shutil.rmtree(self.staging, ignore_errors=True)
 
 
-def open_recorder(staging: Path, opts: ScanOptions, name: str):
+def open_recorder(staging: Path, opts: ScanOptions, name: str, filename: str = "scan.rrd"):
     if not (opts.rrd or opts.view):
         return None
     from gnomon.recording import ScanRecording
 
-    return ScanRecording(staging / "scan.rrd" if opts.rrd else None, recording_name=name,
+    return ScanRecording(staging / filename if opts.rrd else None, recording_name=name,
                          spawn_viewer=opts.view, frame_stride=opts.frame_stride)
 
 
-def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOptions, t0: float) -> ScanResult:
+def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOptions, t0: float,
+               planes_report: list[dict]) -> ScanResult:
     timings: dict[str, float] = {}
     warnings: list[str] = []
     cam, pose = log.camera, log.pose
@@ -317,23 +393,19 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
         depth = np.where(keep, depth, np.nan).astype(np.float32)
         sigma = np.where(keep, sigma, np.nan).astype(np.float32)
         shadow_time = _mean_ignoring_nan([e.times for e in edges])
-        points_cam = points_from_depth(ray_map, depth)
-        world_grid = np.full(points_cam.shape, np.nan, dtype=np.float32)
-        world_grid[keep] = pose.camera_to_world(points_cam[keep].astype(np.float64))
-        points_world = world_grid[keep]
         rgb = _colors(tracked.first_color, tracked.first_grey)
-        colors = rgb[keep]
-        mesh = remove_small_components(grid_mesh(world_grid, depth, keep, log.scan.max_depth_jump, sigma=sigma))
+        surface = build_surface(ray_map, pose, depth, sigma, keep, rgb, log.scan.max_depth_jump)
         timings["fusion_and_mesh_s"] = time.perf_counter() - t
 
         lut = tracked.lut
         under = np.zeros(keep.shape, dtype=bool)
         for e in edges:
             slope = times.enter_slope if e.name == "enter" else times.leave_slope
-            imax = lut[np.clip(np.nan_to_num(times.imax), 0, len(lut) - 1).astype(np.int64)]
-            imin = lut[np.clip(np.nan_to_num(times.imin), 0, len(lut) - 1).astype(np.int64)]
+            imax, imin = lut[_dn_index(times.imax, lut)], lut[_dn_index(times.imin, lut)]
             under |= undersampled(slope, imax, imin) & keep
-        report = _report(log, source, tracked, edges, depth, sigma, keep, conflict, under, mesh, timings, warnings)
+        report = _report(log, source, tracked, edges, depth, sigma, keep, conflict, under, surface.mesh, timings,
+                         warnings)
+        report["reference_planes"] = planes_report
         if under.mean() > 0.2 * max(keep.mean(), 1e-9):
             warnings.append(
                 f"{int(under.sum())} points ({100 * under.sum() / max(keep.sum(), 1):.0f} %) are under-sampled: "
@@ -341,19 +413,10 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
             )
 
         t = time.perf_counter()
-        v, u = np.nonzero(keep)
-        uv = np.stack([u, v], axis=1).astype(np.float32)
-        vertex_rgb = rgb.reshape(-1, 3)[mesh.pixel_index]
-        comments = [f"gnomon {__version__}", ply.units_comment(log.capture.units), "frame world"]
-        ply.write_points_ply(staging / "points.ply", points_world, colors, sigma[keep], uv, comments=comments)
-        ply.write_mesh_ply(staging / "mesh.ply", mesh.vertices, mesh.faces, vertex_rgb, comments=comments)
-        write_obj(staging / "mesh.obj", mesh.vertices, mesh.faces, vertex_rgb)
-        atomic.save_npy(staging / "depth.npy", depth)
-        atomic.save_npy(staging / "sigma.npy", sigma)
+        write_surface(staging, surface, log.capture.units)
         atomic.save_npy(staging / "shadow_time.npy", shadow_time.astype(np.float32))
         if recorder is not None:
-            _record(recorder, log, edges, points_world, colors, sigma[keep], uv, mesh, vertex_rgb,
-                    shadow_time, depth, sigma, warnings, report, opts.frame_stride)
+            _record(recorder, log, edges, surface, shadow_time, warnings, report, opts.frame_stride)
         timings["outputs_s"] = time.perf_counter() - t
         timings["total_s"] = time.perf_counter() - t0
         report["warnings"] = warnings
@@ -365,8 +428,8 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
         if recorder is not None:
             recorder.abort()
 
-    return ScanResult(log, times, edges, shadow_time, depth, sigma, keep, points_world, colors, mesh,
-                      report, warnings)
+    return ScanResult(log, times, edges, shadow_time, depth, sigma, keep, surface.points_world, surface.colors,
+                      surface.mesh, report, warnings)
 
 
 def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[EdgeResult], depth: np.ndarray,
@@ -423,7 +486,8 @@ def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[E
             ],
         }
     if log.light.kind == "two-plane":
-        planes = edges[0].planes
+        # Every shadow plane of a point source, of either edge, passes through it.
+        planes = np.concatenate([e.planes for e in edges])
         if np.isfinite(planes[:, 0]).sum() >= 3:
             point_cam, rms = light_point_from_planes(planes)
             report["light"]["estimated_position"] = pose.camera_to_world(point_cam).tolist()
@@ -443,8 +507,8 @@ def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[E
     return report
 
 
-def _record(recorder, log: FieldLog, edges: list[EdgeResult], points_world, colors, point_sigma, uv, mesh,
-            vertex_rgb, shadow_time, depth, sigma, warnings, report, stride: int) -> None:
+def _record(recorder, log: FieldLog, edges: list[EdgeResult], surface: "Surface", shadow_time: np.ndarray,
+            warnings: list[str], report: dict, stride: int) -> None:
     pose = log.pose
     first = edges[0]
     for ln in first.lines:
@@ -471,12 +535,7 @@ def _record(recorder, log: FieldLog, edges: list[EdgeResult], points_world, colo
             recorder.log_shadow_plane(t, np.array([a, b, b + 0.6 * (s - b), a + 0.6 * (s - a)]))
         elif len(ends) >= 2:
             recorder.log_shadow_plane(t, np.array([ends[0][0], ends[0][1], ends[1][1], ends[1][0]]))
-    recorder.log_points(points_world, colors, point_sigma, uv=uv)
-    recorder.log_mesh(mesh.vertices, mesh.faces, vertex_rgb)
-    recorder.log_maps(shadow_time, depth, sigma)
-    for w in warnings:
-        recorder.log_warning(w)
-    recorder.log_metrics({"coverage": report["coverage"], "noise": report["noise"]})
+    record_surface(recorder, surface, shadow_time, warnings, {"coverage": report["coverage"], "noise": report["noise"]})
 
 
 def _json_default(o):

@@ -32,6 +32,8 @@ from gnomon.fieldlog import PlaneSpec
 MIN_POINTS_PER_REGION = 5
 # How many measured frames (at most this far away) set an extrapolated line's direction.
 EXTRAPOLATION_FRAMES = 8
+# Frames between two measured lines at most this far apart interpolate their direction.
+MAX_INTERPOLATION_GAP = 60
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,7 @@ class ReferenceLines:
     count: np.ndarray  # (N,) int
     pixels: list[np.ndarray]
     extrapolated: np.ndarray  # (N,) bool: direction taken from neighbouring frames
+    points: list[np.ndarray]  # per frame (K, 3) camera-frame crossings: the line's inliers, or all
 
     @property
     def found(self) -> np.ndarray:
@@ -211,8 +214,9 @@ def measure_reference_lines(
     count = np.zeros(n_frames, dtype=np.int64)
     pixels: list[np.ndarray] = [np.zeros((0, 2)) for _ in range(n_frames)]
     extrapolated = np.zeros(n_frames, dtype=bool)
+    points3d: list[np.ndarray] = [np.zeros((0, 3)) for _ in range(n_frames)]
     if len(frame) == 0:
-        return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels, extrapolated)
+        return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels, extrapolated, points3d)
 
     on_plane = plane.intersect(camera.rays(pix))
     good = np.isfinite(on_plane[:, 0])
@@ -234,6 +238,7 @@ def measure_reference_lines(
         count[t] = int(inl.sum())
         sel = pix[idx][inl]
         pixels[t] = sel[np.argsort(sel[:, 1])]
+        points3d[t] = on_plane[idx][inl]
 
     for t, idx in enumerate(per_frame):
         if len(idx) < MIN_POINTS_PER_REGION * regions_needed:
@@ -247,19 +252,26 @@ def measure_reference_lines(
         angle[t] = np.arctan2(d2[1], d2[0])
         keep(t, idx, centre, d2, inl)
 
-    # At the ends of the sweep a slanted shadow line has entered one region
-    # but not yet the other. Its direction changes slowly, so take it from
-    # the nearest measured frames (linear in t) and fit only its offset.
+    # When the line crosses only one region (at the ends of the sweep, or
+    # where regions leave a gap) its direction is not measured well. It changes
+    # slowly with time, so take it from the measured frames — interpolated
+    # between the nearest ones on either side, or extrapolated linearly from
+    # the nearest few at the ends — and fit only the line's offset.
     measured = np.flatnonzero(np.isfinite(angle))
     if len(measured) >= 3 and regions_needed == 2:
+        unwrapped = np.unwrap(angle[measured])
         for t, idx in enumerate(per_frame):
             if np.isfinite(angle[t]) or len(idx) < 2 * MIN_POINTS_PER_REGION:
                 continue
-            near = measured[np.argsort(np.abs(measured - t))[:EXTRAPOLATION_FRAMES]]
-            if np.min(np.abs(near - t)) > EXTRAPOLATION_FRAMES:
-                continue
-            slope, intercept = np.polyfit(near, np.unwrap(angle[near]), 1)
-            theta = slope * t + intercept
+            before, after = measured[measured < t], measured[measured > t]
+            if len(before) and len(after) and after[0] - before[-1] <= MAX_INTERPOLATION_GAP:
+                theta = float(np.interp(t, measured, unwrapped))
+            else:
+                near = np.argsort(np.abs(measured - t))[:EXTRAPOLATION_FRAMES]
+                if np.min(np.abs(measured[near] - t)) > EXTRAPOLATION_FRAMES:
+                    continue
+                slope, intercept = np.polyfit(measured[near], unwrapped[near], 1)
+                theta = slope * t + intercept
             d2 = np.array([np.cos(theta), np.sin(theta)])
             normal2 = np.array([-d2[1], d2[0]])
             offsets = xy[idx] @ normal2
@@ -272,4 +284,7 @@ def measure_reference_lines(
             centre = np.mean(offsets[inl]) * normal2 + np.mean(along) * d2
             keep(t, idx, centre, d2, inl)
             extrapolated[t] = True
-    return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels, extrapolated)
+    for t, idx in enumerate(per_frame):
+        if not np.isfinite(point[t, 0]) and len(idx):
+            points3d[t] = on_plane[idx]
+    return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels, extrapolated, points3d)

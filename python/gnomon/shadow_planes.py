@@ -99,15 +99,35 @@ def sun_shadow_planes(lines: list[ReferenceLines], sun_dir_cam: np.ndarray) -> t
     return _orient(planes), degenerate
 
 
-def two_plane_shadow_planes(lines: list[ReferenceLines], min_angle_deg: float = 2.0) -> tuple[np.ndarray, int]:
-    """Planes through the shadow lines on two (or more) reference planes: no light needed.
+def fit_plane_robust(points: np.ndarray, k: float = 3.0, iterations: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Total-least-squares plane with iterative rejection (1.4826·MAD); (centroid, unit normal, inliers)."""
+    mask = np.ones(len(points), dtype=bool)
+    centre, normal, sv = points.mean(axis=0), np.array([0.0, 0.0, 1.0]), np.zeros(3)
+    for _ in range(iterations):
+        centre = points[mask].mean(axis=0)
+        _, sv, vt = np.linalg.svd(points[mask] - centre, full_matrices=False)
+        normal = vt[2]
+        r = (points - centre) @ normal
+        scale = max(1.4826 * np.median(np.abs(r[mask])), 1e-9 * (1.0 + np.abs(centre).max()))
+        new = np.abs(r) <= k * scale
+        if new.sum() < 3 or np.array_equal(new, mask):
+            break
+        mask = new
+    return centre, normal, mask
+
+
+def two_plane_shadow_planes(lines: list[ReferenceLines], min_angle_deg: float = 2.0,
+                            min_points: int = 10) -> tuple[np.ndarray, int]:
+    """Planes through the shadow's crossings on two (or more) reference planes: no light needed.
 
     Bouguet & Perona's two-plane mode: at each frame the shadow plane contains
-    the line on the desk and the line on the wall, so it is the least-squares
-    plane through points sampled along both. A frame is dropped when a line is
-    missing on one plane or the two lines do not span a plane (nearly
-    parallel and far apart, or nearly the same line): measured by the
-    smallest singular value of the sampled points against the others.
+    the shadow line on the desk and the one on the wall, so it is the
+    least-squares plane through their points (METHOD.md §4) — here the 3-D
+    crossings themselves, so a plane whose line is seen in one short region
+    still contributes its points (the other plane's line fixes the rest).
+    A frame needs ``min_points`` crossings on at least two planes; it is
+    dropped as degenerate when the points do not span a plane (all nearly on
+    one line) or do not lie on one (the lines do not meet in a plane).
     """
     if len(lines) < 2:
         raise ValueError("the two-plane mode needs lines on two reference planes")
@@ -116,22 +136,17 @@ def two_plane_shadow_planes(lines: list[ReferenceLines], min_angle_deg: float = 
     degenerate = 0
     sin_min = np.sin(np.radians(min_angle_deg))
     for t in range(n_frames):
-        found = [ln for ln in lines if np.isfinite(ln.point[t, 0])]
-        if len(found) < 2:
+        sets = [ln.points[t] for ln in lines if len(ln.points[t]) >= min_points]
+        if len(sets) < 2:
             continue
-        samples = []
-        scale = np.mean([np.linalg.norm(ln.point[t]) for ln in found]) * 0.1
-        for ln in found:
-            for s in (-1.0, 0.0, 1.0):
-                samples.append(ln.point[t] + s * scale * ln.direction[t])
-        pts = np.asarray(samples)
-        centre = pts.mean(axis=0)
-        _, sv, vt = np.linalg.svd(pts - centre, full_matrices=False)
-        # Coplanar lines: the third singular value is ~0 while the second is not.
-        if sv[1] < sin_min * sv[0] or sv[2] > sin_min * sv[1]:
+        pts = np.concatenate(sets)
+        centre, normal, inl = fit_plane_robust(pts)
+        _, sv, _ = np.linalg.svd(pts[inl] - centre, full_matrices=False)
+        enough = all(np.count_nonzero(inl[a:b]) >= min_points
+                     for a, b in zip(np.cumsum([0] + [len(x) for x in sets[:-1]]), np.cumsum([len(x) for x in sets])))
+        if not enough or sv[1] < sin_min * sv[0] or sv[2] > sin_min * sv[1]:
             degenerate += 1
             continue
-        normal = vt[2]
         planes[t, :3] = normal
         planes[t, 3] = normal @ centre
     return _orient(planes), degenerate

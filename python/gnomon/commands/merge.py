@@ -1,0 +1,34 @@
+"""`gnomon merge SCAN_A SCAN_B --out DIR`: dual-scan fusion."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "merge",
+        help="fuse two scans of one scene (e.g. lamp left and right)",
+        description="Fuse two scan output folders taken with the same fixed camera, per pixel: "
+        "inverse-variance (gaussian) weights, or Bouguet & Perona's sigmoid weights with --beta.",
+    )
+    p.add_argument("scan_a", type=Path, help="output folder of the first `gnomon scan`")
+    p.add_argument("scan_b", type=Path, help="output folder of the second `gnomon scan`")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--weights", choices=("gaussian", "sigmoid"), default="gaussian")
+    p.add_argument("--beta", type=float, default=10.0, help="sigmoid steepness (large: pick the better scan)")
+    p.add_argument("--no-rrd", action="store_true", help="do not write merge.rrd")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from gnomon.merge import merge_scans
+    from gnomon.pipeline import ScanOptions
+
+    _, report = merge_scans(args.scan_a, args.scan_b, args.out, method=args.weights, beta=args.beta,
+                            options=ScanOptions(rrd=not args.no_rrd, progress=False))
+    c = report["coverage"]
+    print(f"{c['points']} points (A {c['scan_a_points']}, B {c['scan_b_points']}; only A {c['only_a']}, "
+          f"only B {c['only_b']}, both {c['both']}, conflicts {c['conflicts']}) -> {args.out}")
+    return 0

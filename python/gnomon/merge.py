@@ -1,0 +1,141 @@
+"""`gnomon merge`: fuse two scans of one scene taken from the same camera.
+
+Typical use (Bouguet & Perona §5): one scan with the lamp left of the camera,
+one with it right; each fills the other's cast shadows, and where both see a
+point the better-conditioned one dominates. The scans must share the camera
+(same image grid and pose), which is how such a pair is captured: the camera
+stays, the lamp moves.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gnomon import atomic, ply
+from gnomon.camera import OpenCVCamera, Pose
+from gnomon.errors import GnomonError
+from gnomon.fusion import fuse_depths
+from gnomon.pipeline import (
+    ScanOptions,
+    Surface,
+    build_surface,
+    open_recorder,
+    record_surface,
+    staged_outputs,
+    write_surface,
+)
+from gnomon.triangulation import supported_by_neighbours
+
+
+@dataclass
+class ScanOnDisk:
+    """The parts of a scan's output folder that a merge needs."""
+
+    folder: Path
+    depth: np.ndarray
+    sigma: np.ndarray
+    rgb: np.ndarray  # (H, W, 3)
+    camera: OpenCVCamera
+    pose: Pose
+    units: str
+    max_depth_jump: float
+
+
+def load_scan(folder: str | Path) -> ScanOnDisk:
+    """Read depth.npy, sigma.npy, report.json and points.ply of a scan output folder."""
+    f = Path(folder)
+    if not f.is_dir():
+        raise GnomonError(f"{f}: not a scan output folder")
+    for name in ("depth.npy", "sigma.npy", "report.json", "points.ply"):
+        if not (f / name).is_file():
+            raise GnomonError(f"{f}: missing {name} (is it the output folder of `gnomon scan`?)")
+    try:
+        report = json.loads((f / "report.json").read_text())
+        cam = report["camera"]
+        camera = OpenCVCamera(int(cam["width"]), int(cam["height"]), float(cam["fx"]), float(cam["fy"]),
+                              float(cam["cx"]), float(cam["cy"]), tuple(float(x) for x in cam["dist"]))
+        pose = Pose.from_rvec_tvec(np.array(cam["rvec"], float), np.array(cam["tvec"], float))
+        units = str(report["units"])
+        jump = float(report["settings"]["max_depth_jump"])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise GnomonError(f"{f / 'report.json'}: not a gnomon scan report ({exc})") from None
+    depth = np.load(f / "depth.npy")
+    sigma = np.load(f / "sigma.npy")
+    if depth.shape != (camera.height, camera.width) or sigma.shape != depth.shape:
+        raise GnomonError(f"{f}: depth.npy / sigma.npy do not match the {camera.width}x{camera.height} camera")
+    points = ply.read_ply(f / "points.ply")
+    rgb = np.zeros((camera.height, camera.width, 3), np.uint8)
+    if points.get("uv") is not None and points.get("rgb") is not None:
+        u, v = points["uv"][:, 0].astype(np.int64), points["uv"][:, 1].astype(np.int64)
+        rgb[v, u] = points["rgb"]
+    return ScanOnDisk(f, depth, sigma, rgb, camera, pose, units, jump)
+
+
+def _check_same_camera(a: ScanOnDisk, b: ScanOnDisk) -> None:
+    if (a.camera.width, a.camera.height) != (b.camera.width, b.camera.height):
+        raise GnomonError(f"{b.folder}: image size {b.camera.width}x{b.camera.height} differs from "
+                          f"{a.folder}'s {a.camera.width}x{a.camera.height}; merge needs one camera")
+    if a.units != b.units:
+        raise GnomonError(f"{b.folder}: units {b.units!r} differ from {a.folder}'s {a.units!r}")
+    ka, kb = a.camera.K, b.camera.K
+    moved = np.linalg.norm(a.pose.camera_centre_world - b.pose.camera_centre_world)
+    scale = max(np.linalg.norm(a.pose.t), 1e-9)
+    if np.max(np.abs(ka - kb)) > 1e-3 * ka[0, 0] or moved > 1e-3 * scale:
+        raise GnomonError(f"{b.folder}: its camera (intrinsics or pose) differs from {a.folder}'s; "
+                          "merge fuses scans taken with one fixed camera")
+
+
+def merge_scans(scan_a: str | Path, scan_b: str | Path, out_dir: str | Path, *, method: str = "gaussian",
+                beta: float = 10.0, options: ScanOptions | None = None) -> tuple[Surface, dict]:
+    """Fuse two scans per pixel and write the merged outputs into ``out_dir``."""
+    opts = options or ScanOptions()
+    t0 = time.perf_counter()
+    a, b = load_scan(scan_a), load_scan(scan_b)
+    _check_same_camera(a, b)
+    jump = max(a.max_depth_jump, b.max_depth_jump)
+    depth, sigma, conflict = fuse_depths([a.depth, b.depth], [a.sigma, b.sigma], jump, method, beta)
+    keep = supported_by_neighbours(depth, jump)
+    rgb = np.where(np.isfinite(a.depth)[..., None], a.rgb, b.rgb)
+    surface = build_surface(a.camera.ray_map(), a.pose, depth, sigma, keep, rgb, jump)
+    only_a = np.isfinite(a.depth) & ~np.isfinite(b.depth)
+    only_b = np.isfinite(b.depth) & ~np.isfinite(a.depth)
+    both = np.isfinite(a.depth) & np.isfinite(b.depth)
+    diff = (a.depth - b.depth)[both]
+    report = {
+        "inputs": [str(a.folder), str(b.folder)],
+        "units": a.units,
+        "camera": json.loads((a.folder / "report.json").read_text())["camera"],
+        "settings": {"method": method, "beta": beta if method == "sigmoid" else None, "max_depth_jump": jump},
+        "coverage": {
+            "points": int(keep.sum()),
+            "scan_a_points": int(np.isfinite(a.depth).sum()),
+            "scan_b_points": int(np.isfinite(b.depth).sum()),
+            "only_a": int(only_a.sum()), "only_b": int(only_b.sum()), "both": int(both.sum()),
+            "conflicts": int(conflict.sum()),
+            "mesh_faces": int(len(surface.mesh.faces)),
+        },
+        "disagreement": {"rms": float(np.sqrt(np.mean(diff**2))) if diff.size else None,
+                         "median_abs": float(np.median(np.abs(diff))) if diff.size else None},
+    }
+    recorder = None
+    with staged_outputs(Path(out_dir)) as staging:
+        merge_opts = ScanOptions(rrd=opts.rrd, view=opts.view, progress=False, frame_stride=opts.frame_stride)
+        recorder = open_recorder(staging, merge_opts, f"merge {a.folder.name} + {b.folder.name}", "merge.rrd")
+        try:
+            write_surface(staging, surface, a.units)
+            report["timings_s"] = {"total_s": time.perf_counter() - t0}
+            if recorder is not None:
+                recorder.log_camera(a.camera.K, a.camera.width, a.camera.height, a.pose.R, a.pose.t, a.units)
+                record_surface(recorder, surface, None, [], {"coverage": report["coverage"]})
+                recorder.close()
+                recorder = None
+            atomic.write_text(staging / "report.json", json.dumps(report, indent=2))
+        finally:
+            if recorder is not None:
+                recorder.abort()
+    return surface, report

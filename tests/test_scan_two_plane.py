@@ -1,0 +1,59 @@
+"""Two-plane mode end to end: desk and wall, no light information (issue 4).
+
+Bar: depth RMS ≤ 0.15 % of the camera distance over swept pixels, coverage
+≥ 90 %, and the lamp — estimated from the shadow planes as a by-product —
+within 2 % of its distance from the scene.
+"""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+import pytest
+
+from gnomon.accuracy import depth_accuracy
+from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.simulate import TwoPlaneConfig, simulate_two_plane
+
+
+@pytest.fixture(scope="module")
+def two_plane(tmp_path_factory):
+    root = tmp_path_factory.mktemp("two_plane")
+    simulate_two_plane(root / "capture", TwoPlaneConfig(seed=4))
+    result = run_scan(root / "capture" / "field_log.toml", root / "scan", ScanOptions(progress=False, rrd=False))
+    return root, result, dict(np.load(root / "capture" / "ground_truth.npz"))
+
+
+def test_the_field_log_gives_no_light(two_plane) -> None:
+    root, _, _ = two_plane
+    log = tomllib.loads((root / "capture" / "field_log.toml").read_text())
+    assert log["light"] == {"kind": "two-plane"}
+
+
+def test_depth_and_coverage(two_plane) -> None:
+    _, result, truth = two_plane
+    acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], float(truth["camera_distance_mm"]))
+    print(acc.table("two_plane"))
+    assert acc.rms_pct <= 0.15
+    assert acc.coverage >= 0.90
+
+
+def test_lamp_by_product(two_plane) -> None:
+    _, result, truth = two_plane
+    estimated = np.array(result.report["light"]["estimated_position"])
+    lamp = truth["lamp"]
+    # the lamp's distance from the scene: to the centroid of the swept surface points
+    centre = truth["points_world"][truth["swept"]].mean(axis=0)
+    error = np.linalg.norm(estimated - lamp)
+    print(estimated, lamp, error / np.linalg.norm(lamp - centre))
+    assert error <= 0.02 * np.linalg.norm(lamp - centre)
+
+
+def test_markers_check_the_declared_planes(two_plane) -> None:
+    _, result, _ = two_plane
+    planes = {p["plane"]: p for p in result.report["reference_planes"]}
+    assert set(planes) == {"desk", "wall"}
+    for p in planes.values():
+        assert p["rms_px"] < 0.3  # sub-pixel marker fit
+        assert p["angle_to_declared_deg"] < 0.2
