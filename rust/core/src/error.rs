@@ -10,10 +10,7 @@ use std::fmt;
 #[derive(Debug, Clone, PartialEq)]
 pub enum KernelError {
     /// A parameter outside its documented range.
-    InvalidParameter {
-        name: &'static str,
-        reason: String,
-    },
+    InvalidParameter { name: &'static str, reason: String },
     /// A buffer whose length does not match the shape it must have.
     LengthMismatch {
         what: &'static str,
@@ -51,7 +48,11 @@ impl fmt::Display for KernelError {
             KernelError::InvalidLut { reason } => write!(f, "invalid decoding LUT: {reason}"),
             KernelError::NoFrames => write!(f, "no frames were given to the tracker"),
             KernelError::TooManyFrames => {
-                write!(f, "too many frames for one tracker (at most {})", u32::MAX - 1)
+                write!(
+                    f,
+                    "too many frames for one tracker (at most {})",
+                    u32::MAX - 1
+                )
             }
         }
     }

@@ -166,17 +166,21 @@ mod tests {
     #[test]
     fn lerp_aligns_signs_and_renormalises() {
         let a = Plane::new(Vector3::new(1.0, 0.0, 0.0), 1.0).unwrap();
-        let b = Plane::new(Vector3::new(0.0, 1.0, 0.0), 3.0).unwrap();
+        let b = Plane::new(Vector3::new(0.6, 0.8, 0.0), 3.0).unwrap();
         let mid = Plane::lerp(&a, &b, 0.5);
-        let n = Vector3::new(1.0, 1.0, 0.0).normalize();
+        // (n, d) = ((0.8, 0.4, 0), 2) before renormalising by |n| = sqrt(0.8).
+        let norm = 0.8f64.sqrt();
+        let n = Vector3::new(0.8, 0.4, 0.0) / norm;
         assert!((mid.normal().into_inner() - n).norm() < 1e-12);
-        assert!((mid.offset() - 2.0 / 2f64.sqrt()).abs() < 1e-12);
-        // b given with the opposite orientation: same result.
+        assert!((mid.offset() - 2.0 / norm).abs() < 1e-12);
+        // b given with the opposite orientation: same plane, a's orientation.
         let mid_flipped = Plane::lerp(&a, &b.flipped(), 0.5);
         assert!((mid_flipped.normal().into_inner() - n).norm() < 1e-12);
         assert!((mid_flipped.offset() - mid.offset()).abs() < 1e-12);
         // End points.
         assert_eq!(Plane::lerp(&a, &b, 0.0), a);
-        assert!((Plane::lerp(&a, &b, 1.0).offset() - 3.0).abs() < 1e-12);
+        let end = Plane::lerp(&a, &b.flipped(), 1.0);
+        assert!((end.normal().into_inner() - b.normal().into_inner()).norm() < 1e-12);
+        assert!((end.offset() - 3.0).abs() < 1e-12);
     }
 }

@@ -17,6 +17,6 @@ pub mod triangulate;
 
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
-pub use sample::{Lane, Sample};
+pub use sample::Sample;
 pub use tracker::{find_crossing, Crossing, Edge, ShadowTimes, TemporalTracker, TrackerParams};
 pub use triangulate::{plane_at, triangulate};

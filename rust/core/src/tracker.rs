@@ -23,13 +23,16 @@
 //!
 //! # Speed
 //! Frames are copied into a ring and folded into the per-pixel state in
-//! temporal blocks of `K` frames ([`TrackerParams::block`]). A block is folded
-//! row by row (rayon over rows), chunk of pixels by chunk, so a chunk's state
-//! stays in L1 across the `K` frames; the inner loop over pixels is
-//! branch-free and auto-vectorises (for `u8` in `i16` lanes, for `u16` in
-//! `i32`). The windows are copied after the block, only for pixels whose best
-//! fall or rise moved inside it. A block is folded `m` frames late so that
-//! every window it needs is already in the ring.
+//! temporal blocks of `K` frames ([`TrackerParams::block`]), as soon as the
+//! block is complete (its frames still in the last-level cache). A block is
+//! folded row by row (rayon over rows), 64 pixels at a time whose state stays
+//! in SIMD registers across the `K` frames: per pixel and frame, one load and
+//! a few branch-free vector operations in the sample's own lane width (see
+//! [`crate::sample`]); the state goes to memory once per block.
+//! Windows are copied only for pixels whose best fall or rise moved inside a
+//! block, and only once every frame of the window is in the ring: with a lag,
+//! just before the next block is folded (or by [`TemporalTracker::finish`],
+//! which clamps to the last frame).
 
 use std::borrow::Cow;
 use std::ops::Range;
@@ -37,14 +40,24 @@ use std::ops::Range;
 use rayon::prelude::*;
 
 use crate::error::KernelError;
-use crate::sample::{Lane, Sample};
+use crate::sample::Sample;
 
-/// Pixels per chunk of a row in the block fold: the chunk's state
-/// (`≤ 14 B/pixel` for `u8`) stays in L1 while the block's frames stream by.
-const CHUNK: usize = 512;
+/// Pixels folded together, their state held in registers (one AVX-512
+/// register per state variable for `u8`, two for `u16`).
+const LANES: usize = 64;
+
+/// Pixels tested together for "any window to capture" before a scalar scan.
+const GROUP: usize = 64;
+
+/// Samples per parallel piece of a frame copied into the ring.
+const STORE_PIECE: usize = 1 << 18;
 
 /// Marks "no steepest fall/rise yet" in the per-pixel frame indices.
 const NO_FRAME: u32 = u32::MAX;
+
+/// Bits of [`RowState::moved`]: the fall/rise window is not yet captured.
+const FELL: u8 = 1;
+const ROSE: u8 = 2;
 
 /// Tuning of [`TemporalTracker`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,8 +65,9 @@ pub struct TrackerParams {
     /// `m`: half-width of the window kept around the steepest fall and rise
     /// (`2m` samples, frames `j−m … j+m−1`). `1 ≤ m ≤ 64`.
     pub window: usize,
-    /// `K`: frames folded together per pass over the state. `1 ≤ K ≤ 4096`.
-    /// Results do not depend on it; speed does.
+    /// `K`: frames folded together per pass over the state. `1 ≤ K ≤ 128`.
+    /// Results do not depend on it; speed and the ring's size (`2K + m` frames
+    /// and a little more) do.
     pub block: usize,
 }
 
@@ -68,7 +82,8 @@ impl Default for TrackerParams {
 
 impl TrackerParams {
     const MAX_WINDOW: usize = 64;
-    const MAX_BLOCK: usize = 4096;
+    /// Keeps every block-local offset (`< K + lag ≤ 191`) below `u8::MAX`.
+    const MAX_BLOCK: usize = 128;
 
     fn validate(&self) -> Result<(), KernelError> {
         if !(1..=Self::MAX_WINDOW).contains(&self.window) {
@@ -84,6 +99,19 @@ impl TrackerParams {
             ));
         }
         Ok(())
+    }
+
+    /// Frames a block is folded late, so that the previous block's windows
+    /// (reaching `m − 1` frames past it) are complete when it is folded:
+    /// `max(0, m − 1 − K)`.
+    fn lag(&self) -> usize {
+        (self.window - 1).saturating_sub(self.block)
+    }
+
+    /// Ring slots: the previous block's windows reach back `K + m` frames
+    /// from the block being folded, which ends `lag` frames before the newest.
+    fn ring_slots(&self) -> usize {
+        2 * self.block + self.lag() + self.window
     }
 }
 
@@ -189,9 +217,14 @@ impl<T: Sample> FrameRing<T> {
         }
     }
 
+    /// Copy `frame` into the slot of frame `index`, in parallel pieces (a
+    /// single core does not saturate the memory bus).
     fn store(&mut self, index: usize, frame: &[T]) {
         let start = (index % self.slots) * self.frame_len;
-        self.samples[start..start + self.frame_len].copy_from_slice(frame);
+        self.samples[start..start + self.frame_len]
+            .par_chunks_mut(STORE_PIECE)
+            .zip(frame.par_chunks(STORE_PIECE))
+            .for_each(|(dst, src)| dst.copy_from_slice(src));
     }
 
     #[inline(always)]
@@ -203,24 +236,27 @@ impl<T: Sample> FrameRing<T> {
 
 /// The folded state of one image row.
 ///
-/// Invariants, for the frames `0 … F−1` folded so far:
+/// Invariants, for the frames `0 … D−1` folded so far:
 /// * `imax`/`imin`: max/min sample (`T::MIN`/`T::MAX` before any frame);
-/// * `best_fall[x]`: `max(0, max_{1≤j<F} I_{j−1} − I_j)`; `fall_at[x]` the first
+/// * `best_fall[x]`: `max(0, max_{1≤j<D} I_{j−1} − I_j)`; `fall_at[x]` the first
 ///   `j` reaching it, `NO_FRAME` while it is 0 (so only real falls count);
 ///   likewise `best_rise`/`rise_at` for `I_j − I_{j−1}`;
-/// * `fall_window[x·2m .. x·2m+2m]`: samples of frames `j−m … j+m−1` around
-///   `j = fall_at[x]`, clamped to `[0, last]` where `last` is the last frame
-///   present when it was captured (during streaming every frame of the window
-///   is present, so only the clamp at 0 ever applies); meaningless while
-///   `fall_at[x] == NO_FRAME`. Likewise `rise_window`.
+/// * `fall_window[x·2m .. x·2m+2m]`: the samples of frames `j−m … j+m−1`
+///   around `j = fall_at[x]`, clamped to `[0, last]` with `last` the newest
+///   frame when they were captured (while streaming, the whole window is in
+///   the ring when it is captured, so only the clamp at 0 applies) — unless
+///   `moved[x]` has the bit `FELL`: then `fall_at` moved in the last folded
+///   block and its window is still to be captured. Likewise `rise_window`,
+///   `ROSE`.
 #[derive(Debug, Clone)]
 struct RowState<T: Sample> {
     imax: Vec<T>,
     imin: Vec<T>,
-    best_fall: Vec<T::Lane>,
-    best_rise: Vec<T::Lane>,
+    best_fall: Vec<T>,
+    best_rise: Vec<T>,
     fall_at: Vec<u32>,
     rise_at: Vec<u32>,
+    moved: Vec<u8>,
     fall_window: Vec<T>,
     rise_window: Vec<T>,
 }
@@ -230,48 +266,161 @@ impl<T: Sample> RowState<T> {
         RowState {
             imax: vec![T::MIN; width],
             imin: vec![T::MAX; width],
-            best_fall: vec![T::Lane::ZERO; width],
-            best_rise: vec![T::Lane::ZERO; width],
+            best_fall: vec![T::MIN; width],
+            best_rise: vec![T::MIN; width],
             fall_at: vec![NO_FRAME; width],
             rise_at: vec![NO_FRAME; width],
+            moved: vec![0; width],
             fall_window: vec![T::MIN; width * 2 * half],
             rise_window: vec![T::MIN; width * 2 * half],
         }
     }
 }
 
-/// Fold one frame into a chunk of pixels. Branch-free: the selects compile to
-/// SIMD blends. All slices have the length of `cur`.
+/// A vector of `N` neighbouring pixels' state, held in registers while a
+/// whole block of frames is folded into it.
+#[derive(Clone, Copy)]
+struct Span<T, const N: usize> {
+    imax: [T; N],
+    imin: [T; N],
+    best_fall: [T; N],
+    best_rise: [T; N],
+    /// Block-local offset of the steepest fall/rise in this block, or `NO_OFFSET`.
+    fall_offset: [T; N],
+    rise_offset: [T; N],
+}
+
+/// Samples ahead of the current span to prefetch in each of a block's rows.
+const PREFETCH_AHEAD: usize = 4 * LANES;
+
+/// Hint the cache to fetch `slice[at]` (no effect past the end).
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn fold_frame<T: Sample>(
-    cur: &[T],
+fn prefetch<T>(slice: &[T], at: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(item) = slice.get(at) {
+        // SAFETY: a prefetch only hints the cache; the address is in bounds.
+        unsafe {
+            std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+                (item as *const T).cast::<i8>(),
+            )
+        };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (slice, at);
+}
+
+#[inline(always)]
+fn lanes<T: Sample, const N: usize>(slice: &[T], x0: usize) -> [T; N] {
+    let mut out = [T::MIN; N];
+    out.copy_from_slice(&slice[x0..x0 + N]);
+    out
+}
+
+impl<T: Sample, const N: usize> Span<T, N> {
+    /// Fold frame `cur` (predecessor `prev`) at block-local `offset`.
+    /// Branch-free: the selects compile to SIMD blends/masked moves.
+    #[inline(always)]
+    fn fold(&mut self, cur: &[T; N], prev: &[T; N], offset: T) {
+        for x in 0..N {
+            let (v, p) = (cur[x], prev[x]);
+            self.imax[x] = self.imax[x].max(v);
+            self.imin[x] = self.imin[x].min(v);
+            // Saturated to 0 when not a fall (rise): never beats the best (≥ 0).
+            let fall = p.saturating_sub(v);
+            let rise = v.saturating_sub(p);
+            let steeper_fall = fall > self.best_fall[x];
+            let steeper_rise = rise > self.best_rise[x];
+            self.best_fall[x] = self.best_fall[x].max(fall);
+            self.best_rise[x] = self.best_rise[x].max(rise);
+            self.fall_offset[x] = if steeper_fall {
+                offset
+            } else {
+                self.fall_offset[x]
+            };
+            self.rise_offset[x] = if steeper_rise {
+                offset
+            } else {
+                self.rise_offset[x]
+            };
+        }
+    }
+}
+
+/// Fold the block `rows` (one row of each frame, `prev` the row of the
+/// frame before the first) into the `N` pixels from `x0` of a row's state.
+#[inline(always)]
+fn fold_span<T: Sample, const N: usize>(
+    state: &mut RowState<T>,
     prev: &[T],
-    offset: T::Lane,
-    imax: &mut [T],
-    imin: &mut [T],
-    best_fall: &mut [T::Lane],
-    best_rise: &mut [T::Lane],
-    fall_offset: &mut [T::Lane],
-    rise_offset: &mut [T::Lane],
+    rows: &[&[T]],
+    first: usize,
+    x0: usize,
 ) {
-    let n = cur.len();
-    let (prev, imax, imin) = (&prev[..n], &mut imax[..n], &mut imin[..n]);
-    let (best_fall, best_rise) = (&mut best_fall[..n], &mut best_rise[..n]);
-    let (fall_offset, rise_offset) = (&mut fall_offset[..n], &mut rise_offset[..n]);
-    for x in 0..n {
-        let v = cur[x];
-        imax[x] = imax[x].max(v);
-        imin[x] = imin[x].min(v);
-        let (w, p) = (v.widen(), prev[x].widen());
-        let fall = p - w;
-        let rise = w - p;
-        let steeper_fall = fall > best_fall[x];
-        let steeper_rise = rise > best_rise[x];
-        best_fall[x] = if steeper_fall { fall } else { best_fall[x] };
-        fall_offset[x] = if steeper_fall { offset } else { fall_offset[x] };
-        best_rise[x] = if steeper_rise { rise } else { best_rise[x] };
-        rise_offset[x] = if steeper_rise { offset } else { rise_offset[x] };
+    let mut span = Span::<T, N> {
+        imax: lanes(&state.imax, x0),
+        imin: lanes(&state.imin, x0),
+        best_fall: lanes(&state.best_fall, x0),
+        best_rise: lanes(&state.best_rise, x0),
+        fall_offset: [T::NO_OFFSET; N],
+        rise_offset: [T::NO_OFFSET; N],
+    };
+    let mut before: [T; N] = lanes(prev, x0);
+    for (k, row) in rows.iter().enumerate() {
+        prefetch(row, x0 + PREFETCH_AHEAD);
+        let cur: [T; N] = lanes(row, x0);
+        span.fold(&cur, &before, T::from_offset(k));
+        before = cur;
+    }
+    state.imax[x0..x0 + N].copy_from_slice(&span.imax);
+    state.imin[x0..x0 + N].copy_from_slice(&span.imin);
+    state.best_fall[x0..x0 + N].copy_from_slice(&span.best_fall);
+    state.best_rise[x0..x0 + N].copy_from_slice(&span.best_rise);
+    // Moves are rare once the sweep is under way: a vectorised test first.
+    let moved = span
+        .fall_offset
+        .iter()
+        .zip(&span.rise_offset)
+        .fold(false, |any, (&f, &r)| {
+            any | (f != T::NO_OFFSET) | (r != T::NO_OFFSET)
+        });
+    if moved {
+        for (i, (&f, &r)) in span.fall_offset.iter().zip(&span.rise_offset).enumerate() {
+            let x = x0 + i;
+            if f != T::NO_OFFSET {
+                state.fall_at[x] = (first + f.index()) as u32;
+                state.moved[x] |= FELL;
+            }
+            if r != T::NO_OFFSET {
+                state.rise_at[x] = (first + r.index()) as u32;
+                state.moved[x] |= ROSE;
+            }
+        }
+    }
+}
+
+/// Fold the frames `frames` (present in `ring` with their predecessors) into
+/// one row's state: statistics, `fall_at`/`rise_at` and the `moved` bits.
+/// Windows are not captured here.
+///
+/// Pixels are taken `LANES` at a time, their state kept in registers across
+/// all the block's frames: per pixel and frame, one load and a few SIMD
+/// operations.
+fn fold_row<T: Sample>(
+    state: &mut RowState<T>,
+    ring: &FrameRing<T>,
+    row: usize,
+    frames: Range<usize>,
+) {
+    debug_assert!(frames.len() < T::NO_OFFSET.index());
+    let width = state.imax.len();
+    let prev = ring.row(frames.start.saturating_sub(1), row);
+    let rows: Vec<&[T]> = frames.clone().map(|j| ring.row(j, row)).collect();
+    let split = width - width % LANES;
+    for x0 in (0..split).step_by(LANES) {
+        fold_span::<T, LANES>(state, prev, &rows, frames.start, x0);
+    }
+    for x0 in split..width {
+        fold_span::<T, 1>(state, prev, &rows, frames.start, x0);
     }
 }
 
@@ -292,53 +441,30 @@ fn capture_window<T: Sample>(
     }
 }
 
-/// Fold `frames` (all present in `ring`, as well as the frames their windows
-/// need up to `last`) into one row's state.
-fn fold_row<T: Sample>(
+/// Capture the windows of one row's `moved` pixels (frames up to `last`,
+/// back to the window starts, all in `ring`) and clear the bits.
+fn capture_row<T: Sample>(
     state: &mut RowState<T>,
     ring: &FrameRing<T>,
     row: usize,
-    frames: Range<usize>,
     last: usize,
     half: usize,
 ) {
-    debug_assert!(frames.len() <= T::Lane::MAX_OFFSET);
-    let width = state.imax.len();
     let span = 2 * half;
-    let mut fall_offset = [T::Lane::NONE; CHUNK];
-    let mut rise_offset = [T::Lane::NONE; CHUNK];
-    for c0 in (0..width).step_by(CHUNK) {
-        let c1 = (c0 + CHUNK).min(width);
-        let fall_offset = &mut fall_offset[..c1 - c0];
-        let rise_offset = &mut rise_offset[..c1 - c0];
-        fall_offset.fill(T::Lane::NONE);
-        rise_offset.fill(T::Lane::NONE);
-        for (k, j) in frames.clone().enumerate() {
-            fold_frame(
-                &ring.row(j, row)[c0..c1],
-                &ring.row(j.saturating_sub(1), row)[c0..c1],
-                T::Lane::from_offset(k),
-                &mut state.imax[c0..c1],
-                &mut state.imin[c0..c1],
-                &mut state.best_fall[c0..c1],
-                &mut state.best_rise[c0..c1],
-                fall_offset,
-                rise_offset,
-            );
+    for g0 in (0..state.moved.len()).step_by(GROUP) {
+        let g1 = (g0 + GROUP).min(state.moved.len());
+        if state.moved[g0..g1].iter().fold(0, |any, &m| any | m) == 0 {
+            continue;
         }
-        for (i, (&f, &r)) in fall_offset.iter().zip(rise_offset.iter()).enumerate() {
-            let x = c0 + i;
-            if f != T::Lane::NONE {
-                let j = frames.start + f.to_offset();
-                state.fall_at[x] = j as u32;
+        for x in g0..g1 {
+            let moved = std::mem::take(&mut state.moved[x]);
+            if moved & FELL != 0 {
                 let dst = &mut state.fall_window[x * span..(x + 1) * span];
-                capture_window(dst, ring, row, x, j, last);
+                capture_window(dst, ring, row, x, state.fall_at[x] as usize, last);
             }
-            if r != T::Lane::NONE {
-                let j = frames.start + r.to_offset();
-                state.rise_at[x] = j as u32;
+            if moved & ROSE != 0 {
                 let dst = &mut state.rise_window[x * span..(x + 1) * span];
-                capture_window(dst, ring, row, x, j, last);
+                capture_window(dst, ring, row, x, state.rise_at[x] as usize, last);
             }
         }
     }
@@ -347,16 +473,19 @@ fn fold_row<T: Sample>(
 /// Streaming per-pixel shadow tracker over frames of `T` (`u8` or `u16`).
 ///
 /// Invariants between calls (`F` = frames seen, `D` = frames folded,
-/// `K` = block, `m` = window):
-/// * the ring has `K + 2m` slots and holds frames `max(0, F−K−2m) … F−1`;
-/// * `D` is a multiple of `K` and `0 ≤ F − D < K + m`: a block `D … D+K−1` is
-///   folded as soon as `F = D + K + m`. Its windows then reach back to `D − m`
-///   and forward to `D + K + m − 2 < F`, and its first frame's predecessor
-///   is `D − 1 ≥ D − m`: all in the ring, none clamped at the end;
-/// * every row state satisfies [`RowState`]'s invariants for frames `0 … D−1`.
+/// `K` = block, `m` = window, `L` = lag `= max(0, m − 1 − K)`):
+/// * the ring has `S = 2K + L + m` slots and holds frames `max(0, F−S) … F−1`;
+/// * `D` is a multiple of `K` and `0 ≤ F − D < K + L`: block `D … D+K−1` is
+///   folded as soon as `F = D + K + L`, right after the windows of the
+///   previous block `D−K … D−1` are captured. Those reach from `D − K − m =
+///   F − S` to `D + m − 2 ≤ F − 1`: all in the ring, none clamped at the end;
+///   the block itself needs frames `D − 1 … D + K − 1`;
+/// * every row state satisfies [`RowState`]'s invariants for frames `0 … D−1`,
+///   with `moved` bits only for moves in block `D−K … D−1`.
 ///
-/// [`finish`](Self::finish) folds the pending frames `D … F−1` into a copy of
-/// each row's state (their windows, up to `D − m`, are in the ring too), so it
+/// [`finish`](Self::finish) works on a copy of each row's state: captures the
+/// pending windows, folds the pending frames `D … F−1` and captures theirs
+/// (everything back to `D − K − m` is in the ring), clamping at `F − 1`. So it
 /// can be called at any time for a preview.
 #[derive(Debug, Clone)]
 pub struct TemporalTracker<T: Sample> {
@@ -379,12 +508,11 @@ impl<T: Sample> TemporalTracker<T> {
                 format!("frames must not be empty, got {height} × {width}"),
             ));
         }
-        let slots = params.block + 2 * params.window;
         Ok(TemporalTracker {
             height,
             width,
             params,
-            ring: FrameRing::new(height, width, slots),
+            ring: FrameRing::new(height, width, params.ring_slots()),
             rows: (0..height)
                 .map(|_| RowState::new(width, params.window))
                 .collect(),
@@ -425,13 +553,17 @@ impl<T: Sample> TemporalTracker<T> {
         self.ring.store(self.frames_seen, frame);
         self.frames_seen += 1;
         let (block, half) = (self.params.block, self.params.window);
-        if self.frames_seen == self.frames_folded + block + half {
+        if self.frames_seen == self.frames_folded + block + self.params.lag() {
             let frames = self.frames_folded..self.frames_folded + block;
             let last = self.frames_seen - 1;
             let ring = &self.ring;
-            self.rows.par_iter_mut().enumerate().for_each(|(row, state)| {
-                fold_row(state, ring, row, frames.clone(), last, half);
-            });
+            self.rows
+                .par_iter_mut()
+                .enumerate()
+                .for_each(|(row, state)| {
+                    capture_row(state, ring, row, last, half);
+                    fold_row(state, ring, row, frames.clone());
+                });
             self.frames_folded += block;
         }
         Ok(())
@@ -444,7 +576,11 @@ impl<T: Sample> TemporalTracker<T> {
     /// invalid (times NaN). `lut`: decoding table from DN to linear
     /// irradiance, `T::LUT_LEN` finite non-decreasing values (`None` =
     /// identity); thresholds, interpolation and slopes use decoded values.
-    pub fn finish(&self, min_contrast: f32, lut: Option<&[f32]>) -> Result<ShadowTimes, KernelError> {
+    pub fn finish(
+        &self,
+        min_contrast: f32,
+        lut: Option<&[f32]>,
+    ) -> Result<ShadowTimes, KernelError> {
         if self.frames_seen == 0 {
             return Err(KernelError::NoFrames);
         }
@@ -464,13 +600,12 @@ impl<T: Sample> TemporalTracker<T> {
             .zip(self.rows.par_iter())
             .enumerate()
             .for_each(|(row, (mut out, folded))| {
-                let state = if pending.is_empty() {
-                    Cow::Borrowed(folded)
-                } else {
-                    let mut state = folded.clone();
-                    fold_row(&mut state, &self.ring, row, pending.clone(), last, half);
-                    Cow::Owned(state)
-                };
+                let mut state = folded.clone();
+                capture_row(&mut state, &self.ring, row, last, half);
+                if !pending.is_empty() {
+                    fold_row(&mut state, &self.ring, row, pending.clone());
+                    capture_row(&mut state, &self.ring, row, last, half);
+                }
                 resolve_row(&state, &lut, min_contrast, half, &mut out);
             });
         Ok(times)

@@ -58,7 +58,10 @@ pub fn triangulate(
     if planes.len() % 4 != 0 {
         return Err(KernelError::parameter(
             "planes",
-            format!("needs rows of 4 values [nx, ny, nz, d], got {} values", planes.len()),
+            format!(
+                "needs rows of 4 values [nx, ny, nz, d], got {} values",
+                planes.len()
+            ),
         ));
     }
     if !(0.0..=1.0).contains(&min_cos) {

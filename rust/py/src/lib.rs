@@ -1,1 +1,357 @@
-//! stub
+//! `gnomon._kernel`: thin PyO3 bindings of `gnomon-core`.
+//!
+//! Arrays are borrowed (copied only when not C-contiguous), the GIL is
+//! released around every kernel call, and `KernelError`s and bad arrays become
+//! `ValueError`s naming what was expected and what was given. No numerics
+//! here: see `gnomon-core`.
+
+use gnomon_core::{KernelError, Sample, ShadowTimes, TemporalTracker as Tracker, TrackerParams};
+use numpy::ndarray::{Array2, Array3, ArrayView, Dimension, Ix1, Ix2, Ix3};
+use numpy::{
+    Element, IntoPyArray, PyArray, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray,
+    PyUntypedArray, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+fn value_error(err: KernelError) -> PyErr {
+    PyValueError::new_err(err.to_string())
+}
+
+fn shape_text(shape: &[usize]) -> String {
+    let dims: Vec<String> = shape.iter().map(usize::to_string).collect();
+    match dims.len() {
+        1 => format!("({},)", dims[0]),
+        _ => format!("({})", dims.join(", ")),
+    }
+}
+
+/// "a uint8 array of shape (480, 640)", or the Python type of a non-array.
+fn describe(obj: &Bound<'_, PyAny>) -> String {
+    match obj.cast::<PyUntypedArray>() {
+        Ok(array) => format!(
+            "a {} array of shape {}",
+            array.dtype(),
+            shape_text(array.shape())
+        ),
+        Err(_) => match obj.get_type().name() {
+            Ok(name) => format!("an object of type {name}"),
+            Err(_) => "an object of unknown type".to_owned(),
+        },
+    }
+}
+
+/// The extent an array must have along one axis.
+#[derive(Clone, Copy)]
+enum Extent {
+    /// Any length, named in messages (e.g. "N").
+    Any(&'static str),
+    Exactly(usize),
+}
+
+impl Extent {
+    fn accepts(self, n: usize) -> bool {
+        match self {
+            Extent::Any(_) => true,
+            Extent::Exactly(m) => m == n,
+        }
+    }
+
+    fn text(self) -> String {
+        match self {
+            Extent::Any(name) => name.to_owned(),
+            Extent::Exactly(m) => m.to_string(),
+        }
+    }
+}
+
+/// Borrow `obj` as a read-only array of `T` with the given extents, or a
+/// `ValueError` naming `what` was expected and what was given.
+fn borrow_array<'py, T: Element, D: Dimension>(
+    obj: &Bound<'py, PyAny>,
+    what: &str,
+    dtype: &str,
+    shape: &[Extent],
+) -> PyResult<PyReadonlyArray<'py, T, D>> {
+    let expected = || {
+        let dims: Vec<String> = shape.iter().map(|e| e.text()).collect();
+        let dims = if dims.len() == 1 {
+            format!("({},)", dims[0])
+        } else {
+            format!("({})", dims.join(", "))
+        };
+        format!(
+            "{what}: expected a {dtype} array of shape {dims}, got {}",
+            describe(obj)
+        )
+    };
+    let array = obj
+        .cast::<PyArray<T, D>>()
+        .map_err(|_| PyValueError::new_err(expected()))?;
+    let matches = array.ndim() == shape.len()
+        && array
+            .shape()
+            .iter()
+            .zip(shape)
+            .all(|(&got, want)| want.accepts(got));
+    if !matches {
+        return Err(PyValueError::new_err(expected()));
+    }
+    array
+        .try_readonly()
+        .map_err(|err| PyValueError::new_err(format!("{what}: {err}")))
+}
+
+/// Run `f` on the view's elements as one row-major slice (copied if the view
+/// is not C-contiguous).
+fn with_slice<T: Copy, D: Dimension, R>(
+    view: &ArrayView<'_, T, D>,
+    f: impl FnOnce(&[T]) -> R,
+) -> R {
+    match view.as_slice() {
+        Some(slice) => f(slice),
+        None => f(&view.iter().copied().collect::<Vec<T>>()),
+    }
+}
+
+fn image<'py, T: Element>(
+    py: Python<'py>,
+    data: Vec<T>,
+    height: usize,
+    width: usize,
+) -> PyResult<Bound<'py, PyArray2<T>>> {
+    let array = Array2::from_shape_vec((height, width), data)
+        .map_err(|err| PyValueError::new_err(format!("internal shape error: {err}")))?;
+    Ok(array.into_pyarray(py))
+}
+
+fn mask<'py>(
+    py: Python<'py>,
+    data: Vec<u8>,
+    height: usize,
+    width: usize,
+) -> PyResult<Bound<'py, PyArray2<bool>>> {
+    image(
+        py,
+        data.into_iter().map(|v| v != 0).collect(),
+        height,
+        width,
+    )
+}
+
+enum AnyTracker {
+    U8(Tracker<u8>),
+    U16(Tracker<u16>),
+}
+
+/// Streaming per-pixel shadow tracker (see `gnomon-core`'s `TemporalTracker`).
+#[pyclass(module = "gnomon._kernel", name = "TemporalTracker")]
+struct TemporalTracker {
+    inner: AnyTracker,
+}
+
+fn update_any<T: Sample + Element>(
+    py: Python<'_>,
+    tracker: &mut Tracker<T>,
+    frame: &Bound<'_, PyAny>,
+) -> PyResult<()> {
+    let shape = [
+        Extent::Exactly(tracker.height()),
+        Extent::Exactly(tracker.width()),
+    ];
+    let frame = borrow_array::<T, Ix2>(frame, "frame", T::DTYPE, &shape)?;
+    let view = frame.as_array();
+    py.detach(|| with_slice(&view, |data| tracker.update(data)))
+        .map_err(value_error)
+}
+
+fn finish_any<T: Sample>(
+    py: Python<'_>,
+    tracker: &Tracker<T>,
+    min_contrast: f32,
+    lut: Option<&Bound<'_, PyAny>>,
+) -> PyResult<ShadowTimes> {
+    let result = match lut {
+        None => py.detach(|| tracker.finish(min_contrast, None)),
+        Some(lut) => {
+            let lut =
+                borrow_array::<f32, Ix1>(lut, "lut", "float32", &[Extent::Exactly(T::LUT_LEN)])?;
+            let view = lut.as_array();
+            py.detach(|| with_slice(&view, |table| tracker.finish(min_contrast, Some(table))))
+        }
+    };
+    result.map_err(value_error)
+}
+
+#[pymethods]
+impl TemporalTracker {
+    #[new]
+    #[pyo3(signature = (height, width, dtype = "uint8", window = 4, block = 16))]
+    fn new(
+        height: usize,
+        width: usize,
+        dtype: &str,
+        window: usize,
+        block: usize,
+    ) -> PyResult<Self> {
+        let params = TrackerParams { window, block };
+        let inner = match dtype {
+            "uint8" => AnyTracker::U8(Tracker::new(height, width, params).map_err(value_error)?),
+            "uint16" => AnyTracker::U16(Tracker::new(height, width, params).map_err(value_error)?),
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "dtype: expected \"uint8\" or \"uint16\", got {other:?}"
+                )))
+            }
+        };
+        Ok(TemporalTracker { inner })
+    }
+
+    /// Add the next frame: a 2-D array of the tracker's dtype and shape.
+    fn update(&mut self, py: Python<'_>, frame: &Bound<'_, PyAny>) -> PyResult<()> {
+        match &mut self.inner {
+            AnyTracker::U8(t) => update_any(py, t, frame),
+            AnyTracker::U16(t) => update_any(py, t, frame),
+        }
+    }
+
+    /// Per-pixel results for the frames seen so far (the tracker is unchanged).
+    #[pyo3(signature = (min_contrast, lut = None))]
+    fn finish<'py>(
+        &self,
+        py: Python<'py>,
+        min_contrast: f32,
+        lut: Option<&Bound<'py, PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let times = match &self.inner {
+            AnyTracker::U8(t) => finish_any(py, t, min_contrast, lut)?,
+            AnyTracker::U16(t) => finish_any(py, t, min_contrast, lut)?,
+        };
+        let (h, w) = (times.height, times.width);
+        let dict = PyDict::new(py);
+        dict.set_item("imax", image(py, times.imax, h, w)?)?;
+        dict.set_item("imin", image(py, times.imin, h, w)?)?;
+        dict.set_item("contrast", image(py, times.contrast, h, w)?)?;
+        dict.set_item("threshold", image(py, times.threshold, h, w)?)?;
+        dict.set_item("enter", image(py, times.enter, h, w)?)?;
+        dict.set_item("leave", image(py, times.leave, h, w)?)?;
+        dict.set_item("enter_slope", image(py, times.enter_slope, h, w)?)?;
+        dict.set_item("leave_slope", image(py, times.leave_slope, h, w)?)?;
+        dict.set_item("valid", mask(py, times.valid, h, w)?)?;
+        Ok(dict)
+    }
+
+    #[getter]
+    fn frames_seen(&self) -> usize {
+        match &self.inner {
+            AnyTracker::U8(t) => t.frames_seen(),
+            AnyTracker::U16(t) => t.frames_seen(),
+        }
+    }
+
+    /// `(height, width)` of the frames.
+    #[getter]
+    fn shape(&self) -> (usize, usize) {
+        match &self.inner {
+            AnyTracker::U8(t) => (t.height(), t.width()),
+            AnyTracker::U16(t) => (t.height(), t.width()),
+        }
+    }
+
+    #[getter]
+    fn dtype(&self) -> &'static str {
+        match &self.inner {
+            AnyTracker::U8(_) => u8::DTYPE,
+            AnyTracker::U16(_) => u16::DTYPE,
+        }
+    }
+
+    #[getter]
+    fn window(&self) -> usize {
+        self.params().window
+    }
+
+    #[getter]
+    fn block(&self) -> usize {
+        self.params().block
+    }
+
+    fn __repr__(&self) -> String {
+        let (h, w) = self.shape();
+        let p = self.params();
+        format!(
+            "TemporalTracker(height={h}, width={w}, dtype={:?}, window={}, block={}, frames_seen={})",
+            self.dtype(),
+            p.window,
+            p.block,
+            self.frames_seen()
+        )
+    }
+}
+
+impl TemporalTracker {
+    fn params(&self) -> TrackerParams {
+        match &self.inner {
+            AnyTracker::U8(t) => t.params(),
+            AnyTracker::U16(t) => t.params(),
+        }
+    }
+}
+
+/// `(points (H, W, 3) float32, valid (H, W) bool)`.
+type PointsAndMask<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<bool>>);
+
+/// Camera rays ∩ shadow planes interpolated at each pixel's shadow time.
+#[pyfunction]
+#[pyo3(signature = (rays, times, planes, min_cos = 1e-3))]
+fn triangulate<'py>(
+    py: Python<'py>,
+    rays: &Bound<'py, PyAny>,
+    times: &Bound<'py, PyAny>,
+    planes: &Bound<'py, PyAny>,
+    min_cos: f64,
+) -> PyResult<PointsAndMask<'py>> {
+    let times = borrow_array::<f32, Ix2>(
+        times,
+        "times",
+        "float32",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (times.shape()[0], times.shape()[1]);
+    let rays = borrow_array::<f64, Ix3>(
+        rays,
+        "rays",
+        "float64",
+        &[Extent::Exactly(h), Extent::Exactly(w), Extent::Exactly(3)],
+    )?;
+    let planes = borrow_array::<f64, Ix2>(
+        planes,
+        "planes",
+        "float64",
+        &[Extent::Any("N"), Extent::Exactly(4)],
+    )?;
+    let (rays, times, planes) = (rays.as_array(), times.as_array(), planes.as_array());
+    let (points, valid) = py
+        .detach(|| {
+            with_slice(&rays, |rays| {
+                with_slice(&times, |times| {
+                    with_slice(&planes, |planes| {
+                        gnomon_core::triangulate(rays, times, planes, min_cos)
+                    })
+                })
+            })
+        })
+        .map_err(value_error)?;
+    let points = Array3::from_shape_vec((h, w, 3), points)
+        .map_err(|err| PyValueError::new_err(format!("internal shape error: {err}")))?;
+    Ok((points.into_pyarray(py), mask(py, valid, h, w)?))
+}
+
+#[pymodule]
+fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<TemporalTracker>()?;
+    m.add_function(wrap_pyfunction!(triangulate, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

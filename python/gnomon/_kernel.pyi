@@ -1,0 +1,70 @@
+"""Type stub of ``gnomon._kernel``, the Rust kernel (crates gnomon-core, gnomon-py).
+
+Arrays are borrowed without copying when C-contiguous (otherwise copied);
+the GIL is released during every kernel call. Bad dtypes, shapes or
+parameters raise ``ValueError`` naming what was expected and what was given.
+"""
+
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+class TemporalTracker:
+    """Streaming per-pixel shadow tracker; memory independent of the number of frames.
+
+    ``dtype``: the frames' dtype, ``"uint8"`` or ``"uint16"``. ``window``: half-width
+    ``m`` (1..64) of the sample windows kept around each pixel's steepest fall and
+    rise. ``block``: frames folded per pass (1..128), a speed knob only.
+    """
+
+    def __init__(
+        self,
+        height: int,
+        width: int,
+        dtype: Literal["uint8", "uint16"] = "uint8",
+        window: int = 4,
+        block: int = 16,
+    ) -> None: ...
+    def update(self, frame: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
+        """Add the next frame: a (height, width) array of the tracker's dtype."""
+    def finish(
+        self, min_contrast: float, lut: npt.NDArray[np.float32] | None = None
+    ) -> dict[str, np.ndarray]:
+        """Per-pixel results for the frames seen so far; the tracker is unchanged.
+
+        ``min_contrast`` in DN. ``lut``: float32 decoding table DN → linear
+        irradiance (256 or 65536 finite, non-decreasing entries), identity if None.
+        Keys: ``imax``, ``imin``, ``contrast`` (DN), ``threshold`` (linear),
+        ``enter``, ``leave`` (frames, NaN = none/invalid), ``enter_slope``,
+        ``leave_slope`` (linear units per frame): float32 (H, W); ``valid``:
+        bool (H, W), ``contrast >= min_contrast``.
+        """
+    @property
+    def frames_seen(self) -> int: ...
+    @property
+    def shape(self) -> tuple[int, int]: ...
+    @property
+    def dtype(self) -> Literal["uint8", "uint16"]: ...
+    @property
+    def window(self) -> int: ...
+    @property
+    def block(self) -> int: ...
+
+def triangulate(
+    rays: npt.NDArray[np.float64],
+    times: npt.NDArray[np.float32],
+    planes: npt.NDArray[np.float64],
+    min_cos: float = 1e-3,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
+    """Intersect each pixel's camera ray with the shadow plane at its shadow time.
+
+    ``rays`` (H, W, 3) unit camera-frame rays; ``times`` (H, W) frames, NaN = none;
+    ``planes`` (N, 4) rows ``[nx, ny, nz, d]`` of ``n·X = d`` per frame (camera
+    frame; a NaN row = no plane), linearly interpolated (sign-aligned) between
+    frames. Returns camera-frame points (H, W, 3) float32 (NaN where invalid) and
+    the validity mask (H, W) bool. Invalid: time NaN or outside [0, N−1], a
+    missing plane, ``|n·r| < min_cos``, or a point not in front of the camera.
+    """

@@ -1,0 +1,234 @@
+"""Throughput and memory of the streaming tracker: the Rust kernel against the
+numpy implementation of the same algorithm (:class:`gnomon.tracking.NumpyTracker`).
+
+Frames are synthesised in advance: ``DISTINCT`` grey frames (uint8) of a soft
+shadow band sweeping across the image with Gaussian noise, fed in a cycle, so
+decoding never enters the timing. Both trackers are first warmed up with one
+cycle (every pixel's steepest step moves during the first pass), then timed
+over the requested number of frames; ``finish`` is timed once, separately.
+
+Peak memory (peak RSS: ``VmHWM``, else ``ru_maxrss``) is measured in fresh
+subprocesses, before the parent allocates its frames,
+``python -m gnomon.bench --child N``, that synthesise the frames, run the
+kernel over ``N`` frames and finish: memory must not grow with ``N``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from gnomon import _kernel
+from gnomon.tracking import NumpyTracker
+
+DISTINCT = 32
+"""Distinct synthetic frames, fed in a cycle."""
+
+MIN_CONTRAST = 20.0
+
+
+def _logistic(z: np.ndarray) -> np.ndarray:
+    return 0.5 * (1 + np.tanh(0.5 * z))
+
+
+def synthetic_frames(height: int, width: int, count: int = DISTINCT, seed: int = 0) -> list[np.ndarray]:
+    """``count`` uint8 frames (height, width): a shadow band a quarter of the width
+    wide, with logistic edges (scale 3 px), sweeping left to right over the cycle;
+    lit 200 DN, shadow 40 DN, plus Gaussian noise σ = 2 DN."""
+    rng = np.random.default_rng(seed)
+    x = np.arange(width, dtype=np.float32)
+    band = width / 4
+    frames = []
+    for f in range(count):
+        centre = -band / 2 + (f + 0.5) / count * (width + band)
+        inside = _logistic((x - (centre - band / 2)) / 3) * _logistic(((centre + band / 2) - x) / 3)
+        row = 200 - 160 * inside
+        noise = rng.standard_normal((height, width), dtype=np.float32) * 2
+        frames.append(np.clip(row[None, :] + noise, 0, 255).round().astype(np.uint8))
+    return frames
+
+
+def _feed(tracker, frames: list[np.ndarray], n: int, start: int = 0) -> "Throughput":
+    """Feed ``n`` frames of the cycle (from ``start``), timed."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    for i in range(start, start + n):
+        tracker.update(frames[i % len(frames)])
+    return Throughput(n, time.perf_counter() - t0, time.process_time() - c0)
+
+
+@dataclass
+class Throughput:
+    """``frames`` fed in ``seconds`` of wall-clock time, using ``cpu_seconds``
+    of CPU time over all the process's threads (less sensitive than the wall
+    clock to other load on the machine)."""
+
+    frames: int
+    seconds: float
+    cpu_seconds: float
+
+    @property
+    def fps(self) -> float:
+        return self.frames / self.seconds if self.seconds > 0 else float("inf")
+
+
+@dataclass
+class BenchResult:
+    """Figures of one ``gnomon bench`` run (times in seconds, memory in MiB)."""
+
+    width: int
+    height: int
+    dtype: str
+    window: int
+    block: int
+    cpus: int
+    machine: str
+    kernel: Throughput
+    numpy: Throughput
+    kernel_finish_s: float
+    numpy_finish_s: float
+    memory_mib: dict[int, float]
+
+    @property
+    def speedup(self) -> float:
+        return self.kernel.fps / self.numpy.fps
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["kernel"]["fps"] = self.kernel.fps
+        d["numpy"]["fps"] = self.numpy.fps
+        d["speedup"] = self.speedup
+        d["memory_mib"] = {str(k): v for k, v in self.memory_mib.items()}
+        if len(self.memory_mib) >= 2:
+            lo, hi = min(self.memory_mib), max(self.memory_mib)
+            d["memory_ratio"] = self.memory_mib[hi] / self.memory_mib[lo]
+        return d
+
+
+def peak_memory_mib(frames: int, height: int, width: int, window: int, block: int) -> float:
+    """Peak RSS (MiB) of a fresh process that runs the kernel over ``frames`` frames."""
+    cmd = [sys.executable, "-m", "gnomon.bench", "--child", str(frames),
+           "--height", str(height), "--width", str(width), "--window", str(window), "--block", str(block)]
+    out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+    return float(json.loads(out.strip().splitlines()[-1])["maxrss_mib"])
+
+
+def run_bench(
+    frames: int = 1000,
+    numpy_frames: int = 30,
+    width: int = 1920,
+    height: int = 1080,
+    window: int = 4,
+    block: int = 16,
+    memory_frames: tuple[int, ...] = (100, 1000),
+) -> BenchResult:
+    """Measure the kernel over ``frames`` frames and the numpy tracker over
+    ``numpy_frames`` frames of the same synthetic sequence, and the peak memory
+    of a kernel run over each of ``memory_frames`` (empty: skip)."""
+    memory = {n: peak_memory_mib(n, height, width, window, block) for n in memory_frames}
+    distinct = synthetic_frames(height, width)
+
+    kernel = _kernel.TemporalTracker(height, width, "uint8", window=window, block=block)
+    _feed(kernel, distinct, len(distinct))
+    kernel_t = _feed(kernel, distinct, frames, start=len(distinct))
+    t0 = time.perf_counter()
+    kernel.finish(MIN_CONTRAST)
+    kernel_finish = time.perf_counter() - t0
+    del kernel
+
+    reference = NumpyTracker(height, width, "uint8", window=window)
+    _feed(reference, distinct, len(distinct))
+    numpy_t = _feed(reference, distinct, numpy_frames, start=len(distinct))
+    t0 = time.perf_counter()
+    reference.finish(MIN_CONTRAST)
+    numpy_finish = time.perf_counter() - t0
+    del reference, distinct
+    return BenchResult(
+        width=width,
+        height=height,
+        dtype="uint8",
+        window=window,
+        block=block,
+        cpus=os.cpu_count() or 1,
+        machine=f"{platform.machine()} {platform.processor() or platform.system()}".strip(),
+        kernel=kernel_t,
+        numpy=numpy_t,
+        kernel_finish_s=kernel_finish,
+        numpy_finish_s=numpy_finish,
+        memory_mib=memory,
+    )
+
+
+def format_table(r: BenchResult) -> str:
+    """A compact plain-text table of the figures."""
+    lines = [
+        f"gnomon bench: {r.width}x{r.height} {r.dtype}, window {r.window}, block {r.block}, {r.cpus} CPUs",
+        f"  {'tracker':<8} {'frames':>7} {'seconds':>9} {'frames/s':>10} {'CPU ms/frame':>13} {'finish':>10}",
+        *(
+            f"  {name:<8} {t.frames:>7} {t.seconds:>9.3f} {t.fps:>10.0f} "
+            f"{t.cpu_seconds / t.frames * 1e3:>13.3f} {finish * 1e3:>7.0f} ms"
+            for name, t, finish in (
+                ("kernel", r.kernel, r.kernel_finish_s),
+                ("numpy", r.numpy, r.numpy_finish_s),
+            )
+        ),
+        f"  speed-up {r.speedup:.1f}x (frames/s), "
+        f"{(r.numpy.cpu_seconds / r.numpy.frames) / (r.kernel.cpu_seconds / r.kernel.frames):.1f}x (CPU time per frame)",
+    ]
+    if r.memory_mib:
+        mem = ", ".join(f"{n} frames {mib:.0f} MiB" for n, mib in sorted(r.memory_mib.items()))
+        lines.append(f"  peak RSS (kernel, fresh process): {mem}")
+        if len(r.memory_mib) >= 2:
+            lo, hi = min(r.memory_mib), max(r.memory_mib)
+            lines.append(f"  memory ratio {hi}/{lo} frames: {r.memory_mib[hi] / r.memory_mib[lo]:.3f}")
+    return "\n".join(lines)
+
+
+def _child(frames: int, height: int, width: int, window: int, block: int) -> dict:
+    distinct = synthetic_frames(height, width)
+    tracker = _kernel.TemporalTracker(height, width, "uint8", window=window, block=block)
+    _feed(tracker, distinct, frames)
+    tracker.finish(MIN_CONTRAST)
+    return {"frames": frames, "maxrss_mib": _peak_rss_kib() / 1024}
+
+
+def _peak_rss_kib() -> float:
+    """Peak resident memory of this process, KiB.
+
+    Linux's ``ru_maxrss`` survives ``exec``: a child started by a big parent
+    reports at least the parent's size at fork. ``VmHWM`` in
+    ``/proc/self/status`` is the peak of this program's own address space.
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return float(line.split()[1])
+    except OSError:
+        pass
+    return float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)  # KiB on Linux
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m gnomon.bench --child N``: one memory measurement (JSON on stdout)."""
+    p = argparse.ArgumentParser(prog="python -m gnomon.bench", description=__doc__.split("\n\n")[0])
+    p.add_argument("--child", type=int, required=True, metavar="N", help="run the kernel over N frames")
+    p.add_argument("--height", type=int, default=1080)
+    p.add_argument("--width", type=int, default=1920)
+    p.add_argument("--window", type=int, default=4)
+    p.add_argument("--block", type=int, default=16)
+    args = p.parse_args(argv)
+    print(json.dumps(_child(args.child, args.height, args.width, args.window, args.block)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

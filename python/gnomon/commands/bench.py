@@ -1,0 +1,58 @@
+"""`gnomon bench`: throughput of the streaming kernel against the numpy
+reference implementation of the same algorithm, and its peak memory for two
+sequence lengths (it must not grow with the number of frames).
+
+See :mod:`gnomon.bench` for how the figures are taken.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from gnomon.atomic import write_text
+from gnomon.bench import format_table, run_bench
+from gnomon.errors import GnomonError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "bench",
+        help="kernel throughput vs the numpy reference",
+        description="Synthesise grey frames of a sweeping shadow, time the Rust tracker and the numpy "
+        "tracker on them, and measure the kernel's peak memory (RSS of a fresh process) for 100 and "
+        "for --frames frames.",
+    )
+    p.add_argument("--frames", type=int, default=1000, metavar="N", help="frames for the kernel (default 1000)")
+    p.add_argument("--numpy-frames", type=int, default=30, metavar="M",
+                   help="frames for the numpy tracker (default 30)")
+    p.add_argument("--width", type=int, default=1920, help="frame width, pixels (default 1920)")
+    p.add_argument("--height", type=int, default=1080, help="frame height, pixels (default 1080)")
+    p.add_argument("--window", type=int, default=4, help="tracker window half-width m (default 4)")
+    p.add_argument("--block", type=int, default=16, help="kernel temporal block K (default 16)")
+    p.add_argument("--no-memory", action="store_true", help="skip the peak-memory subprocesses")
+    p.add_argument("--json", metavar="PATH", help="also write the figures as JSON to PATH")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    for name in ("frames", "numpy_frames", "width", "height", "window", "block"):
+        if getattr(args, name) < 1:
+            raise GnomonError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(args, name)}")
+    memory_frames = () if args.no_memory else tuple(sorted({100, args.frames}))
+    try:
+        result = run_bench(
+            frames=args.frames,
+            numpy_frames=args.numpy_frames,
+            width=args.width,
+            height=args.height,
+            window=args.window,
+            block=args.block,
+            memory_frames=memory_frames,
+        )
+    except ValueError as exc:  # the kernel's parameter checks
+        raise GnomonError(str(exc)) from None
+    print(format_table(result))
+    if args.json:
+        write_text(args.json, json.dumps(result.to_dict(), indent=2) + "\n")
+    return 0
