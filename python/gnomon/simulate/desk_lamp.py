@@ -236,10 +236,13 @@ class DeskLampConfig(SweepConfig):
     to the other side of the camera; everything else unchanged).
     ``pencil_photos``: how many pencil photos (and ``pencil_log.toml``) to
     write beside the capture; 0 for none, else 2 to 12.
+    ``lamp_height``: the lamp's height above the desk, mm (default: ``LAMP``'s,
+    380); a lower lamp casts longer object shadows (scenes for dual-scan fusion).
     """
 
     lamp_side: str = "left"
     pencil_photos: int = 3
+    lamp_height: float | None = None
 
     @property
     def scene_name(self) -> str:
@@ -249,6 +252,8 @@ class DeskLampConfig(SweepConfig):
         if self.lamp_side not in LAMP_SIDES:
             raise GnomonError(f"simulate desk_lamp: lamp_side {self.lamp_side!r}: must be 'left' or 'right'")
         super().validate()
+        if self.lamp_height is not None and not (math.isfinite(self.lamp_height) and 120 <= self.lamp_height <= 2000):
+            raise self.error(f"lamp_height {self.lamp_height}: must be 120 to 2000 mm")
         if not (self.pencil_photos == 0 or 2 <= self.pencil_photos <= MAX_PENCIL_PHOTOS):
             raise self.error(f"--pencil-photos {self.pencil_photos}: must be 0 (none) or 2 to "
                              f"{MAX_PENCIL_PHOTOS}")
@@ -343,6 +348,8 @@ class DeskLampScene:
         scene and the desk as the left one, on the other side of the view.
         """
         S = LAMP.astype(np.float64)
+        if getattr(self.config, "lamp_height", None) is not None:
+            S[2] = float(self.config.lamp_height)
         if getattr(self.config, "lamp_side", "left") == "right":
             S = mirror_across_view(S, self.C, self.SCENE_CENTRE)
         return S
