@@ -22,7 +22,8 @@ from gnomon.errors import FieldLogError
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
 UNITS = ("mm", "m")
 EDGES = ("enter", "leave", "both")
-LIGHT_KINDS = ("lamp", "two-plane")
+LIGHT_KINDS = ("lamp", "two-plane", "sun")
+TIMESTAMP_MODES = ("filename", "exif", "start+fps")
 
 
 class _Table:
@@ -102,6 +103,10 @@ class CaptureSpec:
     units: str = "mm"
     gamma: float | str = "srgb"
     frame_count: int | None = None
+    timestamps: str | None = None  # "filename" | "exif" | "start+fps"
+    time_pattern: str | None = None
+    start: str | None = None
+    fps: float | None = None
 
 
 @dataclass(frozen=True)
@@ -148,6 +153,38 @@ class ScanSettings:
     window: int = 4
     edge: str = "both"
     max_depth_jump: float = 0.02
+    normalize_illumination: bool = False
+
+
+@dataclass(frozen=True)
+class SiteSpec:
+    """[site]: where a sun capture happens, and how the world frame sits in East-North-Up."""
+
+    latitude_deg: float
+    longitude_deg: float
+    altitude_m: float = 0.0
+    timezone: str | None = None
+    pressure_pa: float | None = None
+    temperature_c: float | None = None
+    heading_deg: float | None = None  # compass heading of the world x axis (world z up)
+
+
+@dataclass(frozen=True)
+class PoleSpec:
+    """[pole]: a vertical occluder of known geometry (world coordinates)."""
+
+    base: np.ndarray
+    top: np.ndarray
+    radius: float = 0.0
+
+
+@dataclass(frozen=True)
+class GnomonSpec:
+    """[gnomon]: a vertical pole seen in one frame, to find the world frame's heading."""
+
+    frame: str
+    base_px: np.ndarray
+    shadow_px: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -161,6 +198,9 @@ class FieldLog:
     scan: ScanSettings
     camera_file: Path | None = None
     calibration: dict = field(default_factory=dict)
+    site: SiteSpec | None = None
+    pole: PoleSpec | None = None
+    gnomon: GnomonSpec | None = None
 
     @property
     def base_dir(self) -> Path:
@@ -180,13 +220,22 @@ def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
     else:
         raise t.error("gamma", f"expected a positive number or 'srgb', got {gamma_raw!r}")
     frame_count = t.integer("frame_count", minimum=2) if "frame_count" in t.data else None
+    timestamps = t.string("timestamps", None, TIMESTAMP_MODES) if "timestamps" in t.data else None
+    time_pattern = t.string("time_pattern") if "time_pattern" in t.data else None
+    start = t.string("start") if "start" in t.data else None
+    fps = t.number("fps", positive=True) if "fps" in t.data else None
+    if timestamps == "filename" and time_pattern is None:
+        raise FieldLogError(f"{t.path}: [capture] timestamps = 'filename' needs 'time_pattern'")
+    if timestamps == "start+fps" and (start is None or fps is None):
+        raise FieldLogError(f"{t.path}: [capture] timestamps = 'start+fps' needs 'start' and 'fps'")
     t.done()
+    extra = dict(timestamps=timestamps, time_pattern=time_pattern, start=start, fps=fps)
 
     if Path(pattern).suffix.lower() in VIDEO_SUFFIXES and not any(c in pattern for c in "*?["):
         video = base / pattern
         if not video.is_file():
             raise FieldLogError(f"{t.where('frames')}: video {video} not found")
-        return CaptureSpec(pattern, (), video, units, gamma, frame_count)
+        return CaptureSpec(pattern, (), video, units, gamma, frame_count, **extra)
     folder = (base / pattern).parent
     if not folder.is_dir():
         raise FieldLogError(f"{t.where('frames')}: frames folder {folder} not found")
@@ -199,7 +248,7 @@ def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
         raise FieldLogError(
             f"{t.where('frames')}: {len(files)} files match {pattern!r}, frame_count says {frame_count}"
         )
-    return CaptureSpec(pattern, files, None, units, gamma, frame_count)
+    return CaptureSpec(pattern, files, None, units, gamma, frame_count, **extra)
 
 
 def _parse_intrinsics(t: _Table) -> OpenCVCamera:
@@ -299,6 +348,53 @@ def _parse_light(t: _Table, base: Path) -> LightSpec:
     return LightSpec(kind, position)
 
 
+def _boolean(t: _Table, key: str, default: bool) -> bool:
+    v = t.take(key, default)
+    if not isinstance(v, bool):
+        raise t.error(key, f"expected true or false, got {v!r}")
+    return v
+
+
+def _parse_site(t: _Table | None) -> SiteSpec | None:
+    if t is None:
+        return None
+    opt = lambda key, fn: fn(key) if key in t.data else None  # noqa: E731
+    site = SiteSpec(
+        latitude_deg=t.number("latitude"),
+        longitude_deg=t.number("longitude"),
+        altitude_m=t.number("altitude", 0.0),
+        timezone=opt("timezone", t.string),
+        pressure_pa=opt("pressure_pa", lambda k: t.number(k, positive=True)),
+        temperature_c=opt("temperature_c", t.number),
+        heading_deg=opt("heading_deg", t.number),
+    )
+    if not -90.0 <= site.latitude_deg <= 90.0:
+        raise t.error("latitude", f"{site.latitude_deg} is outside ±90°")
+    if not -180.0 <= site.longitude_deg <= 360.0:
+        raise t.error("longitude", f"{site.longitude_deg} is outside ±180°")
+    t.done()
+    return site
+
+
+def _parse_pole(t: _Table | None) -> PoleSpec | None:
+    if t is None:
+        return None
+    pole = PoleSpec(t.vector("base", 3), t.vector("top", 3), t.number("radius", 0.0))
+    if np.linalg.norm(pole.top - pole.base) <= 0:
+        raise t.error("top", "must differ from base")
+    t.done()
+    return pole
+
+
+def _parse_gnomon(t: _Table | None) -> GnomonSpec | None:
+    if t is None:
+        return None
+    g = GnomonSpec(t.string("frame"), t.vector("base_px", 2), t.vector("shadow_px", 2))
+    t.take("top_px", None)  # informational: the pole's top, often outside the image
+    t.done()
+    return g
+
+
 def _parse_scan(t: _Table | None) -> ScanSettings:
     if t is None:
         return ScanSettings()
@@ -307,6 +403,7 @@ def _parse_scan(t: _Table | None) -> ScanSettings:
         window=t.integer("window", 4, minimum=1),
         edge=t.string("edge", "both", EDGES),
         max_depth_jump=t.number("max_depth_jump", 0.02, positive=True),
+        normalize_illumination=_boolean(t, "normalize_illumination", False),
     )
     t.done()
     return s
@@ -337,6 +434,16 @@ def load_field_log(path: str | Path) -> FieldLog:
     )
     light = _parse_light(section("light"), base)  # type: ignore[arg-type]
     scan = _parse_scan(section("scan", required=False))
+    site = _parse_site(section("site", required=False))
+    pole = _parse_pole(section("pole", required=False))
+    gnomon = _parse_gnomon(section("gnomon", required=False))
+    if light.kind == "sun":
+        if site is None:
+            raise FieldLogError(f"{p}: [light] kind 'sun' needs a [site] table (latitude, longitude, ...)")
+        if capture.timestamps is None:
+            raise FieldLogError(f"{p}: [capture] a sun scan needs 'timestamps' (filename, exif or start+fps)")
+        if site.heading_deg is None and gnomon is None:
+            raise FieldLogError(f"{p}: [site] a sun scan needs 'heading_deg', or a [gnomon] table to measure it")
     # Sections read by other commands (`gnomon calibrate lamp` reads [pencil]).
     root.data.pop("pencil", None)
     root.done()
@@ -348,7 +455,7 @@ def load_field_log(path: str | Path) -> FieldLog:
             f"{p}: missing required table [camera.pose] (the world → camera transform), "
             "or markers on a [[planes]] entry to measure it"
         )
-    log = FieldLog(p, capture, camera, pose, planes, light, scan, camera_file, calibration)
+    log = FieldLog(p, capture, camera, pose, planes, light, scan, camera_file, calibration, site, pole, gnomon)
     if pose is not None:
         check_geometry(log, pose)
     return log

@@ -31,7 +31,12 @@ from gnomon.fusion import fuse_depths
 from gnomon.meshing import GridMesh, grid_mesh, remove_small_components, write_obj
 from gnomon.progress import Progress
 from gnomon.reference_lines import ReferenceLines, measure_reference_lines
-from gnomon.shadow_planes import lamp_shadow_planes, light_point_from_planes, two_plane_shadow_planes
+from gnomon.shadow_planes import (
+    lamp_shadow_planes,
+    light_point_from_planes,
+    sun_shadow_planes,
+    two_plane_shadow_planes,
+)
 from gnomon.tracking import ShadowTimes, decoding_lut
 from gnomon.triangulation import supported_by_neighbours, triangulate
 from gnomon.uncertainty import (
@@ -100,11 +105,24 @@ class ScanResult:
 @dataclass
 class _Tracked:
     times: ShadowTimes
-    n_frames: int
+    n_frames: int  # frames fed to the tracker
     first_grey: np.ndarray
     first_color: np.ndarray | None
     noise_dn: float
-    lut: np.ndarray
+    lut: np.ndarray  # the tracker's decoding table (DN → linear)
+    used: np.ndarray  # capture index of each tracked frame
+    input_lut: np.ndarray  # the capture's decoding table, for contrast in input DN
+
+
+@dataclass
+class _SunContext:
+    site: object
+    times: object  # pd.DatetimeIndex of every capture frame
+    heading_deg: float
+    heading_source: str
+    heading_sigma_deg: float | None
+    night: np.ndarray  # bool per capture frame
+    timeline: object = None  # outdoor.SunTimeline, after tracking
 
 
 def _colors(first_color: np.ndarray | None, first_grey: np.ndarray) -> np.ndarray:
@@ -115,25 +133,36 @@ def _colors(first_color: np.ndarray | None, first_grey: np.ndarray) -> np.ndarra
     return np.ascontiguousarray(rgb, dtype=np.uint8)
 
 
-def _track(log: FieldLog, source: FrameSource, recorder, progress: bool) -> _Tracked:
-    """One streaming pass over the frames: the kernel tracker, plus recording of a subsample."""
+def _track(log: FieldLog, source: FrameSource, recorder, progress: bool, sun: _SunContext | None = None) -> _Tracked:
+    """One streaming pass over the frames: the kernel tracker, plus recording of a subsample.
+
+    Sun scans feed the tracker normalised linear irradiance (uint16) and skip
+    frames in a cloud dip or with the sun below the horizon.
+    """
+    from gnomon.outdoor import LINEAR_SCALE, IlluminationNormalizer
+
     cam = log.camera
-    tracker = None
+    tracker = normalizer = None
     first_grey = first_color = previous = None
+    input_lut = None
     noise_samples: list[float] = []
+    used: list[int] = []
+    skipped_cloud: list[int] = []
     with Progress("tracking", source.count, enabled=progress) as bar:
         for frame in source:
             g = frame.grey
-            if tracker is None:
+            if first_grey is None:
                 if g.shape != (cam.height, cam.width):
                     raise FrameError(
                         f"frame 0 ({frame.name}): size {g.shape[1]}x{g.shape[0]} differs from the "
                         f"camera's {cam.width}x{cam.height} ({log.path}: [camera])"
                     )
-                dtype = "uint8" if g.dtype == np.uint8 else "uint16"
-                tracker = _kernel.TemporalTracker(g.shape[0], g.shape[1], dtype=dtype, window=log.scan.window)
                 first_grey, first_color = g, frame.color
-            tracker.update(g)
+                input_lut = decoding_lut(log.capture.gamma, g.dtype)
+                if sun is not None:
+                    normalizer = IlluminationNormalizer(input_lut, enabled=log.scan.normalize_illumination)
+                dtype = "uint16" if (sun is not None or g.dtype != np.uint8) else "uint8"
+                tracker = _kernel.TemporalTracker(g.shape[0], g.shape[1], dtype=dtype, window=log.scan.window)
             # Image noise from the first few frame pairs (cheap, and before any
             # illumination drift has accumulated).
             if previous is not None and len(noise_samples) < 4:
@@ -142,14 +171,40 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool) -> _Tra
             if recorder is not None:
                 recorder.log_frame(frame.index, g)
             bar.update(frame.index + 1)
-    assert tracker is not None and first_grey is not None
-    n = tracker.frames_seen
+            if sun is not None:
+                if sun.night[frame.index]:
+                    continue
+                g = normalizer.normalize(g)
+                if g is None:
+                    skipped_cloud.append(frame.index)
+                    continue
+            tracker.update(g)
+            used.append(frame.index)
+    assert tracker is not None and first_grey is not None and input_lut is not None
+    n = source.count if source.video is None else len(used) + len(skipped_cloud)
     if source.expected_count is not None and n < source.expected_count:
         raise FrameError(f"{source.name}: only {n} frames, expected {source.expected_count}")
-    lut = decoding_lut(log.capture.gamma, first_grey.dtype)
-    times = ShadowTimes.from_kernel(tracker.finish(log.scan.min_contrast, lut))
+    if len(used) < 2:
+        raise FrameError(f"{source.name}: fewer than two usable frames (sun below the horizon or clouds)")
+    if sun is not None:
+        lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
+        times = ShadowTimes.from_kernel(tracker.finish(0.0, lut))
+        # The contrast test stays in the input's DN: back through the encoding.
+        code = lambda lin: np.searchsorted(input_lut, lin.astype(np.float32))  # noqa: E731
+        contrast_dn = (code(times.imax / LINEAR_SCALE) - code(times.imin / LINEAR_SCALE)).astype(np.float32)
+        valid = contrast_dn >= log.scan.min_contrast
+        times.enter[~valid] = np.nan
+        times.leave[~valid] = np.nan
+        times.valid = valid
+        times.contrast = contrast_dn
+        from gnomon.outdoor import SunTimeline
+
+        sun.timeline = SunTimeline(sun.times, np.asarray(used), skipped_cloud, list(np.flatnonzero(sun.night)))
+    else:
+        lut = input_lut
+        times = ShadowTimes.from_kernel(tracker.finish(log.scan.min_contrast, lut))
     noise = float(np.median(noise_samples)) if noise_samples else 1.0
-    return _Tracked(times, n, first_grey, first_color, noise, lut)
+    return _Tracked(times, len(used), first_grey, first_color, noise, lut, np.asarray(used), input_lut)
 
 
 def _dn_index(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
@@ -157,8 +212,14 @@ def _dn_index(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
     return np.clip(np.nan_to_num(values_dn), 0, len(lut) - 1).astype(np.int64)
 
 
-def _planes_for(log: FieldLog, lines: list[ReferenceLines], pose: Pose) -> tuple[np.ndarray, int]:
+def _planes_for(log: FieldLog, lines: list[ReferenceLines], pose: Pose,
+                sun: _SunContext | None = None) -> tuple[np.ndarray, int]:
     """Shadow planes (camera frame) from the light model of the field log."""
+    if log.light.kind == "sun":
+        from gnomon.outdoor import sun_directions_camera
+
+        assert sun is not None and sun.timeline is not None
+        return sun_shadow_planes(lines, sun_directions_camera(sun.timeline, sun.site, sun.heading_deg, pose))
     if log.light.kind == "lamp":
         return lamp_shadow_planes(lines, pose.world_to_camera(log.light.position))
     if log.light.kind == "two-plane":
@@ -166,32 +227,57 @@ def _planes_for(log: FieldLog, lines: list[ReferenceLines], pose: Pose) -> tuple
     raise GnomonError(f"{log.path}: [light] kind {log.light.kind!r} is not supported by this version")
 
 
-def _reconstruct_edge(name: str, times_map: np.ndarray, slope: np.ndarray, log: FieldLog, tracked: _Tracked,
-                      ray_map: np.ndarray) -> EdgeResult:
-    cam, pose = log.camera, log.pose
-    lines = [measure_reference_lines(times_map, tracked.n_frames, p, cam, pose) for p in log.planes]
-    planes, degenerate = _planes_for(log, lines, pose)
-    tri = triangulate(ray_map, times_map, planes)
+def _pixel_time_sigma(slope: np.ndarray, tracked: _Tracked) -> np.ndarray:
+    """σ of each pixel's shadow time (frames): image noise over the slope, and edge sampling."""
     times = tracked.times
     sigma_lin = linear_noise_at_threshold(tracked.noise_dn, times.threshold, tracked.lut)
     contrast_lin = 2.0 * (tracked.lut[_dn_index(times.imax, tracked.lut)] - times.threshold)
     with np.errstate(invalid="ignore", divide="ignore"):
         sigma_t_noise = np.where(slope > 0, sigma_lin / slope, np.nan)
-    sigma_t_pixel = np.hypot(sigma_t_noise, interpolation_time_sigma(contrast_lin, slope))
+    return np.hypot(sigma_t_noise, interpolation_time_sigma(contrast_lin, slope))
+
+
+def _with_typical_sigma(depth: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """A depth whose σ could not be propagated (no neighbouring plane for the
+    derivative, no measured slope) keeps its point with the typical σ."""
+    good = np.isfinite(sigma) & (sigma > 0)
+    missing = np.isfinite(depth) & ~good
+    if missing.any():
+        typical = np.nanmedian(sigma[good]) if good.any() else 1.0
+        sigma = np.where(missing, np.float32(typical), sigma)
+    return sigma
+
+
+def _reconstruct_pole(tracked: _Tracked, log: FieldLog, ray_map: np.ndarray, sun: _SunContext) -> EdgeResult:
+    """Sun + pole: each pixel's ray against the plane of the pole's axis and the sun at its own time."""
+    from gnomon.outdoor import SUBSTEPS, pole_plane_table
+
+    times = tracked.times
+    centre = ((times.enter + times.leave) / 2).astype(np.float32)  # the shadow's centre line: the axis plane
+    assert log.pole is not None and sun.timeline is not None
+    table = pole_plane_table(log.pole.base, log.pole.top, sun.timeline, sun.site, sun.heading_deg, log.pose)
+    scaled = (centre * SUBSTEPS).astype(np.float32)
+    tri = triangulate(ray_map, scaled, table)
+    st = 0.5 * np.hypot(_pixel_time_sigma(times.enter_slope, tracked), _pixel_time_sigma(times.leave_slope, tracked))
+    unc = depth_sigma(ray_map, scaled, table, tri.depth, st * SUBSTEPS, np.zeros(len(table)))
+    return EdgeResult("centre", centre, [], table, tri.depth, _with_typical_sigma(tri.depth, unc.sigma_z), 0)
+
+
+def _reconstruct_edge(name: str, times_map: np.ndarray, slope: np.ndarray, log: FieldLog, tracked: _Tracked,
+                      ray_map: np.ndarray, sun: _SunContext | None = None) -> EdgeResult:
+    cam, pose = log.camera, log.pose
+    lines = [measure_reference_lines(times_map, tracked.n_frames, p, cam, pose) for p in log.planes]
+    planes, degenerate = _planes_for(log, lines, pose, sun)
+    tri = triangulate(ray_map, times_map, planes)
+    sigma_t_pixel = _pixel_time_sigma(slope, tracked)
     per_plane = np.stack([line_time_sigma(ln) for ln in lines])
     with np.errstate(invalid="ignore"):
         # Several planes constrain the same shadow plane: the best-measured line dominates.
         sigma_t_line = np.nanmin(np.where(np.isfinite(per_plane), per_plane, np.inf), axis=0)
     sigma_t_line[~np.isfinite(sigma_t_line)] = np.nan
     unc = depth_sigma(ray_map, times_map, planes, tri.depth, sigma_t_pixel, sigma_t_line)
-    sigma = unc.sigma_z
-    # A depth whose σ could not be propagated (no neighbouring plane for the
-    # derivative, no measured slope) keeps its point with the typical σ.
-    missing = np.isfinite(tri.depth) & ~(np.isfinite(sigma) & (sigma > 0))
-    if missing.any():
-        typical = np.nanmedian(sigma[np.isfinite(sigma) & (sigma > 0)]) if (np.isfinite(sigma) & (sigma > 0)).any() else 1.0
-        sigma = np.where(missing, np.float32(typical), sigma)
-    return EdgeResult(name, times_map, lines, planes, tri.depth, sigma, degenerate)
+    return EdgeResult(name, times_map, lines, planes, tri.depth, _with_typical_sigma(tri.depth, unc.sigma_z),
+                      degenerate)
 
 
 @dataclass
@@ -347,6 +433,45 @@ def open_recorder(staging: Path, opts: ScanOptions, name: str, filename: str = "
                          spawn_viewer=opts.view, frame_stride=opts.frame_stride)
 
 
+def _sun_context(log: FieldLog, source: FrameSource, warnings: list[str]) -> _SunContext:
+    """Frame times, the heading of the world frame, and the frames with the sun up."""
+    from gnomon.outdoor import below_horizon, capture_times, heading_from_gnomon, site_of
+
+    site = site_of(log)
+    times = capture_times(log, source.count)
+    if len(times) != source.count:
+        raise FrameError(f"{log.path}: {len(times)} timestamps for {source.count} frames")
+    night = below_horizon(times, site)
+    if night.all():
+        raise GnomonError(f"{log.path}: the sun is below the horizon at every frame "
+                          f"({times[0].isoformat()} … {times[-1].isoformat()}); check [site] and the timestamps")
+    heading, source_name, sigma = log.site.heading_deg, "[site] heading_deg", None
+    if log.gnomon is not None:
+        est = heading_from_gnomon(log, log.pose, times, site)
+        if heading is None:
+            heading, source_name, sigma = est.heading_deg, f"gnomon in {est.frame}", est.sigma_deg
+        else:
+            diff = (est.heading_deg - heading + 180.0) % 360.0 - 180.0
+            if abs(diff) > max(3 * est.sigma_deg, 0.5):
+                warnings.append(f"the gnomon gives a heading of {est.heading_deg:.2f}° ± {est.sigma_deg:.2f}°, "
+                                f"[site] heading_deg says {heading:.2f}°")
+        sigma = est.sigma_deg if sigma is None else sigma
+        context = _SunContext(site, times, float(heading), source_name, sigma, night)
+        context.gnomon_estimate = est  # type: ignore[attr-defined]
+        return context
+    return _SunContext(site, times, float(heading), source_name, None, night)
+
+
+def _note_skipped_frames(sun: _SunContext, warnings: list[str]) -> None:
+    tl = sun.timeline
+    if tl.skipped_night:
+        warnings.append(f"{len(tl.skipped_night)} frames skipped: the sun is below the horizon "
+                        f"(first {sun.times[tl.skipped_night[0]].isoformat()})")
+    if tl.skipped_cloud:
+        warnings.append(f"{len(tl.skipped_cloud)} frames skipped as cloud dips (frames {tl.skipped_cloud[:8]}"
+                        f"{' …' if len(tl.skipped_cloud) > 8 else ''})")
+
+
 def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOptions, t0: float,
                planes_report: list[dict]) -> ScanResult:
     timings: dict[str, float] = {}
@@ -359,21 +484,27 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
             if log.light.position is not None:
                 recorder.log_lamp(log.light.position)
 
+        sun = _sun_context(log, source, warnings) if log.light.kind == "sun" else None
         t = time.perf_counter()
-        tracked = _track(log, source, recorder, opts.progress)
+        tracked = _track(log, source, recorder, opts.progress, sun)
         times = tracked.times
         timings["tracking_s"] = time.perf_counter() - t
+        if sun is not None:
+            _note_skipped_frames(sun, warnings)
 
         t = time.perf_counter()
         ray_map = cam.ray_map()
         timings["ray_map_s"] = time.perf_counter() - t
 
         t = time.perf_counter()
-        wanted = ("enter", "leave") if log.scan.edge == "both" else (log.scan.edge,)
         edges = []
-        for name in wanted:
-            tmap, slope = (times.enter, times.enter_slope) if name == "enter" else (times.leave, times.leave_slope)
-            edges.append(_reconstruct_edge(name, tmap, slope, log, tracked, ray_map))
+        if sun is not None and log.pole is not None:
+            edges.append(_reconstruct_pole(tracked, log, ray_map, sun))
+        else:
+            wanted = ("enter", "leave") if log.scan.edge == "both" else (log.scan.edge,)
+            for name in wanted:
+                tmap, slope = (times.enter, times.enter_slope) if name == "enter" else (times.leave, times.leave_slope)
+                edges.append(_reconstruct_edge(name, tmap, slope, log, tracked, ray_map, sun))
         timings["planes_and_triangulation_s"] = time.perf_counter() - t
         for e in edges:
             if e.degenerate:
@@ -406,6 +537,19 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
         report = _report(log, source, tracked, edges, depth, sigma, keep, conflict, under, surface.mesh, timings,
                          warnings)
         report["reference_planes"] = planes_report
+        if sun is not None:
+            est = getattr(sun, "gnomon_estimate", None)
+            report["sun"] = {
+                "heading_deg": sun.heading_deg, "heading_source": sun.heading_source,
+                "heading_sigma_deg": sun.heading_sigma_deg,
+                "gnomon_heading_deg": est.heading_deg if est else None,
+                "gnomon_heading_sigma_deg": est.sigma_deg if est else None,
+                "frames_used": int(len(tracked.used)),
+                "skipped_cloud": [int(i) for i in sun.timeline.skipped_cloud],
+                "skipped_night": [int(i) for i in sun.timeline.skipped_night],
+                "first_frame_utc": sun.times[0].isoformat(), "last_frame_utc": sun.times[-1].isoformat(),
+                "mode": "pole" if log.pole is not None else "reference lines",
+            }
         if under.mean() > 0.2 * max(keep.mean(), 1e-9):
             warnings.append(
                 f"{int(under.sum())} points ({100 * under.sum() / max(keep.sum(), 1):.0f} %) are under-sampled: "
