@@ -242,7 +242,7 @@ def test_times_and_coverage(capture):
     _, gt, _ = capture
     N = SMALL.frames
     sw = gt["swept"]
-    assert sw.mean() > 0.8
+    assert sw.mean() > 0.75  # the stick is rocked ±8° (the lamp must be observable), which sweeps a little less
     e, l = gt["enter_time"][sw], gt["leave_time"][sw]
     assert (e >= 1).all() and (l <= N - 2).all() and (e < l).all()
     # Most of each plane is swept (the rest: marker edges, the corner, object silhouettes and

@@ -30,7 +30,7 @@ from gnomon.frames import FrameSource, sha256_file
 from gnomon.fusion import fuse_depths
 from gnomon.meshing import GridMesh, grid_mesh, remove_small_components, write_obj
 from gnomon.progress import Progress
-from gnomon.reference_lines import ReferenceLines, measure_reference_lines
+from gnomon.reference_lines import PlaneInCamera, ReferenceLines, measure_reference_lines
 from gnomon.shadow_planes import (
     lamp_shadow_planes,
     light_point_from_planes,
@@ -169,7 +169,7 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool, sun: _S
                 noise_samples.append(image_noise_dn(previous, g))
             previous = g
             if recorder is not None:
-                recorder.log_frame(frame.index, g)
+                recorder.log_frame(frame.index, g, sun.times[frame.index] if sun is not None else None)
             bar.update(frame.index + 1)
             if sun is not None:
                 if sun.night[frame.index]:
@@ -560,7 +560,8 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
         write_surface(staging, surface, log.capture.units)
         atomic.save_npy(staging / "shadow_time.npy", shadow_time.astype(np.float32))
         if recorder is not None:
-            _record(recorder, log, edges, surface, shadow_time, warnings, report, opts.frame_stride)
+            _record(recorder, log, edges, surface, shadow_time, warnings, report, opts.frame_stride, tracked.used,
+                    sun)
         timings["outputs_s"] = time.perf_counter() - t
         timings["total_s"] = time.perf_counter() - t0
         report["warnings"] = warnings
@@ -652,21 +653,24 @@ def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[E
 
 
 def _record(recorder, log: FieldLog, edges: list[EdgeResult], surface: "Surface", shadow_time: np.ndarray,
-            warnings: list[str], report: dict, stride: int) -> None:
+            warnings: list[str], report: dict, stride: int, used: np.ndarray,
+            sun: _SunContext | None = None) -> None:
     pose = log.pose
     first = edges[0]
-    for ln in first.lines:
-        corners = []
-        for (u0, v0, u1, v1) in next(p for p in log.planes if p.name == ln.plane_name).regions:
+    for spec in log.planes:
+        plane = PlaneInCamera.from_world(spec.point, spec.normal, pose)
+        for i, (u0, v0, u1, v1) in enumerate(spec.regions):
             pix = np.array([[u0, v0], [u1, v0], [u1, v1], [u0, v1]], dtype=np.float64)
-            corners.append(ln.plane.intersect(log.camera.rays(pix)))
-        for i, c in enumerate(corners):
+            c = plane.intersect(log.camera.rays(pix))
             if np.all(np.isfinite(c)):
-                recorder.log_reference_plane(f"{ln.plane_name}_{i}", pose.camera_to_world(c))
-    for t in range(0, len(first.planes), max(stride, 1)):
+                recorder.log_reference_plane(f"{spec.name}_{i}", pose.camera_to_world(c))
+    n_frames = len(first.lines[0].point) if first.lines else 0
+    for t in range(0, n_frames, max(stride, 1)):
+        frame = int(used[t])  # the capture's frame index (sun scans skip frames)
+        when = sun.times[frame] if sun is not None else None
         polylines = [ln.pixels[t] for ln in first.lines if len(ln.pixels[t]) >= 2]
         if polylines:
-            recorder.log_edges(t, polylines)
+            recorder.log_edges(frame, polylines, when)
         ends = []
         for ln in first.lines:
             if len(ln.pixels[t]) >= 2:
@@ -676,9 +680,17 @@ def _record(recorder, log: FieldLog, edges: list[EdgeResult], surface: "Surface"
         if ends and log.light.position is not None:
             a, b = ends[0]
             s = log.light.position
-            recorder.log_shadow_plane(t, np.array([a, b, b + 0.6 * (s - b), a + 0.6 * (s - a)]))
+            recorder.log_shadow_plane(frame, np.array([a, b, b + 0.6 * (s - b), a + 0.6 * (s - a)]), when)
         elif len(ends) >= 2:
-            recorder.log_shadow_plane(t, np.array([ends[0][0], ends[0][1], ends[1][1], ends[1][0]]))
+            recorder.log_shadow_plane(frame, np.array([ends[0][0], ends[0][1], ends[1][1], ends[1][0]]), when)
+    if sun is not None:
+        from gnomon.outdoor import sun_world
+
+        anchor = log.pole.base if log.pole is not None else np.nanmean(surface.points_world, axis=0)
+        extent = float(np.nanmax(np.ptp(surface.points_world, axis=0))) if len(surface.points_world) else 1.0
+        for k in range(0, len(sun.times), max(stride, 1)):
+            d = sun_world(sun.times[k:k + 1], sun.site, sun.heading_deg)[0]
+            recorder.log_sun(k, d, anchor, 0.5 * extent, sun.times[k])
     record_surface(recorder, surface, shadow_time, warnings, {"coverage": report["coverage"], "noise": report["noise"]})
 
 

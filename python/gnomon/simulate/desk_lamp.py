@@ -672,8 +672,9 @@ class DeskLampScene:
         H, W = self.H, self.W
         good = self.swept & (self.object_id == DESK)
         band = max(6, int(round(0.05 * H)))
-        u0 = int(round(0.02 * W))
-        u1 = W - u0
+        # Full width: a pixel whose shadow time falls before the line reaches
+        # a region (or after it leaves) has no shadow plane.
+        u0, u1 = 0, W
         edge = int(round(0.02 * H))
         top = bottom = None
         for v0 in range(edge, H // 2 - band + 1):
