@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gnomon import toml_io
-from gnomon.errors import FieldLogError
+from gnomon.errors import GnomonError
 from gnomon.fieldlog import load_field_log
 
 
@@ -37,7 +37,8 @@ def test_valid_log_loads(tiny_capture: Path) -> None:
         (lambda d: d["light"].pop("position"), "[light] missing required key 'position'"),
         (lambda d: d["light"].update(postion=[1, 2, 3]), "[light] unknown key 'postion'"),
         (lambda d: d.pop("capture"), "missing required table [capture]"),
-        (lambda d: d["camera"].update(fx="wide"), "[camera] fx: expected a finite number"),
+        (lambda d: d["camera"].update(fx="wide"), "[camera]: key 'fx' must be a number"),
+        (lambda d: d["camera"].update(model="fisheye"), "[camera]: key 'model' must be"),
         (lambda d: d["camera"]["pose"].pop("tvec"), "[camera.pose] missing required key 'tvec'"),
         (lambda d: d["planes"][0].update(regions=[[0, 0, 480, 10]]), "outside the 48x36 image"),
         (lambda d: d["scan"].update(edge="both-ways"), "[scan] edge: expected one of"),
@@ -49,7 +50,7 @@ def test_valid_log_loads(tiny_capture: Path) -> None:
 )
 def test_mistakes_name_file_and_key(tiny_capture: Path, edit, message: str) -> None:
     rewrite(tiny_capture, edit)
-    with pytest.raises(FieldLogError) as info:
+    with pytest.raises(GnomonError) as info:
         load_field_log(tiny_capture)
     text = str(info.value)
     assert message in text
@@ -63,3 +64,27 @@ def test_not_toml(tmp_path: Path) -> None:
     with pytest.raises(Exception) as info:
         load_field_log(bad)
     assert "not valid TOML" in str(info.value) and str(bad) in str(info.value)
+
+
+def test_a_tsai_camera_file_flows_into_the_scan(tmp_path: Path) -> None:
+    """A camera file from `gnomon calibrate camera --model tsai` is used by `gnomon scan`."""
+    import numpy as np
+
+    from gnomon.camera import TsaiCamera
+    from gnomon.pipeline import ScanOptions, run_scan
+
+    from conftest import write_tiny_capture
+
+    log_path = write_tiny_capture(tmp_path / "cap")
+    pitch = 0.005  # mm per pixel: f = 60 px · pitch
+    toml_io.dump({"model": "tsai", "width": 48, "height": 36, "f_mm": 60 * pitch, "kappa1": 0.0,
+                  "cx": 23.5, "cy": 17.5, "sx": 1.0, "dx_mm": pitch, "dy_mm": pitch,
+                  "calibration": {"method": "tsai coplanar", "rms_px": 0.1}}, tmp_path / "cap" / "camera.toml")
+    data = tomllib.loads(log_path.read_text())
+    data["camera"] = {"file": "camera.toml", "pose": data["camera"]["pose"]}
+    toml_io.dump(data, log_path)
+    log = load_field_log(log_path)
+    assert isinstance(log.camera, TsaiCamera) and log.calibration["rms_px"] == 0.1
+    result = run_scan(log_path, tmp_path / "out", ScanOptions(progress=False, rrd=False))
+    assert np.nanmedian(result.depth) == pytest.approx(500.0, rel=0.01)
+    assert result.report["calibration"]["method"] == "tsai coplanar"

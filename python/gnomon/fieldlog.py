@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from gnomon import toml_io
-from gnomon.camera import OpenCVCamera, Pose
+from gnomon.camera import CameraModel, OpenCVCamera, Pose
 from gnomon.errors import FieldLogError
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
@@ -191,7 +191,7 @@ class GnomonSpec:
 class FieldLog:
     path: Path
     capture: CaptureSpec
-    camera: OpenCVCamera
+    camera: CameraModel  # OpenCVCamera or TsaiCamera
     pose: Pose | None  # None: measured from the planes' markers by the scan
     planes: tuple[PlaneSpec, ...]
     light: LightSpec
@@ -251,42 +251,25 @@ def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
     return CaptureSpec(pattern, files, None, units, gamma, frame_count, **extra)
 
 
-def _parse_intrinsics(t: _Table) -> OpenCVCamera:
-    t.string("model", "opencv", ("opencv",))
-    width = t.integer("width", minimum=2)
-    height = t.integer("height", minimum=2)
-    cam = OpenCVCamera(
-        width=width,
-        height=height,
-        fx=t.number("fx", positive=True),
-        fy=t.number("fy", positive=True),
-        cx=t.number("cx"),
-        cy=t.number("cy"),
-        dist=tuple(t.vector("dist", 5, [0.0] * 5).tolist()),  # type: ignore[arg-type]
-    )
-    return cam
+def _parse_camera(t: _Table, base: Path) -> tuple[CameraModel, Pose | None, Path | None, dict]:
+    """[camera]: a camera file (``file = ...``) or inline keys (OpenCV or Tsai model), and [camera.pose]."""
+    from gnomon.calibration import camera_from_table, load_calibration_info, load_camera_file
 
-
-def _parse_camera(t: _Table, base: Path) -> tuple[OpenCVCamera, Pose | None, Path | None, dict]:
     pose_table = t.subtable("pose")
     pose = None
     if pose_table is not None:
         pose = Pose.from_rvec_tvec(pose_table.vector("rvec", 3), pose_table.vector("tvec", 3))
         pose_table.done()
-    camera_file = None
-    calibration: dict = {}
     if "file" in t.data:
         camera_file = base / t.string("file")
         t.done()
-        data = toml_io.load(camera_file)
-        calibration = data.pop("calibration", {}) if isinstance(data.get("calibration"), dict) else {}
-        cam = _parse_intrinsics(_Table(camera_file, "camera file", data))
-    else:
-        calibration_table = t.take("calibration", {})
-        calibration = calibration_table if isinstance(calibration_table, dict) else {}
-        cam = _parse_intrinsics(t)
-    t.done()
-    return cam, pose, camera_file, calibration
+        if not camera_file.is_file():
+            raise FieldLogError(f"{t.where('file')}: camera file {camera_file} not found")
+        return load_camera_file(camera_file), pose, camera_file, load_calibration_info(camera_file)
+    table = dict(t.data)
+    t.data.clear()
+    calibration = table.get("calibration", {}) if isinstance(table.get("calibration"), dict) else {}
+    return camera_from_table(table, f"{t.path}: [camera]"), pose, None, calibration
 
 
 def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from gnomon import atomic, ply
-from gnomon.camera import OpenCVCamera, Pose
+from gnomon.calibration import camera_from_table
+from gnomon.camera import CameraModel, Pose
 from gnomon.errors import GnomonError
 from gnomon.fusion import fuse_depths
 from gnomon.pipeline import (
@@ -40,7 +41,7 @@ class ScanOnDisk:
     depth: np.ndarray
     sigma: np.ndarray
     rgb: np.ndarray  # (H, W, 3)
-    camera: OpenCVCamera
+    camera: CameraModel
     pose: Pose
     units: str
     max_depth_jump: float
@@ -56,10 +57,10 @@ def load_scan(folder: str | Path) -> ScanOnDisk:
             raise GnomonError(f"{f}: missing {name} (is it the output folder of `gnomon scan`?)")
     try:
         report = json.loads((f / "report.json").read_text())
-        cam = report["camera"]
-        camera = OpenCVCamera(int(cam["width"]), int(cam["height"]), float(cam["fx"]), float(cam["fy"]),
-                              float(cam["cx"]), float(cam["cy"]), tuple(float(x) for x in cam["dist"]))
-        pose = Pose.from_rvec_tvec(np.array(cam["rvec"], float), np.array(cam["tvec"], float))
+        cam = dict(report["camera"])
+        pose_table = cam.pop("pose")
+        camera = camera_from_table(cam, f"{f / 'report.json'}: camera")
+        pose = Pose.from_rvec_tvec(np.array(pose_table["rvec"], float), np.array(pose_table["tvec"], float))
         units = str(report["units"])
         jump = float(report["settings"]["max_depth_jump"])
     except (ValueError, KeyError, TypeError) as exc:
@@ -82,10 +83,11 @@ def _check_same_camera(a: ScanOnDisk, b: ScanOnDisk) -> None:
                           f"{a.folder}'s {a.camera.width}x{a.camera.height}; merge needs one camera")
     if a.units != b.units:
         raise GnomonError(f"{b.folder}: units {b.units!r} differ from {a.folder}'s {a.units!r}")
-    ka, kb = a.camera.K, b.camera.K
+    probe = np.array([[0.0, 0.0], [a.camera.width - 1.0, a.camera.height - 1.0], [a.camera.width / 2, 0.0]])
+    rays_differ = np.max(np.abs(a.camera.rays(probe) - b.camera.rays(probe))) > 1e-4
     moved = np.linalg.norm(a.pose.camera_centre_world - b.pose.camera_centre_world)
     scale = max(np.linalg.norm(a.pose.t), 1e-9)
-    if np.max(np.abs(ka - kb)) > 1e-3 * ka[0, 0] or moved > 1e-3 * scale:
+    if rays_differ or moved > 1e-3 * scale:
         raise GnomonError(f"{b.folder}: its camera (intrinsics or pose) differs from {a.folder}'s; "
                           "merge fuses scans taken with one fixed camera")
 

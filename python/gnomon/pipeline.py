@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from gnomon import __version__, _kernel, atomic, ply
+from gnomon.calibration import camera_to_table
 from gnomon.camera import Pose
 from gnomon.errors import FrameError, GnomonError
 from gnomon.fieldlog import FieldLog, check_geometry, load_field_log
@@ -593,8 +594,7 @@ def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[E
             "frames": tracked.n_frames,
             "image_size": [cam.width, cam.height],
         },
-        "camera": {"width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy, "cx": cam.cx,
-                   "cy": cam.cy, "dist": list(cam.dist), "rvec": pose.rvec.tolist(), "tvec": pose.t.tolist()},
+        "camera": {**camera_to_table(cam), "pose": {"rvec": pose.rvec.tolist(), "tvec": pose.t.tolist()}},
         "calibration": log.calibration,
         "light": {"kind": log.light.kind,
                   "position": None if log.light.position is None else log.light.position.tolist()},
