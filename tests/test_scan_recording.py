@@ -59,3 +59,21 @@ def test_compare_with_itself_is_zero(scanned, capsys) -> None:
     assert main(["review", rec, "--compare", rec, "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert result["compare"]["max"] == 0.0
+
+
+def test_calibration_and_merge_runs_leave_recordings(tmp_path, scanned, capsys) -> None:
+    assert main(["simulate", "chessboard", "--out", str(tmp_path / "cb"), "--width", "640", "--height", "480"]) == 0
+    assert main(["calibrate", "camera", str(tmp_path / "cb"), "--board", "9x6", "--square", "25",
+                 "--out", str(tmp_path / "cam.toml")]) == 0
+    capsys.readouterr()
+    s = summarize(tmp_path / "cam.rrd").to_dict()
+    assert s["frames_stored"] == 12 and "/world/camera/image/board" in s["entities"]
+    # a merge of a scan with itself records its fused cloud
+    scan = str(scanned / "scan")
+    assert main(["merge", scan, scan, "--out", str(tmp_path / "merged")]) == 0
+    merged = summarize(tmp_path / "merged" / "merge.rrd").to_dict()
+    assert merged["point_count"] > 0.9 * summarize(scanned / "scan" / "scan.rrd").to_dict()["point_count"]
+    for rec in (tmp_path / "cam.rrd", tmp_path / "merged" / "merge.rrd"):
+        proc = subprocess.run([sys.executable, "-m", "rerun", "rrd", "verify", str(rec)],
+                              capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr

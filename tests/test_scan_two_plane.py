@@ -57,3 +57,15 @@ def test_markers_check_the_declared_planes(two_plane) -> None:
     for p in planes.values():
         assert p["rms_px"] < 0.3  # sub-pixel marker fit
         assert p["angle_to_declared_deg"] < 0.2
+
+
+def test_sigma_predicts_the_error(two_plane) -> None:
+    """Over bins of predicted σ, the observed RMS error is within 1.5× of it (issue 6)."""
+    from test_accuracy_features import sigma_calibration
+
+    _, result, truth = two_plane
+    rows = sigma_calibration(result, truth)
+    print(rows)
+    for predicted, observed, n in rows:
+        assert n > 1000
+        assert predicted / 1.5 <= observed <= predicted * 1.5

@@ -50,7 +50,7 @@ from gnomon.uncertainty import (
 )
 
 OUTPUT_FILES = ("points.ply", "mesh.ply", "mesh.obj", "depth.npy", "sigma.npy", "shadow_time.npy",
-                "report.json", "scan.rrd", "merge.rrd")
+                "undersampled.npy", "report.json", "scan.rrd", "merge.rrd")
 
 
 @dataclass
@@ -559,6 +559,7 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
 
         t = time.perf_counter()
         write_surface(staging, surface, log.capture.units)
+        atomic.save_npy(staging / "undersampled.npy", under)
         atomic.save_npy(staging / "shadow_time.npy", shadow_time.astype(np.float32))
         if recorder is not None:
             _record(recorder, log, edges, surface, shadow_time, warnings, report, opts.frame_stride, tracked.used,

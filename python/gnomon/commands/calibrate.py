@@ -52,6 +52,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="tsai: also optimise the image centre (Cx, Cy) (and sx with several views), from the two-stage result",
     )
     c.add_argument("--fix-k3", action="store_true", help="zhang: hold k3 at 0 (advisable for narrow fields of view)")
+    c.add_argument("--rrd", default=None, metavar="PATH",
+                   help="rerun recording of the views with the reprojected board (default: beside --out, .rrd)")
+    c.add_argument("--no-rrd", action="store_true", help="do not write a recording")
     c.add_argument(
         "--reject",
         type=float,
@@ -88,6 +91,29 @@ def _fmt(v: float, s: float | None) -> str:
     return f"{v:.6g}" if s is None else f"{v:.6g} ± {s:.2g}"
 
 
+def _record_calibration(cal, path: Path) -> None:
+    """A recording of the calibration: every used view, the board reprojected with the
+    calibrated camera and that view's pose, the per-view RMS, and the warnings."""
+    import numpy as np
+
+    from gnomon import calibration
+    from gnomon.camera import Pose
+    from gnomon.recording import ScanRecording
+
+    cam = cal.camera
+    board = calibration.board_points(cal.board[0], cal.board[1], cal.square)
+    with ScanRecording(path, recording_name=f"calibrate camera ({cal.method})", frame_stride=1,
+                       image_scale=1.0) as rec:
+        rec.log_camera(cam.K, cam.width, cam.height, np.eye(3), np.zeros(3), "board units")
+        for i, (name, pose, rms) in enumerate(zip(cal.names, cal.poses, cal.per_view_rms_px)):
+            rec.log_frame(i, calibration.read_grey(name))
+            rec.log_image_points(i, cam.project(Pose(pose.R, pose.t).world_to_camera(board)), name="board")
+            rec.log_metrics({"view_rms_px": float(rms)}, index=i)
+        for w in cal.warnings:
+            rec.log_warning(w)
+        rec.log_metrics({"rms_px": float(cal.rms_px), "views": float(cal.n_views)})
+
+
 def run(args: argparse.Namespace) -> int:
     from gnomon import calibration
     from gnomon.progress import Progress
@@ -112,6 +138,8 @@ def run(args: argparse.Namespace) -> int:
         )
     for w in cal.warnings:
         print(f"gnomon: warning: {w}", file=sys.stderr)
+    if not args.no_rrd:
+        _record_calibration(cal, Path(args.rrd) if args.rrd else Path(args.out).with_suffix(".rrd"))
 
     print(f"{'view':40s} {'RMS px':>8s}  status")
     rms = dict(zip(cal.names, cal.per_view_rms_px))

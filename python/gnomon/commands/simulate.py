@@ -7,7 +7,7 @@ import time
 
 from gnomon.errors import GnomonError
 
-SCENE_CHOICES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun")
+SCENE_CHOICES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "chessboard")
 
 
 def register(subparsers) -> None:
@@ -51,8 +51,25 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def run_chessboard(args: argparse.Namespace) -> int:
+    """12 views of a 9x6 chessboard (25 mm squares) with a known camera, for `gnomon calibrate camera`."""
+    from gnomon.simulate.chessboard import default_truth_camera, write_chessboard_views
+
+    width = args.width if args.width != 800 else 1280
+    height = args.height if args.height != 600 else 960
+    t0 = time.perf_counter()
+    write_chessboard_views(args.out, camera=default_truth_camera(width, height), cols=9, rows=6, square=25.0,
+                           n_views=12, seed=args.seed)
+    print(f"wrote 12 chessboard views (9x6 inner corners, 25 mm squares) and the true camera to {args.out} "
+          f"in {time.perf_counter() - t0:.1f} s; try: gnomon calibrate camera {args.out} --board 9x6 --square 25")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from gnomon.progress import Progress
+
+    if args.scene == "chessboard":
+        return run_chessboard(args)
     from gnomon.simulate import DeskLampConfig, TwoPlaneConfig, simulate_desk_lamp, simulate_two_plane
 
     if args.frames is None:
