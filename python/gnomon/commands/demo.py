@@ -23,35 +23,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def run_desk_lamp(out: Path, *, small: bool, progress: bool) -> dict:
+def demo_scene(name: str, simulate, cfg, out: Path, *, progress: bool, what: str = "frames"):
+    """Simulate one scene into OUT/NAME/capture, scan it into OUT/NAME/scan, compare with the truth."""
     from gnomon.accuracy import depth_accuracy
     from gnomon.pipeline import ScanOptions, run_scan
+
+    capture = out / name / "capture"
+    print(f"simulating {name} ({cfg.width}x{cfg.height}, {cfg.frames} {what}) -> {capture}")
+    simulate(capture, cfg)
+    result = run_scan(capture / "field_log.toml", out / name / "scan", ScanOptions(progress=progress))
+    truth = np.load(capture / "ground_truth.npz")
+    units = result.report["units"]
+    distance = float(truth["camera_distance_mm"] if units == "mm" else truth["camera_distance"])
+    acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], distance, units)
+    print(acc.table(f"{name}: depth against ground truth (swept pixels)"))
+    return result, truth, acc
+
+
+def run_desk_lamp(out: Path, *, small: bool, progress: bool) -> dict:
     from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
     cfg = DeskLampConfig(width=400, height=300, frames=120) if small else DeskLampConfig()
-    capture = out / "desk_lamp" / "capture"
-    print(f"simulating desk_lamp ({cfg.width}x{cfg.height}, {cfg.frames} frames) -> {capture}")
-    simulate_desk_lamp(capture, cfg)
-    result = run_scan(capture / "field_log.toml", out / "desk_lamp" / "scan", ScanOptions(progress=progress))
-    truth = np.load(capture / "ground_truth.npz")
-    acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], float(truth["camera_distance_mm"]), "mm")
-    print(acc.table("desk_lamp: depth against ground truth (swept pixels)"))
+    _, _, acc = demo_scene("desk_lamp", simulate_desk_lamp, cfg, out, progress=progress)
     return {"desk_lamp": acc.as_dict()}
 
 
 def run_facade_sun(out: Path, *, small: bool, progress: bool) -> dict:
-    from gnomon.accuracy import depth_accuracy
-    from gnomon.pipeline import ScanOptions, run_scan
     from gnomon.simulate import FacadeSunConfig, simulate_facade_sun
 
     cfg = FacadeSunConfig(width=400, height=300, frames=100) if small else FacadeSunConfig()
-    capture = out / "facade_sun" / "capture"
-    print(f"simulating facade_sun ({cfg.width}x{cfg.height}, {cfg.frames} frames of a sun time-lapse) -> {capture}")
-    simulate_facade_sun(capture, cfg)
-    result = run_scan(capture / "field_log.toml", out / "facade_sun" / "scan", ScanOptions(progress=progress))
-    truth = np.load(capture / "ground_truth.npz")
-    acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], float(truth["camera_distance"]), "m")
-    print(acc.table("facade_sun: depth against ground truth (swept pixels)"))
+    result, truth, acc = demo_scene("facade_sun", simulate_facade_sun, cfg, out, progress=progress,
+                                    what="frames of a sun time-lapse")
     sun = result.report["sun"]
     print(f"  heading             {sun['heading_deg']:.3f}° ({sun['heading_source']}); "
           f"gnomon {sun['gnomon_heading_deg']:.3f}°, truth {float(truth['heading_deg']):.3f}°")
