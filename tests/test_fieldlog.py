@@ -88,3 +88,31 @@ def test_a_tsai_camera_file_flows_into_the_scan(tmp_path: Path) -> None:
     result = run_scan(log_path, tmp_path / "out", ScanOptions(progress=False, rrd=False))
     assert np.nanmedian(result.depth) == pytest.approx(500.0, rel=0.01)
     assert result.report["calibration"]["method"] == "tsai coplanar"
+
+
+def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
+    """[[planes]] chessboard = "9x6", image = ...: the board's frame becomes the world frame."""
+    import numpy as np
+
+    from gnomon.cli import main
+    from gnomon.frames import FrameSource
+    from gnomon.pipeline import resolve_reference_planes
+
+    from conftest import write_tiny_capture
+
+    assert main(["simulate", "chessboard", "--out", str(tmp_path / "cb"), "--width", "640", "--height", "480"]) == 0
+    truth = tomllib.loads((tmp_path / "cb" / "truth.toml").read_text())
+    log_path = write_tiny_capture(tmp_path / "cap")
+    data = tomllib.loads(log_path.read_text())
+    data["camera"] = truth["camera"]
+    data["planes"] = [{"name": "desk", "point": [0, 0, 0], "normal": [0, 0, 1], "regions": [[0, 0, 640, 20]],
+                       "chessboard": "9x6", "square": 25.0, "image": "../cb/view_00.png"}]
+    data["light"]["position"] = [0.0, 0.0, -400.0]  # the board's z points away from the camera
+    toml_io.dump(data, log_path)
+    log = load_field_log(log_path)
+    assert log.pose is None
+    log, report = resolve_reference_planes(log, FrameSource(log.capture.image_files))
+    view = truth["views"][0]
+    np.testing.assert_allclose(log.pose.t, view["tvec"], atol=0.002 * np.linalg.norm(view["tvec"]))
+    np.testing.assert_allclose(log.pose.rvec, view["rvec"], atol=np.radians(0.1))
+    assert report[0]["method"] == "chessboard" and report[0]["rms_px"] < 0.3

@@ -69,3 +69,24 @@ def test_sigma_predicts_the_error(two_plane) -> None:
     for predicted, observed, n in rows:
         assert n > 1000
         assert predicted / 1.5 <= observed <= predicted * 1.5
+
+
+def test_markers_set_the_camera_pose(two_plane, tmp_path) -> None:
+    """Without [camera.pose], the printed markers give it; the scan is as good."""
+    import shutil
+
+    from gnomon import toml_io
+
+    root, result, truth = two_plane
+    cap = tmp_path / "capture"
+    shutil.copytree(root / "capture", cap)
+    log = tomllib.loads((cap / "field_log.toml").read_text())
+    log["camera"].pop("pose")
+    toml_io.dump(log, cap / "field_log.toml")
+    measured = run_scan(cap / "field_log.toml", tmp_path / "scan", ScanOptions(progress=False, rrd=False))
+    rvec = np.array(measured.report["camera"]["pose"]["rvec"])
+    tvec = np.array(measured.report["camera"]["pose"]["tvec"])
+    assert np.linalg.norm(tvec - truth["tvec"].ravel()) < 0.002 * float(truth["camera_distance_mm"])
+    assert np.degrees(np.linalg.norm(rvec - truth["rvec"].ravel())) < 0.1
+    acc = depth_accuracy(measured.depth, truth["depth"], truth["swept"], float(truth["camera_distance_mm"]))
+    assert acc.rms_pct <= 0.15 and acc.coverage >= 0.90

@@ -132,6 +132,9 @@ class PlaneSpec:
     regions: tuple[tuple[int, int, int, int], ...]
     x_axis: np.ndarray | None = None
     markers: tuple[MarkerSpec, ...] = ()
+    chessboard: tuple[int, int] | None = None  # inner corners (cols, rows) of a board lying on the plane
+    square: float | None = None  # the board's square, world units
+    image: Path | None = None  # the photo with the markers or board (default: the first frame)
 
     def marker_world(self) -> np.ndarray:
         """(N, 3) world coordinates of the markers' centres."""
@@ -310,8 +313,19 @@ def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
         raise FieldLogError(f"{t.path}: [{t.name}] markers need 'x_axis' (the plane's 2-D frame)")
     if markers and len(markers) < 4:
         raise t.error("markers", f"a plane from markers needs at least 4, got {len(markers)}")
+    chessboard = square = None
+    if "chessboard" in t.data:
+        text = t.string("chessboard")
+        try:
+            cols, rows = (int(x) for x in text.lower().split("x"))
+        except ValueError:
+            raise t.error("chessboard", f"expected inner corners as 'COLSxROWS', e.g. '9x6', got {text!r}") from None
+        chessboard, square = (cols, rows), t.number("square", positive=True)
+    image = t.path.resolve().parent / t.string("image") if "image" in t.data else None
+    if image is not None and not image.is_file():
+        raise t.error("image", f"{image} not found")
     t.done()
-    return PlaneSpec(name, point, normal, tuple(regions), x_axis, tuple(markers))
+    return PlaneSpec(name, point, normal, tuple(regions), x_axis, tuple(markers), chessboard, square, image)
 
 
 def _parse_light(t: _Table, base: Path) -> LightSpec:
@@ -433,10 +447,10 @@ def load_field_log(path: str | Path) -> FieldLog:
     if light.kind == "two-plane" and len(planes) < 2:
         raise FieldLogError(f"{p}: [light] kind 'two-plane' needs two [[planes]] (e.g. desk and wall)")
 
-    if pose is None and not any(pl.markers for pl in planes):
+    if pose is None and not any(pl.markers or pl.chessboard for pl in planes):
         raise FieldLogError(
             f"{p}: missing required table [camera.pose] (the world → camera transform), "
-            "or markers on a [[planes]] entry to measure it"
+            "or markers or a chessboard on a [[planes]] entry to measure it"
         )
     log = FieldLog(p, capture, camera, pose, planes, light, scan, camera_file, calibration, site, pole, gnomon)
     if pose is not None:

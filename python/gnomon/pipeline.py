@@ -365,27 +365,39 @@ def _first_frame(source: FrameSource) -> np.ndarray:
 
 
 def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldLog, list[dict]]:
-    """Measure the planes that carry printed markers in the first frame.
+    """Measure the planes that carry printed markers or a chessboard.
 
     Marker centres are known on their plane (``plane_xy``), hence in the world
-    frame; finding them in the image gives the world → camera pose. Without a
-    ``[camera.pose]`` the first such plane sets it; with one, the markers check
-    it (their residuals and the angle between the measured and declared
-    planes go into report.json).
+    frame, so finding them in the image gives the world → camera pose; a
+    chessboard gives its own frame's pose (the world frame, when it sets it).
+    The photo is the plane's ``image`` or the capture's first frame. Without a
+    ``[camera.pose]`` the first such plane sets it; with one, the plane checks
+    it (residuals and the angle between measured and declared planes go into
+    report.json).
     """
-    from gnomon.markers import plane_pose_from_markers
+    from gnomon.calibration import read_grey
+    from gnomon.markers import plane_pose_from_chessboard, plane_pose_from_markers
 
-    with_markers = [p for p in log.planes if p.markers]
-    if not with_markers:
+    measured_planes = [p for p in log.planes if p.markers or p.chessboard]
+    if not measured_planes:
         return log, []
-    image = _first_frame(source)
-    name = log.capture.image_files[0].name if log.capture.image_files else f"{log.capture.video} frame 0"
+    first = None
     measured = []
-    for plane in with_markers:
-        pp = plane_pose_from_markers(
-            image, log.camera, plane.marker_world(), np.array([m.pixel_hint for m in plane.markers]),
-            names=[f"{plane.name} marker {m.id}" for m in plane.markers], source=f"{log.path}: {name}",
-        )
+    for plane in measured_planes:
+        if plane.image is not None:
+            image, name = read_grey(plane.image), plane.image.name
+        else:
+            first = _first_frame(source) if first is None else first
+            image = first
+            name = log.capture.image_files[0].name if log.capture.image_files else f"{log.capture.video} frame 0"
+        where = f"{log.path}: [[planes]] {plane.name}: {name}"
+        if plane.markers:
+            pp = plane_pose_from_markers(
+                image, log.camera, plane.marker_world(), np.array([m.pixel_hint for m in plane.markers]),
+                names=[f"{plane.name} marker {m.id}" for m in plane.markers], source=where,
+            )
+        else:
+            pp = plane_pose_from_chessboard(image, log.camera, plane.chessboard, plane.square, source=where)
         measured.append((plane, pp))
     pose = log.pose if log.pose is not None else measured[0][1].pose
     report = []
