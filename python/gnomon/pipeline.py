@@ -124,6 +124,7 @@ class _SunContext:
     heading_sigma_deg: float | None
     night: np.ndarray  # bool per capture frame
     timeline: object = None  # outdoor.SunTimeline, after tracking
+    gnomon_estimate: object = None  # outdoor.HeadingEstimate, when a [gnomon] is given
 
 
 def _colors(first_color: np.ndarray | None, first_grey: np.ndarray) -> np.ndarray:
@@ -468,10 +469,7 @@ def _sun_context(log: FieldLog, source: FrameSource, warnings: list[str]) -> _Su
             if abs(diff) > max(3 * est.sigma_deg, 0.5):
                 warnings.append(f"the gnomon gives a heading of {est.heading_deg:.2f}° ± {est.sigma_deg:.2f}°, "
                                 f"[site] heading_deg says {heading:.2f}°")
-        sigma = est.sigma_deg if sigma is None else sigma
-        context = _SunContext(site, times, float(heading), source_name, sigma, night)
-        context.gnomon_estimate = est  # type: ignore[attr-defined]
-        return context
+        return _SunContext(site, times, float(heading), source_name, sigma, night, gnomon_estimate=est)
     return _SunContext(site, times, float(heading), source_name, None, night)
 
 
@@ -551,7 +549,7 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
                          warnings)
         report["reference_planes"] = planes_report
         if sun is not None:
-            est = getattr(sun, "gnomon_estimate", None)
+            est = sun.gnomon_estimate
             report["sun"] = {
                 "heading_deg": sun.heading_deg, "heading_source": sun.heading_source,
                 "heading_sigma_deg": sun.heading_sigma_deg,
