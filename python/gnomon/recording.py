@@ -677,12 +677,15 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         capture_time: datetime | np.datetime64 | None = None,
         level: str = "WARN",
     ) -> None:
-        """A warning in ``log`` (at frame ``index`` if given, else at this thread's current time)."""
+        """A warning in ``log``: at frame ``index`` if given, else on no frame (a run's warning
+        belongs to the whole run, not to whichever frame was logged last)."""
         if not self.enabled:
             return
         rr = _rr()
         if index is not None:
             self.set_time(index, capture_time)
+        else:
+            self._rec.reset_time()
         self._rec.log(ENTITY["log"], rr.TextLog(str(text), level=level))
 
     def log_metrics(self, metrics: Mapping[str, Any], *, index: int | None = None) -> None:
