@@ -232,7 +232,8 @@ def _planes_for(log: FieldLog, lines: list[ReferenceLines], pose: Pose,
 def _pixel_time_sigma(slope: np.ndarray, tracked: _Tracked) -> np.ndarray:
     """σ of each pixel's shadow time (frames): image noise over the slope, and edge sampling."""
     times = tracked.times
-    sigma_lin = linear_noise_at_threshold(tracked.noise_dn, times.threshold, tracked.lut)
+    # The noise is measured in the input's DN: carry it to irradiance through the input's decoding.
+    sigma_lin = linear_noise_at_threshold(tracked.noise_dn, times.threshold, tracked.input_lut)
     contrast_lin = 2.0 * (tracked.lut[_dn_index(times.imax, tracked.lut)] - times.threshold)
     with np.errstate(invalid="ignore", divide="ignore"):
         sigma_t_noise = np.where(slope > 0, sigma_lin / slope, np.nan)
