@@ -12,7 +12,6 @@ than the one the bar is set for.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -73,6 +72,9 @@ def test_shadow_planes_match_the_true_ones(desk_scan) -> None:
     d_cam = true_world[:, 3] + n_cam @ t
     ok = np.isfinite(result.planes[:, 0])
     assert ok.sum() >= 0.7 * len(ok)
-    cosang = np.abs(np.sum(result.planes[ok, :3] * n_cam[ok], axis=1))
-    angle_deg = np.degrees(np.arccos(np.clip(cosang, -1, 1)))
+    dots = np.sum(result.planes[ok, :3] * n_cam[ok], axis=1)
+    angle_deg = np.degrees(np.arccos(np.clip(np.abs(dots), -1, 1)))
     assert np.median(angle_deg) < 0.05
+    # and their offsets from the camera agree to a fraction of a millimetre
+    offset_error = np.abs(np.sign(dots) * result.planes[ok, 3] - d_cam[ok])
+    assert np.median(offset_error) < 0.0005 * float(truth["camera_distance_mm"])

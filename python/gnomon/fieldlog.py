@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from gnomon import toml_io
-from gnomon.camera import CameraModel, OpenCVCamera, Pose
+from gnomon.camera import CameraModel, Pose
 from gnomon.errors import FieldLogError
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
