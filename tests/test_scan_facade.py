@@ -55,6 +55,10 @@ def test_accuracy_heading_from_the_gnomon(facade) -> None:
     sun = result.report["sun"]
     assert sun["heading_source"].startswith("gnomon")
     assert abs((sun["heading_deg"] - float(truth["heading_deg"]) + 180) % 360 - 180) <= 0.2
+    # shadow times are reported in the capture's frame indices, though cloud frames were skipped
+    st = np.load(root / "scan" / "shadow_time.npy")
+    m = truth["swept"] & np.isfinite(st)
+    assert np.median(np.abs(st[m] - truth["center_time"][m])) < 0.1
     # the frames skipped as cloud dips are frames in a cloud
     clouds = set(np.flatnonzero(truth["cloud"]).tolist())
     assert sun["skipped_cloud"] and set(sun["skipped_cloud"]) <= clouds

@@ -536,6 +536,10 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
         depth = np.where(keep, depth, np.nan).astype(np.float32)
         sigma = np.where(keep, sigma, np.nan).astype(np.float32)
         shadow_time = _mean_ignoring_nan([e.times for e in edges])
+        if len(tracked.used) and not np.array_equal(tracked.used, np.arange(len(tracked.used))):
+            # frames were skipped (clouds, night): report times as the capture's frame indices
+            finite = np.isfinite(shadow_time)
+            shadow_time[finite] = np.interp(shadow_time[finite], np.arange(len(tracked.used)), tracked.used)
         rgb = _colors(tracked.first_color, tracked.first_grey)
         surface = build_surface(ray_map, pose, depth, sigma, keep, rgb, log.scan.max_depth_jump)
         timings["fusion_and_mesh_s"] = time.perf_counter() - t
