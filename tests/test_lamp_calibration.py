@@ -317,3 +317,42 @@ def test_field_log_missing_pencil_table(tmp_path):
     with pytest.raises(GnomonError) as excinfo:
         calibrate_lamp_cli(argparse.Namespace(field_log=path))
     assert "missing required table [pencil]" in _one_line_error(excinfo)
+
+
+def test_tips_found_against_the_empty_desk(tmp_path) -> None:
+    """[pencil] empty = ...: photos give only a base hint; the shadow tips are found automatically."""
+    import tomllib
+
+    from gnomon import toml_io
+    from gnomon.cli import main
+    from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
+
+    cap = tmp_path / "capture"
+    simulate_desk_lamp(cap, DeskLampConfig(seed=9, frames=24, pencil_photos=3))
+    log = tomllib.loads((cap / "pencil_log.toml").read_text())
+    rng = np.random.default_rng(9)
+    for photo in log["pencil"]["photos"]:
+        photo.pop("tip")
+        photo["base"] = (np.array(photo["base"]) + rng.normal(0, 1.0, 2)).round(1).tolist()  # a clicked hint
+    log["pencil"].update(empty="frames/frame_0000.jpg", gamma=2.2, sigma_px=1.0)
+    toml_io.dump(log, cap / "auto.toml")
+    assert main(["calibrate", "lamp", str(cap / "auto.toml")]) == 0
+    lamp = np.array(tomllib.loads((cap / "lamp.toml").read_text())["light"]["position"])
+    truth = np.load(cap / "ground_truth.npz")
+    distance = np.linalg.norm(truth["lamp"] - truth["pencil_bases_world"].mean(axis=0))
+    assert np.linalg.norm(lamp - truth["lamp"]) <= 0.01 * distance
+
+
+def test_a_missing_tip_needs_the_empty_desk(tmp_path) -> None:
+    import tomllib
+
+    from gnomon import toml_io
+    from gnomon.cli import main
+
+    from pathlib import Path
+
+    src = Path(__file__).resolve().parents[1] / "field_logs" / "desk_lamp_small" / "pencil_log.toml"
+    log = tomllib.loads(src.read_text())
+    log["pencil"]["photos"][0].pop("tip")
+    toml_io.dump(log, tmp_path / "p.toml")
+    assert main(["calibrate", "lamp", str(tmp_path / "p.toml")]) == 2

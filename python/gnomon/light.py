@@ -34,19 +34,24 @@ optional here and ignored), plus::
     sigma_height = 0.0     # 1σ of the height, world units (default 0)
     plane = "desk"         # the [[planes]] name it stands on (default: the first plane)
     units = "mm"           # world units, "mm" or "m" (default: [capture] units, else "mm")
+    empty = "empty.jpg"    # optional: the desk without the pencil (same camera and lamp)
+    gamma = 2.2            # the photos' encoding (default: [capture] gamma, else "srgb")
     photos = [             # ≥ 2 photos; pixels, centre of the top-left pixel = (0, 0)
         { base = [412.3, 310.8], tip = [301.0, 355.2], image = "pencil1.jpg" },
-        { base = [220.5, 280.1], tip = [120.7, 301.4] },
+        { base = [220.5, 280.1], image = "pencil2.jpg" },   # tip found against `empty`
     ]
 
-``image`` is optional and informational. ``[capture]``, ``[light]``,
+``image`` is informational when both pixels are given. A photo without
+``tip`` needs its ``image`` and ``[pencil] empty``: the shadow's tip is then
+found by comparing the two photos' irradiance, and the base (a hint, a few
+pixels off at most) is moved onto the shadow's axis
+(:mod:`gnomon.pencil_detection`). ``[capture]``, ``[light]``,
 ``[scan]`` and ``[site]`` tables are ignored, so a scan's own field log may
 carry the ``[pencil]`` table; any other table is an error. The result is
 written to ``lamp.toml`` beside the field log: a ``[light]`` table
 (``kind = "lamp"``, ``position``) ready to paste into a scan's field log, and a
 ``[lamp_calibration]`` table with the covariance, 1σ per axis, residuals, χ²
-and warnings. Automatic detection of base and tip is not implemented: the
-pixels are clicked by hand (e.g. in any image viewer showing coordinates).
+and warnings.
 """
 
 from __future__ import annotations
@@ -326,8 +331,10 @@ class PencilLog:
     sigma_height: float
     units: str
     bases_px: np.ndarray
-    tips_px: np.ndarray
+    tips_px: np.ndarray  # NaN rows: to be found against the empty-desk photo
     images: tuple[str | None, ...]
+    empty: Path | None = None  # photo of the desk without the pencil
+    gamma: float | str = "srgb"  # the photos' encoding, to compare irradiance
 
 
 # Tables of a scan's field log that a lamp calibration does not read.
@@ -384,6 +391,16 @@ def load_pencil_log(path: str | Path) -> PencilLog:
     if plane_name not in planes:
         raise t.error("plane", f"no [[planes]] entry is named {plane_name!r} (have: {', '.join(map(repr, planes))})")
     units = t.string("units", capture_units or "mm", UNITS)
+    empty = base / t.string("empty") if "empty" in t.data else None
+    if empty is not None and not empty.is_file():
+        raise t.error("empty", f"{empty} not found")
+    gamma: float | str = "srgb"
+    if isinstance(capture, dict) and isinstance(capture.get("gamma"), (int, float, str)):
+        gamma = capture["gamma"]
+    if "gamma" in t.data:
+        gamma = t.take("gamma")
+    if not (gamma == "srgb" or (isinstance(gamma, (int, float)) and not isinstance(gamma, bool) and gamma > 0)):
+        raise t.error("gamma", f"expected a positive number or 'srgb', got {gamma!r}")
     photos = t.take("photos")
     if not isinstance(photos, list) or not all(isinstance(x, dict) for x in photos):
         raise t.error("photos", "expected a list of { base = [u, v], tip = [u, v] } tables")
@@ -394,19 +411,68 @@ def load_pencil_log(path: str | Path) -> PencilLog:
     w, h = camera.width, camera.height
     for i, raw in enumerate(photos):
         pt = _Table(p, f"pencil.photos.{i}", raw)
+        image = pt.string("image") if "image" in pt.data else None
         for key, out in (("base", bases), ("tip", tips)):
+            if key == "tip" and "tip" not in pt.data:
+                # found automatically: needs this photo and the empty desk
+                if empty is None or image is None:
+                    raise pt.error("tip", "missing: give the tip's pixel, or the photo's 'image' and "
+                                          "[pencil] 'empty' (a photo of the desk without the pencil)")
+                out.append(np.array([np.nan, np.nan]))
+                continue
             uv = pt.vector(key, 2)
             if not (-0.5 <= uv[0] <= w - 0.5 and -0.5 <= uv[1] <= h - 0.5):
                 raise pt.error(key, f"pixel {uv.tolist()} is outside the {w}x{h} image")
             out.append(uv)
-        images.append(pt.string("image") if "image" in pt.data else None)
+        images.append(image)
         pt.done()
     root.done()
     point, normal = planes[plane_name]
     return PencilLog(
         p, camera, pose, plane_name, point, normal, height, sigma_px, sigma_height, units,
-        np.array(bases), np.array(tips), tuple(images),
+        np.array(bases), np.array(tips), tuple(images), empty, gamma,
     )
+
+
+def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
+    """Find the shadow tips the log leaves out (and refine those photos' bases) against ``empty``.
+
+    Returns the completed log and one line per detected photo. See
+    :mod:`gnomon.pencil_detection`.
+    """
+    from dataclasses import replace
+
+    from gnomon.calibration import read_grey
+    from gnomon.pencil_detection import detect_pencil
+    from gnomon.reference_lines import PlaneInCamera
+    from gnomon.tracking import decoding_lut
+
+    missing = np.flatnonzero(~np.isfinite(log.tips_px[:, 0]))
+    if len(missing) == 0:
+        return log, []
+    assert log.empty is not None
+    folder = log.path.resolve().parent
+    empty_raw = read_grey(log.empty)
+    lut = decoding_lut(log.gamma, empty_raw.dtype)
+    empty = lut[empty_raw]
+    plane = PlaneInCamera.from_world(log.plane_point, log.plane_normal, log.pose)
+    bases, tips, lines = log.bases_px.copy(), log.tips_px.copy(), []
+    for i in missing:
+        name = log.images[i]
+        photo_raw = read_grey(folder / name)
+        if photo_raw.shape != empty_raw.shape:
+            raise GnomonError(f"{log.path}: [pencil] photo {name} is {photo_raw.shape[1]}x{photo_raw.shape[0]}, "
+                              f"the empty desk {empty_raw.shape[1]}x{empty_raw.shape[0]}")
+        foot = plane.intersect(log.camera.rays(bases[i][None]))[0]
+        if not np.all(np.isfinite(foot)):
+            raise GnomonError(f"{log.path}: [pencil] photo {name}: the base pixel does not see the plane")
+        top_world = log.pose.camera_to_world(foot) + log.height * log.plane_normal
+        top_px = log.camera.project(log.pose.world_to_camera(top_world)[None])[0]
+        found = detect_pencil(lut[photo_raw], empty, bases[i], top_px, source=f"{log.path}: {name}")
+        bases[i], tips[i] = found.base_px, found.tip_px
+        lines.append(f"photo {i + 1} ({name}): base {found.base_px.round(2).tolist()}, "
+                     f"tip {found.tip_px.round(2).tolist()} (found against {log.empty.name})")
+    return replace(log, bases_px=bases, tips_px=tips), lines
 
 
 def _decimals(sigma: float) -> int:
@@ -419,7 +485,9 @@ def _decimals(sigma: float) -> int:
 def calibrate_lamp_cli(args: argparse.Namespace) -> int:
     """``gnomon calibrate lamp FIELD_LOG``: reads ``args.field_log`` (a Path), prints the
     lamp ± 1σ, residuals and warnings, writes ``lamp.toml`` beside the field log (atomic)."""
-    log = load_pencil_log(args.field_log)
+    log, detected = detect_missing_tips(load_pencil_log(args.field_log))
+    for line in detected:
+        print(line)
     try:
         cal = calibrate_lamp_from_pencil(
             log.camera, log.pose, log.plane_point, log.plane_normal, log.bases_px, log.tips_px,
