@@ -131,7 +131,7 @@ import numpy as np
 from gnomon import atomic, toml_io
 from gnomon.errors import GnomonError
 from gnomon.simulate import geometry as geo
-from gnomon.simulate import shadow
+from gnomon.simulate import sensor, shadow
 
 # ----------------------------------------------------------------- fixed scene constants
 
@@ -711,19 +711,11 @@ class DeskLampScene:
 
     def _finish(self, L_full: np.ndarray, blur: bool) -> np.ndarray:
         """Blur the padded linear image (the padding holds the real scene) and crop it."""
-        L = np.asarray(L_full, dtype=np.float32)
-        s = self.config.blur
-        if blur and s > 0:
-            L = cv2.GaussianBlur(L, (0, 0), sigmaX=s, sigmaY=s, borderType=cv2.BORDER_REFLECT)
-        return np.ascontiguousarray(L[self.crop])
+        return sensor.blur_and_crop(L_full, self.config.blur if blur else 0.0, self.crop)
 
     def encode(self, L_blurred: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Gamma-encode, add sensor noise, quantise: linear (blurred) radiance → u8."""
-        c = self.config
-        dn = 255.0 * np.power(np.clip(L_blurred, 0.0, 1.0, dtype=np.float32), np.float32(1.0 / c.gamma))
-        if c.noise > 0:
-            dn += np.float32(c.noise) * rng.standard_normal(dn.shape, dtype=np.float32)
-        return np.clip(np.rint(dn), 0, 255).astype(np.uint8)
+        return sensor.encode_dn(L_blurred, self.config.gamma, self.config.noise, rng)
 
     def frame(self, k: int, rng: np.random.Generator) -> np.ndarray:
         return self.encode(self.linear_image(float(k)), rng)

@@ -191,7 +191,7 @@ import pandas as pd
 from gnomon import atomic, toml_io
 from gnomon.errors import GnomonError
 from gnomon.simulate import geometry as geo
-from gnomon.simulate import shadow
+from gnomon.simulate import sensor, shadow
 
 # ----------------------------------------------------------------- fixed scene constants
 
@@ -979,19 +979,12 @@ class FacadeSunScene:
         return self._finish(L * self.gain[k], blur)
 
     def _finish(self, L_full: np.ndarray, blur: bool) -> np.ndarray:
-        L = np.asarray(L_full, dtype=np.float32)
-        s = self.config.blur
-        if blur and s > 0:
-            L = cv2.GaussianBlur(L, (0, 0), sigmaX=s, sigmaY=s, borderType=cv2.BORDER_REFLECT)
-        return np.ascontiguousarray(L[self.crop])
+        """Blur the padded linear image (the padding holds the real scene) and crop it."""
+        return sensor.blur_and_crop(L_full, self.config.blur if blur else 0.0, self.crop)
 
     def encode(self, L_blurred: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Gamma-encode, add sensor noise, quantise: linear (blurred) radiance → u8."""
-        c = self.config
-        dn = 255.0 * np.power(np.clip(L_blurred, 0.0, 1.0, dtype=np.float32), np.float32(1.0 / c.gamma))
-        if c.noise > 0:
-            dn += np.float32(c.noise) * rng.standard_normal(dn.shape, dtype=np.float32)
-        return np.clip(np.rint(dn), 0, 255).astype(np.uint8)
+        return sensor.encode_dn(L_blurred, self.config.gamma, self.config.noise, rng)
 
     def frame(self, k: int, rng: np.random.Generator) -> np.ndarray:
         return self.encode(self.linear_image(k), rng)
