@@ -39,52 +39,35 @@ pub trait Sample: Copy + Ord + Debug + Default + Send + Sync + 'static + sealed:
     fn to_f32(self) -> f32;
 }
 
-impl Sample for u8 {
-    const MIN: Self = u8::MIN;
-    const MAX: Self = u8::MAX;
-    const NO_OFFSET: Self = u8::MAX;
-    const LUT_LEN: usize = 1 << 8;
-    const DTYPE: &'static str = "uint8";
-    #[inline(always)]
-    fn saturating_sub(self, other: Self) -> Self {
-        u8::saturating_sub(self, other)
-    }
-    #[inline(always)]
-    fn from_offset(k: usize) -> Self {
-        debug_assert!(k < usize::from(Self::NO_OFFSET));
-        k as u8
-    }
-    #[inline(always)]
-    fn index(self) -> usize {
-        usize::from(self)
-    }
-    #[inline(always)]
-    fn to_f32(self) -> f32 {
-        f32::from(self)
-    }
+/// The two sample types differ only in width: one implementation for both.
+macro_rules! impl_sample {
+    ($t:ty, $bits:expr, $dtype:expr) => {
+        impl Sample for $t {
+            const MIN: Self = <$t>::MIN;
+            const MAX: Self = <$t>::MAX;
+            const NO_OFFSET: Self = <$t>::MAX;
+            const LUT_LEN: usize = 1 << $bits;
+            const DTYPE: &'static str = $dtype;
+            #[inline(always)]
+            fn saturating_sub(self, other: Self) -> Self {
+                <$t>::saturating_sub(self, other)
+            }
+            #[inline(always)]
+            fn from_offset(k: usize) -> Self {
+                debug_assert!(k < usize::from(Self::NO_OFFSET));
+                k as $t
+            }
+            #[inline(always)]
+            fn index(self) -> usize {
+                usize::from(self)
+            }
+            #[inline(always)]
+            fn to_f32(self) -> f32 {
+                f32::from(self)
+            }
+        }
+    };
 }
 
-impl Sample for u16 {
-    const MIN: Self = u16::MIN;
-    const MAX: Self = u16::MAX;
-    const NO_OFFSET: Self = u16::MAX;
-    const LUT_LEN: usize = 1 << 16;
-    const DTYPE: &'static str = "uint16";
-    #[inline(always)]
-    fn saturating_sub(self, other: Self) -> Self {
-        u16::saturating_sub(self, other)
-    }
-    #[inline(always)]
-    fn from_offset(k: usize) -> Self {
-        debug_assert!(k < usize::from(Self::NO_OFFSET));
-        k as u16
-    }
-    #[inline(always)]
-    fn index(self) -> usize {
-        usize::from(self)
-    }
-    #[inline(always)]
-    fn to_f32(self) -> f32 {
-        f32::from(self)
-    }
-}
+impl_sample!(u8, 8, "uint8");
+impl_sample!(u16, 16, "uint16");
