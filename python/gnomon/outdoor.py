@@ -130,9 +130,8 @@ class IlluminationNormalizer:
     irradiance (``LINEAR_SCALE`` = 1.0), or None for a frame to skip.
     """
 
-    def __init__(self, lut: np.ndarray, enabled: bool = True, step: int = 4):
+    def __init__(self, lut: np.ndarray, step: int = 4):
         self.lut = lut.astype(np.float32)
-        self.enabled = enabled
         self.step = step
         self.reference: np.ndarray | None = None
         self.gains: list[float] = []
@@ -148,9 +147,9 @@ class IlluminationNormalizer:
 
     def normalize(self, frame: np.ndarray) -> np.ndarray | None:
         linear = self.lut[frame]
-        g = self.gain(linear) if self.enabled else 1.0
+        g = self.gain(linear)
         self.gains.append(g)
-        if self.enabled and len(self.accepted) >= 3:
+        if len(self.accepted) >= 3:
             recent = float(np.median(self.accepted[-GAIN_HISTORY:]))
             if g < CLOUD_DROP * recent:
                 return None

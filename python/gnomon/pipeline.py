@@ -113,6 +113,7 @@ class _Tracked:
     lut: np.ndarray  # the tracker's decoding table (DN → linear)
     used: np.ndarray  # capture index of each tracked frame
     input_lut: np.ndarray  # the capture's decoding table, for contrast in input DN
+    skipped_dips: list[int]  # capture frames skipped as illumination dips
 
 
 @dataclass
@@ -138,12 +139,14 @@ def _colors(first_color: np.ndarray | None, first_grey: np.ndarray) -> np.ndarra
 def _track(log: FieldLog, source: FrameSource, recorder, progress: bool, sun: _SunContext | None = None) -> _Tracked:
     """One streaming pass over the frames: the kernel tracker, plus recording of a subsample.
 
-    Sun scans feed the tracker normalised linear irradiance (uint16) and skip
-    frames in a cloud dip or with the sun below the horizon.
+    With ``[scan] normalize_illumination`` the tracker is fed normalised linear
+    irradiance (uint16) and frames in a sudden dip (a cloud, a flicker) are
+    skipped; sun scans also skip frames with the sun below the horizon.
     """
     from gnomon.outdoor import LINEAR_SCALE, IlluminationNormalizer
 
     cam = log.camera
+    normalize = log.scan.normalize_illumination
     tracker = normalizer = None
     first_grey = first_color = previous = None
     input_lut = None
@@ -161,9 +164,9 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool, sun: _S
                     )
                 first_grey, first_color = g, frame.color
                 input_lut = decoding_lut(log.capture.gamma, g.dtype)
-                if sun is not None:
-                    normalizer = IlluminationNormalizer(input_lut, enabled=log.scan.normalize_illumination)
-                dtype = "uint16" if (sun is not None or g.dtype != np.uint8) else "uint8"
+                if normalize:
+                    normalizer = IlluminationNormalizer(input_lut)
+                dtype = "uint16" if (normalize or g.dtype != np.uint8) else "uint8"
                 tracker = _kernel.TemporalTracker(g.shape[0], g.shape[1], dtype=dtype, window=log.scan.window)
             # Image noise from the first few frame pairs (cheap, and before any
             # illumination drift has accumulated).
@@ -173,9 +176,9 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool, sun: _S
             if recorder is not None:
                 recorder.log_frame(frame.index, g, sun.times[frame.index] if sun is not None else None)
             bar.update(frame.index + 1)
-            if sun is not None:
-                if sun.night[frame.index]:
-                    continue
+            if sun is not None and sun.night[frame.index]:
+                continue
+            if normalize:
                 g = normalizer.normalize(g)
                 if g is None:
                     skipped_cloud.append(frame.index)
@@ -188,7 +191,7 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool, sun: _S
         raise FrameError(f"{source.name}: only {n} frames, expected {source.expected_count}")
     if len(used) < 2:
         raise FrameError(f"{source.name}: fewer than two usable frames (sun below the horizon or clouds)")
-    if sun is not None:
+    if normalize:
         lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
         times = ShadowTimes.from_kernel(tracker.finish(0.0, lut))
         # The contrast test stays in the input's DN: back through the encoding.
@@ -199,14 +202,16 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool, sun: _S
         times.leave[~valid] = np.nan
         times.valid = valid
         times.contrast = contrast_dn
-        from gnomon.outdoor import SunTimeline
-
-        sun.timeline = SunTimeline(sun.times, np.asarray(used), skipped_cloud, list(np.flatnonzero(sun.night)))
     else:
         lut = input_lut
         times = ShadowTimes.from_kernel(tracker.finish(log.scan.min_contrast, lut))
+    if sun is not None:
+        from gnomon.outdoor import SunTimeline
+
+        sun.timeline = SunTimeline(sun.times, np.asarray(used), skipped_cloud, list(np.flatnonzero(sun.night)))
     noise = float(np.median(noise_samples)) if noise_samples else 1.0
-    return _Tracked(times, len(used), first_grey, first_color, noise, lut, np.asarray(used), input_lut)
+    return _Tracked(times, len(used), first_grey, first_color, noise, lut, np.asarray(used), input_lut,
+                    skipped_cloud)
 
 
 def _dn_index(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
@@ -503,6 +508,9 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
         timings["tracking_s"] = time.perf_counter() - t
         if sun is not None:
             _note_skipped_frames(sun, warnings)
+        elif tracked.skipped_dips:
+            warnings.append(f"{len(tracked.skipped_dips)} frames skipped as sudden illumination dips "
+                            f"(frames {tracked.skipped_dips[:8]}{' …' if len(tracked.skipped_dips) > 8 else ''})")
 
         t = time.perf_counter()
         ray_map = cam.ray_map()
