@@ -12,7 +12,12 @@ an image point along the radius from (Cx, Cy) only, so ``(Xd, Yd) ∥ (x, y)``
 or ``Ty⁻¹·(sx·r1, sx·r2, sx·r3, sx·Tx, r4, r5, r6)`` (non-coplanar target, sx
 unknown) and independent of f, κ1 and Tz. It gives R, Tx, Ty (and sx). Stage 2
 gets f and Tz by linear least squares ignoring distortion, then exact f, Tz,
-κ1 by Levenberg–Marquardt on the paper's equation (8b) from (f, Tz, 0).
+κ1 by Levenberg–Marquardt from (f, Tz, 0) — both on the paper's equations
+(8a) and (8b), the x and the y equation, as Willson's reference implementation
+does (sx is known for a coplanar target and estimated by stage 1 otherwise);
+the paper's (8b) alone loses accuracy as the target tilts (f error ≈5× at 80°,
+tests/test_tsai_reference.py). Parameter σ are marginal over every estimated
+parameter (pose included), as OpenCV reports them for Zhang's method.
 
 Entry points:
 
@@ -25,8 +30,11 @@ Entry points:
 * :func:`calibrate_views` — several views: two stages on each, then a joint
   refinement of the shared intrinsics (our extension, not in the paper).
 
-Degenerate set-ups the paper warns about give a :class:`GnomonError` (too few
-points, collinear points, a target seen edge-on) or a warning in the result
+Degenerate set-ups the paper warns about give a :class:`GnomonError`, one line
+saying what is wrong and how to fix the capture (too few points; collinear or
+nearly collinear points, a strip less than 1/20 as wide as long; a target
+seen edge-on, ≥ 87° from facing the camera or imaged as a line; points that
+fit only a target behind the camera, i.e. a mirror image) or a warning in the result
 (the world origin near the camera's x–z plane, i.e. Ty ≈ 0, which we then
 avoid by moving the origin to a target point and back; a coplanar target
 nearly parallel to the image plane, where f and Tz cannot be separated).
@@ -53,6 +61,18 @@ TY_DEGENERATE_RATIO = 0.02
 # A coplanar target must be tilted away from the image plane: near parallel,
 # f and Tz are nearly interchangeable (a change of f is undone by one of Tz).
 MIN_TILT_DEG = 15.0
+# ... and not seen edge-on: at 88° tilt a 300 mm board is a few pixels tall and
+# f comes out 5–10 % off (0.2 px noise). The tilt is judged from the line of
+# sight to the target's centre.
+MAX_TILT_DEG = 87.0
+# The target's image must not be a line: the RMS distance of its points from
+# their best-fitting line, in pixels.
+MIN_IMAGE_THICKNESS_PX = 1.0
+# The target itself must be two-dimensional: the ratio of its second to first
+# principal extent. Below this (a strip 20× longer than wide) the pose about
+# the strip's axis is unconstrained by the noise (issue: a 290×1 mm strip gave
+# a pose 50° off).
+MIN_TARGET_ASPECT = 0.05
 
 
 @dataclass(frozen=True)
@@ -61,9 +81,9 @@ class TsaiResult:
 
     ``residuals_px`` are observed minus projected pixels (N, 2); ``rms_px`` is
     the RMS of their length (OpenCV's convention). ``std`` holds 1-σ standard
-    deviations of the parameters estimated by the last least-squares step
-    (stage 2: f_mm, tz, kappa1, conditional on stage 1; full: every
-    parameter), scaled by the residual variance. ``linear`` holds stage 2's
+    deviations of the parameters, each marginal over every parameter
+    estimated (two stages: f_mm, tz, kappa1 and, non-coplanar, sx, with the
+    pose free; full: every parameter), scaled by the residual variance. ``linear`` holds stage 2's
     distortion-free estimates (f_mm, tz). ``method`` is "coplanar" or
     "noncoplanar", with "+full" after :func:`refine_full`.
     """
@@ -132,6 +152,11 @@ def _check_spread(world: np.ndarray, where: str) -> np.ndarray:
     s = _singular_values(world)
     if s[0] == 0.0 or s[1] <= 1e-6 * s[0]:
         raise GnomonError(f"{where}: the target points are collinear (or all equal); Tsai's method needs a plane or a volume")
+    if s[1] < MIN_TARGET_ASPECT * s[0]:
+        raise GnomonError(
+            f"{where}: the target points are nearly collinear (their spread across is {s[1] / s[0]:.2%} of their "
+            f"spread along; need ≥ {MIN_TARGET_ASPECT:.0%}): use a target at least 1/{1 / MIN_TARGET_ASPECT:.0f} as wide as it is long"
+        )
     return s
 
 
@@ -267,44 +292,127 @@ def _check_rank(A: np.ndarray, where: str) -> None:
 # --------------------------------------------------------------------------- stage 2
 
 
-def _stage2(R: np.ndarray, ty: float, world: np.ndarray, xd: np.ndarray, yd: np.ndarray, where: str):
-    """f and Tz ignoring distortion, then exact f, Tz, κ1 by LM on eq. (8b).
+def _stage2(R: np.ndarray, tx: float, ty: float, world: np.ndarray, xd: np.ndarray, yd: np.ndarray, where: str):
+    """f and Tz ignoring distortion, then exact f, Tz, κ1 by LM on eq. (8).
 
-    Returns (f, tz, kappa1, f_lin, tz_lin, std, R) — R possibly with r3, r6,
-    r7, r8 negated, which the paper prescribes when f comes out negative.
+    Both of the paper's equations (8a, 8b) are used, in the linear and the
+    non-linear step: ``Xd·(1 + κ1·r²) = f·x/z`` and ``Yd·(1 + κ1·r²) = f·y/z``
+    (Xd needs sx, known a priori for a coplanar target and estimated by stage 1
+    otherwise). The y equation alone, as the paper writes it, wastes half the
+    data: at 80° tilt its f error is ≈6× larger.
+
+    Returns (f, tz, kappa1, f_lin, tz_lin, R) — R possibly with r3, r6, r7, r8
+    negated, which the paper prescribes when f comes out negative.
     """
     for _ in range(2):
+        xi = world @ R[0] + tx
         yi = world @ R[1] + ty
         wi = world @ R[2]
-        A = np.stack([yi, -yd], axis=1)
-        f_lin, tz_lin = np.linalg.lstsq(A, wi * yd, rcond=None)[0]
+        A = np.concatenate([np.stack([xi, -xd], axis=1), np.stack([yi, -yd], axis=1)])
+        f_lin, tz_lin = np.linalg.lstsq(A, np.concatenate([wi * xd, wi * yd]), rcond=None)[0]
         if f_lin > 0:
             break
         R = R * np.array([[1, 1, -1], [1, 1, -1], [-1, -1, 1]])
     else:
         raise GnomonError(f"{where}: Tsai stage 2 found a negative focal length both ways round (left-handed world coordinates?)")
-    if tz_lin <= 0:
-        raise GnomonError(f"{where}: Tsai stage 2 puts the target behind the camera (Tz = {tz_lin:.4g}); check the point correspondences")
+    if tz_lin <= 0 or np.any(wi + tz_lin <= 0):
+        raise GnomonError(
+            f"{where}: the points fit only a target behind the camera (Tz = {tz_lin:.4g}): the pixels are "
+            f"mirrored through the image centre relative to the target points (image rotated by 180°, or "
+            f"the points listed in the wrong order); check the correspondences"
+        )
 
     r2 = xd * xd + yd * yd
+    xi = world @ R[0] + tx
     yi = world @ R[1] + ty
     wi = world @ R[2]
 
-    # Paper, eq. (8b): dy·Y·(1 + κ1·r²) = f·y/z — the y equation only, which does
-    # not involve sx (uncertain a priori for the coplanar case).
     def fun(p):
         f, tz, k = p
-        return yd * (1.0 + k * r2) - f * yi / (wi + tz)
+        d = 1.0 + k * r2
+        z = wi + tz
+        return np.concatenate([xd * d - f * xi / z, yd * d - f * yi / z])
 
-    sol = least_squares(fun, np.array([f_lin, tz_lin, 0.0]), method="lm", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    def jac(p):
+        f, tz, k = p
+        z = wi + tz
+        return np.concatenate(
+            [np.stack([-xi / z, f * xi / z**2, xd * r2], axis=1), np.stack([-yi / z, f * yi / z**2, yd * r2], axis=1)]
+        )
+
+    sol = least_squares(fun, np.array([f_lin, tz_lin, 0.0]), jac=jac, method="lm", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15)
     f, tz, k = sol.x
-    std = _std_from_jacobian(sol.jac, sol.fun, ("f_mm", "tz", "kappa1"))
     if f <= 0 or tz <= 0:
         raise GnomonError(f"{where}: Tsai's non-linear step diverged (f = {f:.4g} mm, Tz = {tz:.4g})")
-    return float(f), float(tz), float(k), float(f_lin), float(tz_lin), std, R
+    return float(f), float(tz), float(k), float(f_lin), float(tz_lin), R
 
 
 # --------------------------------------------------------------------------- one view
+
+
+def _line_of_sight_tilt(world: np.ndarray, pose: Pose) -> float:
+    """Angle (degrees) between a planar target's normal and the line of sight to its centroid: 0 facing the camera, 90 edge-on."""
+    n = pose.R[:, 2]
+    c = pose.world_to_camera(world.mean(axis=0)[None, :])[0]
+    return float(np.degrees(np.arccos(min(abs(n @ c) / np.linalg.norm(c), 1.0))))
+
+
+def _check_tilt(tilt_deg: float, where: str) -> None:
+    if tilt_deg >= MAX_TILT_DEG:
+        raise GnomonError(
+            f"{where}: the target is seen nearly edge-on ({tilt_deg:.1f}° from facing the camera, limit {MAX_TILT_DEG:g}°): "
+            f"its image is too thin to calibrate from; turn it towards the camera (30–60° of tilt is best)"
+        )
+
+
+def _check_image_spread(world: np.ndarray, pixels: np.ndarray, where: str) -> None:
+    """Reject a target whose image is (nearly) a line: seen edge-on, or collinear."""
+    sp = np.linalg.svd(pixels - pixels.mean(axis=0), compute_uv=False)
+    thickness = float(sp[1] / np.sqrt(len(pixels)))  # RMS distance from the points' best line (px)
+    if sp[0] == 0.0 or thickness < MIN_IMAGE_THICKNESS_PX:
+        raise GnomonError(
+            f"{where}: the target's image is nearly a line ({thickness:.2g} px RMS across it): the target is seen "
+            f"edge-on; turn it towards the camera (30–60° of tilt is best)"
+        )
+
+
+def _std_two_stage(camera: TsaiCamera, pose: Pose, world: np.ndarray, pixels: np.ndarray, with_sx: bool) -> dict[str, float]:
+    """1-σ of the estimated parameters, marginal over all of them, as OpenCV reports them for Zhang's method.
+
+    Every parameter the two stages estimate is free — the pose, f, κ1, and sx
+    for a non-coplanar target (Cx, Cy are a priori) — so each σ includes the
+    uncertainty of stage 1's pose instead of being conditional on it. The
+    residuals are the paper's eq. (8) in undistorted sensor coordinates (mm),
+    ``f·x/z − Xd·(1 + κ1·r²)`` and the same for y, with an analytic Jacobian;
+    s² is their variance. ``tz`` is the pose's Tz.
+    """
+    xd, yd = _sensor(pixels, camera.cx, camera.cy, camera.dx_mm, camera.dy_mm, camera.sx)
+    r2 = xd * xd + yd * yd
+    f, k = camera.f_mm, camera.kappa1
+    pc = pose.world_to_camera(world)
+    q = pc - pose.t  # R·X: the rotation's lever arm
+    x, y, z = pc.T
+    g = 1.0 + k * r2
+    res = np.concatenate([f * x / z - xd * g, f * y / z - yd * g])
+    # d(f·x/z)/dP = f·(1/z, 0, −x/z²); d(f·y/z)/dP = f·(0, 1/z, −y/z²)
+    dx_dp = np.stack([f / z, np.zeros_like(z), -f * x / z**2], axis=1)
+    dy_dp = np.stack([np.zeros_like(z), f / z, -f * y / z**2], axis=1)
+    # P = exp([ω]×)·R·X + T, at ω = 0: dP/dω = −[R·X]×, dP/dT = I.
+    def rot_cols(d):
+        return np.cross(q, d)  # d·(ω × q) = ω·(q × d)
+
+    cols_x = [rot_cols(dx_dp), dx_dp, (x / z)[:, None], (-xd * r2)[:, None]]
+    cols_y = [rot_cols(dy_dp), dy_dp, (y / z)[:, None], (-yd * r2)[:, None]]
+    names = ["wx", "wy", "wz", "tx", "ty", "tz", "f_mm", "kappa1"]
+    if with_sx:
+        # Xd = Xd(sx=1)/sx: dXd/dsx = −Xd/sx, d r²/dsx = −2·Xd²/sx.
+        sx = camera.sx
+        cols_x.append((xd / sx * g + xd * k * 2.0 * xd * xd / sx)[:, None])
+        cols_y.append((yd * k * 2.0 * xd * xd / sx)[:, None])
+        names.append("sx")
+    J = np.concatenate([np.concatenate(cols_x, axis=1), np.concatenate(cols_y, axis=1)])
+    std = _std_from_jacobian(J, res, names)
+    return {n: std[n] for n in ["f_mm", "tz", "kappa1"] + (["sx"] if with_sx else [])}
 
 
 def _ty_ratio(world: np.ndarray, xd: np.ndarray, yd: np.ndarray, coplanar: bool) -> float:
@@ -323,7 +431,8 @@ def _ty_ratio(world: np.ndarray, xd: np.ndarray, yd: np.ndarray, coplanar: bool)
         rows = [4, 5, 6]  # r4, r5, r6: a unit row
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0.0] = 1.0
-    v = np.linalg.svd(A / scale)[2][-1] / scale
+    # Thin SVD: only the 6 (8) right singular vectors, never an N×N matrix.
+    v = np.linalg.svd(A / scale, full_matrices=False)[2][-1] / scale
     extent = float(np.max(np.linalg.norm(world - world.mean(axis=0), axis=1)))
     return float(abs(v[-1]) / (np.linalg.norm(v[rows]) * extent))
 
@@ -364,19 +473,28 @@ def _solve_one(world, pixels, width, height, dx_mm, dy_mm, sx, cx, cy, coplanar,
             f"{where}: only {agree:.0%} of the points agree on the sign of Ty: some points are mismatched or the centre (Cx, Cy) is far off"
         )
 
-    f, tz, k, f_lin, tz_lin, std, R = _stage2(R, ty, world, xd, yd, where)
+    try:
+        f, tz, k, f_lin, tz_lin, R = _stage2(R, tx, ty, world, xd, yd, where)
+    except GnomonError:
+        # A target seen nearly edge-on makes stage 2 fail in misleading ways: say so.
+        if coplanar:
+            _check_tilt(float(np.degrees(np.arccos(min(abs(R[2, 2]), 1.0)))), where)
+        raise
     camera = TsaiCamera(width=width, height=height, f_mm=f, kappa1=k, cx=float(cx), cy=float(cy), dx_mm=dx_mm, dy_mm=dy_mm, sx=float(sx))
     pose = Pose(R=R, t=np.array([tx, ty, tz]))
-    res = _residuals(camera, pose, world, pixels)
     if coplanar:
-        tilt = np.degrees(np.arccos(min(abs(R[2, 2]), 1.0)))
-        if tilt < MIN_TILT_DEG:
-            warnings.append(
-                f"{where}: the target is only {tilt:.1f}° from parallel to the image plane: f and Tz are poorly "
-                f"separated (tilt it by 30° or more; σf = {std['f_mm']:.3g} mm)"
-            )
+        tilt = _line_of_sight_tilt(world, pose)
+        _check_tilt(tilt, where)
+    res = _residuals(camera, pose, world, pixels)
     if not np.all(np.isfinite(res)):
         raise GnomonError(f"{where}: some target points do not project with the calibrated model (behind the camera or beyond the distortion's fold)")
+    std = _std_two_stage(camera, pose, world, pixels, with_sx=not coplanar)
+    if coplanar and np.degrees(np.arccos(min(abs(R[2, 2]), 1.0))) < MIN_TILT_DEG:
+        tilt_axis = np.degrees(np.arccos(min(abs(R[2, 2]), 1.0)))
+        warnings.append(
+            f"{where}: the target is only {tilt_axis:.1f}° from parallel to the image plane: f and Tz are poorly "
+            f"separated (tilt it by 30° or more; σf = {std['f_mm']:.3g} mm)"
+        )
     return TsaiResult(
         camera=camera,
         pose=pose,
@@ -419,6 +537,7 @@ def calibrate_coplanar(
     s = _check_spread(world, where)
     if np.max(np.abs(world[:, 2])) > 1e-9 * s[0]:
         raise GnomonError(f"{where}: coplanar calibration needs the target on the plane zw = 0 (use calibrate() for a plane in any position)")
+    _check_image_spread(world, pix, where)
     return _solve_one(world, pix, width, height, float(dx_mm), float(dy_mm), float(sx), cx, cy, True, where)
 
 
@@ -446,6 +565,7 @@ def calibrate_noncoplanar(
     s = _check_spread(world, where)
     if s[2] <= 1e-6 * s[0]:
         raise GnomonError(f"{where}: the target points are coplanar: use the coplanar variant (sx known a priori)")
+    _check_image_spread(world, pix, where)
     return _solve_one(world, pix, width, height, float(dx_mm), float(dy_mm), 1.0, cx, cy, False, where)
 
 
