@@ -252,3 +252,75 @@ def test_a_target_behind_the_camera_is_one_clear_line():
         tsai.calibrate(world, observe(world, R, t, 0), W, H, PITCH, PITCH, where="behind.png")
     msg = str(exc.value)
     assert "\n" not in msg and msg.startswith("behind.png: ") and "behind the camera" in msg
+
+
+# --------------------------------------------------------------------------- the same through the CLI
+
+
+def _cli(argv, capsys):
+    try:
+        code = cli.main(argv)
+    except SystemExit as exc:  # argparse
+        code = int(exc.code)
+    out = capsys.readouterr()
+    return code, out.out, [line for line in out.err.splitlines() if line.strip()]
+
+
+def _write_points(path, world, pix):
+    np.savetxt(path, np.concatenate([world, pix], axis=1), header="xw yw zw Xf Yf")
+    return str(path)
+
+
+def test_cli_calibrates_points_and_writes_a_camera_file(tmp_path, capsys):
+    from gnomon.calibration import load_calibration_info, load_camera_file
+
+    world, R, t = scene(60.0)
+    pts = _write_points(tmp_path / "view.txt", world, observe(world, R, t, 0))
+    out = tmp_path / "cam.toml"
+    code, stdout, err = _cli(["calibrate", "points", pts, "--size", "1280x960", "--pixel-pitch", "0.00375", "-o", str(out)], capsys)
+    assert code == 0, err
+    cam = load_camera_file(out)
+    info = load_calibration_info(out)
+    assert abs(cam.f_mm - 6.0) < 4 * info["std"]["f_mm"]
+    assert info["method"] == "tsai-coplanar" and info["n_points"] == len(world)
+    assert "f_mm 6.0" in stdout
+
+
+def _edge_on(tmp_path):
+    world, R, t = scene(88.0, nx=10, ny=7, sq=30.0, distance=1400.0)
+    return _write_points(tmp_path / "edge.txt", world, observe(world, R, t, 1))
+
+
+def _strip(tmp_path):
+    xs, ys = np.meshgrid(np.linspace(0, 290, 30), np.linspace(0, 1.0, 3))
+    world = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], 1)
+    _, R, _ = scene(40.0)
+    t = np.array([0.0, 0.0, 450.0]) - R @ world.mean(axis=0)
+    return _write_points(tmp_path / "strip.txt", world, observe(world, R, t, 0))
+
+
+def _behind(tmp_path):
+    world = board_points(16, 12, 20.0)
+    world = np.concatenate([world, world + [0.0, 0.0, -60.0]])
+    R = Rotation.from_euler("xz", [40.0, 20.0], degrees=True).as_matrix()
+    t = np.array([0.0, 0.0, -450.0]) - R @ world.mean(axis=0)
+    return _write_points(tmp_path / "behind.txt", world, observe(world, R, t, 0))
+
+
+def _bad_line(tmp_path):
+    p = tmp_path / "bad.txt"
+    p.write_text("# xw yw zw Xf Yf\n0 0 0 10 10\n1 2 3 4\n")
+    return str(p)
+
+
+@pytest.mark.parametrize(
+    "make,needle",
+    [(_edge_on, "edge-on"), (_strip, "nearly collinear"), (_behind, "behind the camera"), (_bad_line, "bad.txt:3: expected five numbers")],
+)
+def test_cli_degenerate_targets_exit_2_with_one_line(tmp_path, capsys, make, needle):
+    pts = make(tmp_path)
+    out = tmp_path / "cam.toml"
+    code, _, err = _cli(["calibrate", "points", pts, "--size", "1280x960", "--pixel-pitch", "0.00375", "-o", str(out)], capsys)
+    assert code == 2
+    assert len(err) == 1 and err[0].startswith("gnomon: error: ") and needle in err[0], err
+    assert not out.exists()

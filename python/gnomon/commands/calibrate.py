@@ -1,5 +1,5 @@
-"""`gnomon calibrate camera IMAGES... --board COLSxROWS --square S [--model zhang|tsai]`
-and `gnomon calibrate lamp FIELD_LOG`.
+"""`gnomon calibrate camera IMAGES... --board COLSxROWS --square S [--model zhang|tsai]`,
+`gnomon calibrate points FILE --size WxH --pixel-pitch DX[,DY]` and `gnomon calibrate lamp FIELD_LOG`.
 
 `camera` finds the chessboard in each photo, calibrates (Zhang's method
 through OpenCV, or our Tsai implementation), prints per-view reprojection
@@ -7,6 +7,10 @@ errors and the parameters with their standard deviations, and writes the
 camera file (TOML) that field logs reference. Warnings (a photo without a
 board, a rejected outlier view, a degenerate Tsai set-up) go to stderr, one
 line each.
+
+`points` is Tsai's method on measured correspondences: a text file with one
+point per line, ``xw yw zw Xf Yf`` (world coordinates, then the pixel), as in
+Willson's reference implementation's data files; ``#`` starts a comment.
 """
 
 from __future__ import annotations
@@ -63,6 +67,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="zhang: reject views whose RMS exceeds FACTOR x the median (and 0.5 px); default 3",
     )
     c.set_defaults(func=run)
+
+    pts = sub.add_parser(
+        "points",
+        help="world ↔ pixel correspondences (one view) → camera file, by Tsai's method",
+        description=(
+            "Calibrate one view by Tsai's two-stage method from measured correspondences: a text file "
+            "with one point per line, 'xw yw zw Xf Yf' (world units, then pixels; '#' comments). "
+            "Coplanar or not according to the points."
+        ),
+    )
+    pts.add_argument("points", type=Path, metavar="FILE", help="correspondences, 'xw yw zw Xf Yf' per line")
+    pts.add_argument("--size", required=True, metavar="WxH", help="image size in pixels, e.g. 1280x960")
+    pts.add_argument("--pixel-pitch", required=True, metavar="DX[,DY]", help="the sensor's pixel pitch in mm")
+    pts.add_argument("--sx", type=float, default=1.0, help="horizontal scale factor a priori for a planar target (default 1)")
+    pts.add_argument("--full", action="store_true", help="also optimise every parameter (Cx, Cy included) from the two-stage result")
+    pts.add_argument("--out", "-o", default="camera.toml", metavar="FILE", help="camera file to write (default: camera.toml)")
+    pts.set_defaults(func=run_points)
 
     lamp = sub.add_parser(
         "lamp",
@@ -168,6 +189,70 @@ def run(args: argparse.Namespace) -> int:
         else:
             print(f"  {k} {_fmt(v, std.get(k))}")
     calibration.write_camera_file(args.out, cal)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().replace("×", "x").split("x"))
+    except ValueError:
+        raise GnomonError(f"--size '{text}': expected WIDTHxHEIGHT in pixels, e.g. 1280x960") from None
+    if w <= 0 or h <= 0:
+        raise GnomonError(f"--size '{text}': width and height must be positive")
+    return w, h
+
+
+def read_points_file(path: Path):
+    """``xw yw zw Xf Yf`` per line → (world (N, 3), pixels (N, 2)); a bad line is an error naming it."""
+    import numpy as np
+
+    if not path.is_file():
+        raise GnomonError(f"{path}: file not found")
+    rows = []
+    for k, line in enumerate(path.read_text(errors="replace").splitlines(), start=1):
+        text = line.split("#", 1)[0].strip()
+        if not text:
+            continue
+        try:
+            vals = [float(x) for x in text.replace(",", " ").split()]
+        except ValueError:
+            vals = []
+        if len(vals) != 5 or not all(np.isfinite(vals)):
+            raise GnomonError(f"{path}:{k}: expected five numbers 'xw yw zw Xf Yf', got {text!r}")
+        rows.append(vals)
+    if not rows:
+        raise GnomonError(f"{path}: no points")
+    a = np.array(rows)
+    return a[:, :3], a[:, 3:]
+
+
+def run_points(args: argparse.Namespace) -> int:
+    from gnomon import calibration, toml_io, tsai
+
+    width, height = _size(args.size)
+    dx, dy = _pitch(args.pixel_pitch)
+    if not args.sx > 0:
+        raise GnomonError(f"--sx {args.sx}: the scale factor must be positive")
+    world, pix = read_points_file(args.points)
+    r = tsai.calibrate(world, pix, width, height, dx, dy, sx=args.sx, full=args.full, where=str(args.points))
+    for w in r.warnings:
+        print(f"gnomon: warning: {w}", file=sys.stderr)
+    print(f"method tsai-{r.method}: {r.n_points} points, reprojection RMS {r.rms_px:.3f} px")
+    for k, v in calibration.camera_to_table(r.camera).items():
+        if k not in ("model", "width", "height"):
+            print(f"  {k} {_fmt(v, r.std.get(k))}")
+    print(f"  pose: rvec {' '.join(f'{x:.6g}' for x in r.pose.rvec)}, T {' '.join(f'{x:.6g}' for x in r.pose.t)}"
+          + (f" (σTz {r.std['tz']:.2g})" if "tz" in r.std else ""))
+    table = calibration.camera_to_table(r.camera)
+    table["calibration"] = {
+        "method": f"tsai-{r.method}",
+        "rms_px": float(r.rms_px),
+        "n_points": int(r.n_points),
+        "points": args.points.name,
+        "std": {k: float(v) for k, v in r.std.items()},
+    }
+    toml_io.dump(table, args.out, header=calibration._HEADER)
     print(f"wrote {args.out}")
     return 0
 
