@@ -78,3 +78,17 @@ def test_shadow_planes_match_the_true_ones(desk_scan) -> None:
     # and their offsets from the camera agree to a fraction of a millimetre
     offset_error = np.abs(np.sign(dots) * result.planes[ok, 3] - d_cam[ok])
     assert np.median(offset_error) < 0.0005 * float(truth["camera_distance_mm"])
+
+
+def test_edges_disagree_as_their_sigma_says(desk_scan) -> None:
+    # The two edges are independent measurements of one depth: where both were
+    # fused, their difference over its predicted σ must have an RMS near 1
+    # (σ from the unquantised image noise; 0.8–1.3 leaves room for the model's
+    # approximations, while a quantised σI gave 2.4–6).
+    _, result, _ = desk_scan
+    dis = result.report["edges"]["disagreement"]
+    print(dis, result.report["noise"])
+    assert dis["pixels"] > 100_000
+    assert 0.8 <= dis["rms_in_sigmas"] <= 1.3
+    # conflicts are outliers, counted apart, and rare
+    assert dis["not_fused"] <= 0.001 * dis["pixels"]

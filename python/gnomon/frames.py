@@ -6,7 +6,7 @@ a reader thread ahead of the consumer (OpenCV releases the GIL while decoding),
 through a small bounded queue.
 
 Problems with the input raise :class:`FrameError` naming the frame: a file that
-cannot be decoded, a frame whose size differs from the first, a video that
+cannot be decoded or is truncated (the decoder only warns about those), a frame whose size differs from the first, a video that
 ends before the number of frames it announced (or the field log expects).
 """
 
@@ -47,12 +47,47 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     return image[:, :, 0]
 
 
+_JPEG_SOI, _JPEG_SOS, _JPEG_EOI = b"\xff\xd8", b"\xff\xda", b"\xff\xd9"
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_PNG_IEND = b"IEND\xaeB`\x82"
+
+
+def truncation_problem(raw: bytes) -> str | None:
+    """Why an encoded JPEG or PNG file is incomplete, or None.
+
+    A JPEG cut short (a copy interrupted, a card pulled) still decodes: libjpeg
+    warns "premature end of data segment" and fills the rest of the image with
+    grey, and OpenCV prints the warning but returns the image. So the bytes are
+    checked instead (cheap, no second decode): a JPEG's last scan (after its
+    last SOS marker; entropy-coded data cannot contain a bare 0xFFD9) must be
+    followed by the EOI marker, and a PNG must hold its IEND chunk. Other
+    formats are not checked.
+    """
+    if raw.startswith(_JPEG_SOI):
+        sos = raw.rfind(_JPEG_SOS)
+        if sos < 0:
+            return "a JPEG without image data (no SOS marker)"
+        if raw.find(_JPEG_EOI, sos + 2) < 0:
+            return "a truncated JPEG (its data ends before the end-of-image marker)"
+    elif raw.startswith(_PNG_SIGNATURE) and raw.rfind(_PNG_IEND) < 0:
+        return "a truncated PNG (no IEND chunk)"
+    return None
+
+
 def decode_image_file(path: Path) -> tuple[np.ndarray, bytes]:
-    """Decode an image file as stored (keeping 16-bit data); return it and its raw bytes."""
+    """Decode an image file as stored (keeping 16-bit data); return it and its raw bytes.
+
+    Raises :class:`FrameError` naming the file when it cannot be read or
+    decoded, or when it is truncated (see :func:`truncation_problem`: the
+    decoder would only warn and hand back a partly grey image).
+    """
     try:
         raw = path.read_bytes()
     except OSError as exc:
         raise FrameError(f"{path}: cannot be read ({exc.strerror})") from None
+    problem = truncation_problem(raw)
+    if problem is not None:
+        raise FrameError(f"{path}: corrupt frame: {problem}")
     image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)
     if image is None or image.size == 0:
         raise FrameError(f"{path}: cannot be decoded as an image")

@@ -662,12 +662,17 @@ def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[E
             report["light"]["estimated_position"] = pose.camera_to_world(point_cam).tolist()
             report["light"]["estimated_position_plane_rms"] = float(rms)
     if len(edges) == 2:
-        both = np.isfinite(edges[0].depth) & np.isfinite(edges[1].depth)
+        # Over the pixels where both edges were fused into an output point: a
+        # pair in conflict (beyond max_depth_jump) is an outlier, not noise, and
+        # is counted apart (its squared σ-distance would swamp the statistic).
+        measured = np.isfinite(edges[0].depth) & np.isfinite(edges[1].depth)
+        both = measured & keep
         diff = (edges[0].depth - edges[1].depth)[both]
         comb = np.sqrt(edges[0].sigma ** 2 + edges[1].sigma ** 2)[both]
         if diff.size:
             report["edges"]["disagreement"] = {
                 "pixels": int(both.sum()),
+                "not_fused": int((measured & ~keep).sum()),
                 "mean": float(np.mean(diff)),
                 "rms": float(np.sqrt(np.mean(diff**2))),
                 "median_abs": float(np.median(np.abs(diff))),

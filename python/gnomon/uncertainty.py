@@ -34,17 +34,75 @@ DERIVATIVE_STEP_FRAMES = 0.25
 MIN_FRAMES_PER_TRANSITION = 2.0
 
 
-def image_noise_dn(frame_a: np.ndarray, frame_b: np.ndarray) -> float:
-    """Robust per-frame image noise σI (DN) from two consecutive frames.
+def image_noise_dn(frame_a: np.ndarray, frame_b: np.ndarray, *, clip_sigmas: float = 4.0,
+                   iterations: int = 6) -> float:
+    """Per-frame image noise σI (DN) from two consecutive frames, without quantisation.
 
-    The difference of two frames is noise except where the shadow moved (a
-    small part of the image), so 1.4826·MAD of the difference, divided by √2,
-    estimates the noise of one frame. Quantisation alone gives ≈0.29 DN.
+    The difference of two frames is noise (σ√2) except where the shadow moved
+    or the scene changed (a small part of the image). Its spread is measured
+    as a *standard deviation* with iterative ``clip_sigmas``·σ clipping, not
+    as a median of absolute deviations: on 8-bit data the differences are
+    integers, so a MAD is an integer too (1.4826·1/√2 = 1.048 DN whatever the
+    true noise between ≈0.7 and ≈2 DN), while the clipped standard deviation
+    of integer differences is continuous (quantisation adds 1/12 DN² per
+    frame, which is part of the noise a threshold crossing sees).
+
+    A slow global change between the frames (exposure drift, passing haze) is
+    removed first as an offset and a gain, fitted on the unclipped pixels.
+    Samples at the ends of the range (0 or the dtype's maximum: clipped or
+    saturated) are excluded: their noise is hidden by the clipping.
+    Returns ≥ 1/√12 DN (the quantisation floor).
     """
-    diff = frame_a.astype(np.float32) - frame_b.astype(np.float32)
-    mad = float(np.median(np.abs(diff - np.median(diff))))
-    sigma = 1.4826 * mad / np.sqrt(2.0)
-    return max(sigma, 1.0 / np.sqrt(12.0))
+    a = np.asarray(frame_a)
+    b = np.asarray(frame_b)
+    if a.shape != b.shape:
+        raise ValueError(f"frames differ in shape: {a.shape} vs {b.shape}")
+    top = np.iinfo(a.dtype).max if np.issubdtype(a.dtype, np.integer) else np.inf
+    a = a.astype(np.float32).ravel()
+    b = b.astype(np.float32).ravel()
+    inside = (a > 0) & (b > 0) & (a < top) & (b < top)
+    floor = 1.0 / np.sqrt(12.0)
+    if inside.sum() < 16:
+        return float(floor)
+    a, b = a[inside], b[inside]
+    diff = a - b
+    level = 0.5 * (a + b)
+    level = level - float(level.mean())
+    # Starting scale: the MAD (integer on 8-bit data, only a start), at least one quantisation step.
+    med = float(np.median(diff))
+    scale = max(1.4826 * float(np.median(np.abs(diff - med))), 1.0)
+    offset, gain = med, 0.0
+    keep = np.ones(diff.size, dtype=bool)
+    for _ in range(iterations):
+        resid = diff - offset - gain * level
+        keep = np.abs(resid) <= clip_sigmas * scale
+        if keep.sum() < 16:
+            break
+        x, y = level[keep], diff[keep]
+        var_x = float(np.mean((x - x.mean()) ** 2))
+        gain = float(np.mean((x - x.mean()) * (y - y.mean())) / var_x) if var_x > 0 else 0.0
+        offset = float(y.mean() - gain * x.mean())
+        resid = y - offset - gain * x
+        new_scale = float(np.sqrt(np.mean(resid**2)))
+        # A Gaussian clipped at k·σ has a std smaller by this factor.
+        k = clip_sigmas * scale / max(new_scale, 1e-12)
+        new_scale /= _clipped_std_factor(min(k, 10.0))
+        converged = abs(new_scale - scale) <= 1e-3 * scale
+        scale = max(new_scale, 1e-6)
+        if converged:
+            break
+    return float(max(scale / np.sqrt(2.0), floor))
+
+
+def _clipped_std_factor(k: float) -> float:
+    """std of a unit Gaussian truncated to ±k (k in σ of the untruncated one)."""
+    from math import erf, exp, pi, sqrt
+
+    mass = erf(k / sqrt(2.0))
+    if mass <= 0:
+        return 1.0
+    pdf = exp(-0.5 * k * k) / sqrt(2.0 * pi)
+    return float(np.sqrt(max(1.0 - 2.0 * k * pdf / mass, 1e-6)))
 
 
 def linear_noise_at_threshold(sigma_dn: float, threshold_lin: np.ndarray, lut: np.ndarray) -> np.ndarray:

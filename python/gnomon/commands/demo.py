@@ -24,7 +24,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def demo_scene(name: str, simulate, cfg, out: Path, *, progress: bool, what: str = "frames"):
-    """Simulate one scene into OUT/NAME/capture, scan it into OUT/NAME/scan, compare with the truth."""
+    """Simulate one scene into OUT/NAME/capture, scan it into OUT/NAME/scan, compare with the truth.
+
+    The figures (errors over swept pixels, coverage, false points and gross
+    errors over all output points) are added to the scan's report.json as
+    ``accuracy``.
+    """
+    from gnomon import atomic
     from gnomon.accuracy import depth_accuracy
     from gnomon.pipeline import ScanOptions, run_scan
 
@@ -35,8 +41,15 @@ def demo_scene(name: str, simulate, cfg, out: Path, *, progress: bool, what: str
     truth = np.load(capture / "ground_truth.npz")
     units = result.report["units"]
     distance = float(truth["camera_distance_mm"] if units == "mm" else truth["camera_distance"])
-    acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], distance, units)
-    print(acc.table(f"{name}: depth against ground truth (swept pixels)"))
+    surface = truth["swept_surface"] if "swept_surface" in truth.files else None
+    acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], distance, units, sigma=result.sigma,
+                         swept_surface=surface)
+    print(acc.table(f"{name}: depth against ground truth (swept pixels; false points over all)"))
+    result.report["accuracy"] = acc.as_dict()
+    report_path = out / name / "scan" / "report.json"
+    report = json.loads(report_path.read_text())
+    report["accuracy"] = acc.as_dict()
+    atomic.write_text(report_path, json.dumps(report, indent=2))
     return result, truth, acc
 
 

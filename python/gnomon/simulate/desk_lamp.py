@@ -96,6 +96,9 @@ Ground truth (``ground_truth.npz``)
   no pixel that fails (1): a footprint straddling the edge of an object's
   cast shadow mixes lit and unlit surface just as one straddling a
   silhouette mixes depths, and biases the pixel's shadow time alike;
+* ``swept_surface`` — (1) and (2) without (3): the surface the shadow really
+  crossed while it was lit, mixed pixels included (a scanner's point
+  anywhere else measured nothing: it is a false point);
 * the camera (``K``, ``dist``, ``rvec``, ``tvec``, ``R``, ``t``), ``lamp``,
   ``image_size`` (W, H) and ``camera_distance_mm``;
 * the stick: ``stick_axis`` (N, 2, 3), two points of its axis per frame (the
@@ -654,6 +657,8 @@ class DeskLampScene:
                                borderValue=0).astype(bool)
         clean = (self.hit_f & ~near_edge)[self.crop]
         self.unmixed = clean
+        # Lit and crossed, mixed or not: where a shadow event was really there to measure.
+        self.swept_surface = self.lit & crossed
         self.swept = self._refine_swept(self.lit & crossed & clean)
         self.regions = self._regions()
 
@@ -727,6 +732,7 @@ class DeskLampScene:
             "points_world": self.points.astype(np.float32),
             "object_id": self.object_id,
             "swept": self.swept,
+            "swept_surface": self.swept_surface,
             "enter_time": self.enter_time.astype(np.float32),
             "leave_time": self.leave_time.astype(np.float32),
             "shadow_planes_enter": self.planes_enter,

@@ -159,6 +159,9 @@ Ground truth (``ground_truth.npz``; arrays H × W unless noted)
   3σ) sees another object, no surface or another surface (a neighbour with
   another normal or off the pixel's plane — ``desk_lamp``'s depth change
   > 1 % would flag the whole grazing ground), or fails (1);
+* ``swept_surface``: (1) and (2) without (3): a surface the shadow really
+  crossed while it was lit, mixed pixels included (a scanner's point
+  elsewhere measured nothing: it is a false point);
 * ``cloud_free_passage``: swept and no cloud frame within
   [enter_time − 1, leave_time + 1];
 * per frame (N): ``frame_times_utc`` (ISO 8601 strings), ``frame_times_utc_ns``
@@ -901,6 +904,8 @@ class FacadeSunScene:
                                borderValue=0).astype(bool)
         self.unmixed = (self.hit_f & ~near_edge)[self.crop]
         self.swept = self.sunlit & crossed & self.unmixed
+        # Sunlit and crossed, mixed or not: where a shadow event was really there to measure.
+        self.swept_surface = self.sunlit & crossed
         # No cloud frame while the shadow passes.
         cloud_frames = np.nonzero(self.cloud)[0]
         free = self.swept.copy()
@@ -1022,6 +1027,7 @@ class FacadeSunScene:
             "normals_world": self.normals.astype(np.float32),
             "object_id": self.object_id,
             "swept": self.swept,
+            "swept_surface": self.swept_surface,
             "sunlit": self.sunlit,
             "cloud_free_passage": self.cloud_free_passage,
             "enter_time": self.enter_time.astype(np.float32),

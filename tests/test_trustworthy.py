@@ -1,0 +1,115 @@
+"""Trustworthy points (issue 10): the pieces that need no simulated scan.
+
+* the image noise σI is measured without quantisation (8-bit frames);
+* a truncated frame is an error naming it (the decoder only warns);
+* the false-point rate counts points where nothing was swept, or far off.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from conftest import write_tiny_capture
+from gnomon.accuracy import FALSE_SIGMAS, GROSS_FRACTION, depth_accuracy
+from gnomon.cli import main
+from gnomon.uncertainty import image_noise_dn
+
+
+def noisy_pair(sigma_dn: float, seed: int, gain: float = 1.0, moved_rows: int = 0):
+    """Two u8 frames of one textured scene with independent Gaussian noise σ (DN), quantised."""
+    rng = np.random.default_rng(seed)
+    scene = rng.uniform(30.0, 220.0, (300, 400))
+    a = np.clip(np.rint(scene + sigma_dn * rng.standard_normal(scene.shape)), 0, 255).astype(np.uint8)
+    b = np.clip(np.rint(gain * scene + sigma_dn * rng.standard_normal(scene.shape)), 0, 255).astype(np.uint8)
+    if moved_rows:
+        b[100:100 + moved_rows] = 15  # a shadow arrived there
+    return a, b
+
+
+@pytest.mark.parametrize("sigma_dn", [0.6, 1.0, 1.25, 1.5, 2.0])
+def test_noise_is_not_quantised(sigma_dn: float) -> None:
+    # The truth a frame's threshold crossing sees: sensor noise plus rounding (1/12 DN²).
+    expected = np.sqrt(sigma_dn**2 + 1.0 / 12.0)
+    a, b = noisy_pair(sigma_dn, seed=int(10 * sigma_dn), gain=1.02, moved_rows=30)
+    got = image_noise_dn(a, b)
+    # 120 000 differences: the estimate's own spread is ≈ 0.2 %; the moved rows and
+    # the 2 % gain change must not bias it by more than a few per cent.
+    assert got == pytest.approx(expected, rel=0.03)
+
+
+def test_noise_tells_close_levels_apart() -> None:
+    # The old MAD estimate gave 1.048 DN for every one of these.
+    values = [image_noise_dn(*noisy_pair(s, seed=3)) for s in (0.9, 1.2, 1.5)]
+    assert values[0] < values[1] < values[2]
+    assert values[2] - values[0] > 0.5
+
+
+def test_noise_ignores_saturated_pixels() -> None:
+    a, b = noisy_pair(1.5, seed=5)
+    a[:150] = 255
+    b[:150] = 255  # half the image clipped: no noise visible there
+    assert image_noise_dn(a, b) == pytest.approx(np.sqrt(1.5**2 + 1 / 12), rel=0.03)
+
+
+def _jpeg_capture(folder: Path) -> Path:
+    log = write_tiny_capture(folder, extra={"capture": {"frames": "frames/*.jpg"}})
+    for png in sorted((folder / "frames").glob("*.png")):
+        image = cv2.imread(str(png), cv2.IMREAD_UNCHANGED)
+        cv2.imwrite(str(png.with_suffix(".jpg")), image, [cv2.IMWRITE_JPEG_QUALITY, 95])
+        png.unlink()
+    return log
+
+
+def test_truncated_jpeg_is_an_error_naming_the_frame(tmp_path: Path, capsys) -> None:
+    log = _jpeg_capture(tmp_path / "capture")
+    out = tmp_path / "scan"
+    assert main(["scan", str(log), "--out", str(out), "--quiet", "--no-rrd"]) == 0
+    capsys.readouterr()
+    victim = tmp_path / "capture" / "frames" / "frame_0009.jpg"
+    raw = victim.read_bytes()
+    victim.write_bytes(raw[: int(0.8 * len(raw))])
+    # cv2.imread still decodes it (libjpeg only warns "premature end"): the check must come from us.
+    assert cv2.imread(str(victim), cv2.IMREAD_UNCHANGED) is not None
+    out2 = tmp_path / "scan2"
+    code = main(["scan", str(log), "--out", str(out2), "--quiet", "--no-rrd"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and "frame_0009.jpg" in err[0] and "truncated" in err[0], err
+    assert not out2.exists()
+
+
+def test_truncated_png_is_an_error_naming_the_frame(tmp_path: Path, capsys) -> None:
+    log = write_tiny_capture(tmp_path / "capture")
+    victim = tmp_path / "capture" / "frames" / "frame_0003.png"
+    raw = victim.read_bytes()
+    victim.write_bytes(raw[:-12])  # the IEND chunk is gone
+    code = main(["scan", str(log), "--out", str(tmp_path / "scan"), "--quiet", "--no-rrd"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "frame_0003.png" in err[0], err
+
+
+def test_false_point_rate_counts_what_was_not_swept() -> None:
+    dist = 1000.0
+    truth = np.full((10, 10), 1000.0)
+    truth[0, :] = np.nan  # no surface (sky)
+    swept = np.zeros((10, 10), dtype=bool)
+    swept[2:, :] = True  # rows 0-1 never swept
+    depth = truth + 0.5
+    depth[0, :3] = 50.0  # 3 points in the sky
+    depth[1, :] = 1000.2  # 10 points on a surface the shadow never crossed, right or not
+    depth[5, 0] = 1000.0 + 2 * GROSS_FRACTION * dist  # > 1 % and > 5σ: false
+    depth[5, 1] = 1000.0 + 2 * GROSS_FRACTION * dist  # > 1 % but σ is large: not false, still gross
+    depth[6, 0] = np.nan  # not measured
+    sigma = np.full((10, 10), 1.0)
+    sigma[5, 1] = 2 * GROSS_FRACTION * dist / FALSE_SIGMAS * 1.5
+    acc = depth_accuracy(depth, truth, swept, dist, sigma=sigma)
+    assert acc.output_points == 3 + 10 + 80 - 1
+    assert acc.false_points == 3 + 10 + 1
+    assert acc.false_point_rate == pytest.approx(14 / 92)
+    assert acc.gross_points == 3 + 2
+    assert acc.coverage == pytest.approx(79 / 80)
+    # errors over swept pixels are unchanged by the false points elsewhere
+    assert acc.median_abs == pytest.approx(0.5)
