@@ -1,0 +1,303 @@
+"""`gnomon batch` on a real Dask cluster: a `dask scheduler` and two `dask worker` processes on 127.0.0.1.
+
+The scans run on the workers and are compared byte for byte with the same
+scans run sequentially in this process; a broken field log fails alone; a
+worker killed in the middle of a scan has its task rerun on the other worker
+with the same outputs; a rerun skips what is up to date.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from conftest import write_tiny_capture
+
+pytest.importorskip("distributed")
+
+import gnomon
+from gnomon.pipeline import ScanOptions, run_scan
+
+PYTHON_DIR = str(Path(gnomon.__file__).resolve().parent.parent)
+COMPARED = ("depth.npy", "sigma.npy", "shadow_time.npy", "undersampled.npy", "points.ply", "mesh.ply", "mesh.obj")
+START_TIMEOUT_S = 60
+BATCH_TIMEOUT_S = 180
+
+
+def _env() -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = PYTHON_DIR + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env["DASK_DISTRIBUTED__WORKER__DAEMON"] = "False"
+    return env
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Cluster:
+    """A scheduler and worker processes started here, all on loopback, all stopped by :meth:`close`."""
+
+    def __init__(self, root: Path):
+        self.root = root
+        self.port = _free_port()
+        self.address = f"tcp://127.0.0.1:{self.port}"
+        self.procs: list[subprocess.Popen] = []
+        self.workers: list[subprocess.Popen] = []
+        self.logs = root / "logs"
+        self.logs.mkdir(parents=True, exist_ok=True)
+        self.procs.append(self._spawn("scheduler", [sys.executable, "-m", "distributed.cli.dask_scheduler",
+                                                    "--host", "127.0.0.1", "--port", str(self.port),
+                                                    "--no-dashboard"]))
+
+    def _spawn(self, name: str, cmd: list[str]) -> subprocess.Popen:
+        with open(self.logs / f"{name}-{len(self.procs)}.log", "wb") as out:
+            return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=_env(), cwd=self.root,
+                                    start_new_session=True)
+
+    def add_worker(self) -> subprocess.Popen:
+        p = self._spawn("worker", [sys.executable, "-m", "distributed.cli.dask_worker", self.address,
+                                   "--host", "127.0.0.1", "--nthreads", "1", "--no-nanny", "--no-dashboard",
+                                   "--memory-limit", "0", "--death-timeout", "60"])
+        self.procs.append(p)
+        self.workers.append(p)
+        return p
+
+    def client(self):
+        from distributed import Client
+
+        return Client(self.address, timeout=START_TIMEOUT_S)
+
+    def ensure_workers(self, n: int) -> dict[str, int]:
+        """At least ``n`` live workers; returns {address: pid} of the live ones."""
+        alive = [p for p in self.workers if p.poll() is None]
+        for _ in range(n - len(alive)):
+            self.add_worker()
+        with self.client() as c:
+            c.wait_for_workers(n, timeout=START_TIMEOUT_S)
+            deadline = time.monotonic() + START_TIMEOUT_S
+            while True:  # a killed worker may still be listed for a moment
+                pids = c.run(os.getpid)
+                if len(pids) >= n or time.monotonic() > deadline:
+                    return pids
+                time.sleep(0.1)
+
+    def close(self) -> None:
+        for p in reversed(self.procs):
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for p in reversed(self.procs):
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout=10)
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    c = Cluster(tmp_path_factory.mktemp("dask"))
+    try:
+        for _ in range(2):
+            c.add_worker()
+        c.ensure_workers(2)
+        yield c
+    finally:
+        c.close()
+
+
+@pytest.fixture(scope="module")
+def captures(tmp_path_factory) -> dict[str, Path]:
+    """Four small captures: the simulated desk lit from the left and from the right (ground truth,
+    one camera: a merge pair) and two minimal sweeps with different lamps."""
+    from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
+
+    root = tmp_path_factory.mktemp("captures")
+    logs = {}
+    for name, side in (("left", "left"), ("right", "right")):
+        cfg = DeskLampConfig(width=240, height=180, frames=80, seed=1, lamp_side=side, pencil_photos=0)
+        logs[name] = simulate_desk_lamp(root / name, cfg).field_log
+    logs["tiny_a"] = write_tiny_capture(root / "tiny_a")
+    logs["tiny_b"] = write_tiny_capture(root / "tiny_b", n_frames=30, lamp=(-150.0, 40.0, 450.0))
+    return logs
+
+
+@pytest.fixture(scope="module")
+def sequential(captures, tmp_path_factory) -> dict[str, Path]:
+    """The same scans, one after another in this process: the reference for the workers' outputs."""
+    root = tmp_path_factory.mktemp("sequential")
+    out = {}
+    for name, log in captures.items():
+        run_scan(log, root / name, ScanOptions(progress=False))
+        out[name] = root / name
+    return out
+
+
+def _batch(args: list[str], timeout: float = BATCH_TIMEOUT_S, **kw) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "gnomon", "batch", "--quiet", *map(str, args)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(), **kw)
+
+
+def _run_batch(args: list[str]) -> subprocess.CompletedProcess:
+    p = _batch(args)
+    try:
+        out, err = p.communicate(timeout=BATCH_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.communicate()
+        raise
+    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
+
+
+def _summary(out: Path) -> dict[str, dict]:
+    with open(out / "summary.csv", newline="") as fh:
+        return {row["name"]: row for row in csv.DictReader(fh)}
+
+
+def _assert_same_outputs(a: Path, b: Path) -> None:
+    for name in COMPARED:
+        assert (a / name).read_bytes() == (b / name).read_bytes(), f"{a / name} differs from {b / name}"
+
+
+def test_batch_on_scheduler_equals_sequential_and_isolates_a_broken_log(cluster, captures, sequential, tmp_path):
+    cluster.ensure_workers(2)
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "field_log.toml").write_text('[capture]\nframes = "frames/*.png"\n')  # no frames, no camera
+    out = tmp_path / "batch"
+    logs = [captures[n] for n in ("left", "right", "tiny_a", "tiny_b")] + [broken / "field_log.toml"]
+    res = _run_batch([*logs, "--merge", "left,right", "--out", out, "--scheduler", cluster.address])
+    assert res.returncode == 2, res.stderr
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("gnomon: error:")]
+    assert len(errors) == 1 and str(broken / "field_log.toml") in errors[0], res.stderr
+
+    rows = _summary(out)
+    assert rows["broken"]["status"] == "failed" and rows["broken"]["error"] in errors[0]
+    assert not (out / "broken").exists()
+    workers = set()
+    for name in ("left", "right", "tiny_a", "tiny_b"):
+        assert rows[name]["status"] == "ok", rows[name]
+        _assert_same_outputs(out / name, sequential[name])
+        report = json.loads((sequential[name] / "report.json").read_text())
+        assert int(rows[name]["points"]) == report["coverage"]["points"]
+        workers.add(rows[name]["worker"])
+    assert len(workers) == 2, "both workers took scans"
+    # Ground truth exists for the simulated pair: the RMS is that of a working scan (the simulator's
+    # desk scans measure well under 1 % of the camera distance at this size) and absent for the others.
+    for name in ("left", "right"):
+        assert 0 < float(rows[name]["rms_pct"]) < 1.0, rows[name]
+        assert 0.05 < float(rows[name]["coverage_of_swept"]) <= 1.0
+    assert rows["tiny_a"]["rms"] == ""
+    assert rows["left+right"]["status"] == "ok"
+    merged = int(rows["left+right"]["points"])
+    assert merged > max(int(rows["left"]["points"]), int(rows["right"]["points"]))
+    summary = json.loads((out / "summary.json").read_text())
+    assert [j["name"] for j in summary["jobs"]] == ["left", "right", "tiny_a", "tiny_b", "broken", "left+right"]
+    assert (out / "batch.rrd").stat().st_size > 0
+
+    # A rerun skips what is up to date and rescans what changed (one frame's bytes).
+    mtimes = {n: (out / n / "depth.npy").stat().st_mtime_ns for n in ("left", "right", "tiny_a", "tiny_b")}
+    frame = min((captures["tiny_b"].parent / "frames").glob("*.png"))
+    original = frame.read_bytes()
+    try:
+        import cv2
+
+        img = cv2.imread(str(frame), cv2.IMREAD_UNCHANGED)
+        cv2.imwrite(str(frame), img, [cv2.IMWRITE_PNG_COMPRESSION, 9])  # same pixels, other bytes
+        assert frame.read_bytes() != original
+        res2 = _run_batch([*logs, "--merge", "left,right", "--out", out, "--scheduler", cluster.address])
+    finally:
+        frame.write_bytes(original)
+    assert res2.returncode == 2
+    rows2 = _summary(out)
+    assert [rows2[n]["status"] for n in ("left", "right", "tiny_a", "tiny_b", "left+right")] == \
+        ["skipped", "skipped", "skipped", "ok", "skipped"]
+    for n in ("left", "right", "tiny_a"):
+        assert (out / n / "depth.npy").stat().st_mtime_ns == mtimes[n]
+    _assert_same_outputs(out / "tiny_b", sequential["tiny_b"])  # same pixels, same scan
+
+
+def test_worker_killed_mid_scan_is_retried_with_the_same_outputs(cluster, tmp_path):
+    """Frame 5 of the capture is a FIFO that nobody writes: the scan blocks there, so the kill
+    certainly lands in the middle of it. The real frame replaces the FIFO's name first; the
+    blocked reader keeps waiting on the FIFO until its worker dies."""
+    pids = cluster.ensure_workers(2)
+    log = write_tiny_capture(tmp_path / "killme")
+    reference = tmp_path / "reference"
+    run_scan(log, reference, ScanOptions(progress=False))
+    frame = log.parent / "frames" / "frame_0005.png"
+    real = tmp_path / "frame_0005.png"
+    frame.replace(real)
+    os.mkfifo(frame)
+
+    out = tmp_path / "batch"
+    proc = _batch([log, "--out", out, "--scheduler", cluster.address])
+    try:
+        killed = None
+        with cluster.client() as c:
+            deadline = time.monotonic() + BATCH_TIMEOUT_S
+            while killed is None:
+                assert time.monotonic() < deadline, "the scan never started"
+                assert proc.poll() is None, proc.communicate()
+                busy = [addr for addr, keys in c.processing().items() if any("scan-killme" in str(k) for k in keys)]
+                if busy and list(out.glob(".killme.partial-*")):
+                    killed = busy[0]
+                else:
+                    time.sleep(0.05)
+        real.replace(frame)  # the retry reads the real frame; the blocked reader still waits on the FIFO
+        os.kill(pids[killed], signal.SIGKILL)
+        _, stderr = proc.communicate(timeout=BATCH_TIMEOUT_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, stderr
+    row = _summary(out)["killme"]
+    assert row["status"] == "ok" and row["worker"] != killed
+    _assert_same_outputs(out / "killme", reference)
+    assert not list(out.glob(".*partial*")), "the killed attempt's staging folder is gone"
+
+
+def test_batch_plan_errors_are_one_line_before_any_cluster_starts(tmp_path, capsys):
+    from gnomon.cli import main
+
+    a = write_tiny_capture(tmp_path / "a")
+    b = write_tiny_capture(tmp_path / "other" / "a")
+    cases = [
+        ([a, "--merge", "a,zz"], "--merge a,zz: no scan named 'zz'"),
+        ([a, b], "scan name 'a' is also that of"),
+        ([a, "--batch-file", tmp_path / "none.toml"], "none.toml: no such batch file"),
+        ([], "no field logs given"),
+    ]
+    for args, message in cases:
+        assert main(["batch", *map(str, args), "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "out").exists()
+
+
+def test_batch_file_names_scans_and_merges(tmp_path):
+    from gnomon.batch import plan_batch
+
+    write_tiny_capture(tmp_path / "d1")
+    write_tiny_capture(tmp_path / "d2")
+    (tmp_path / "survey.toml").write_text(
+        '[[scan]]\nfield_log = "d1/field_log.toml"\nname = "nov12"\n'
+        '[[scan]]\nfield_log = "d2/field_log.toml"\n'
+        '[[merge]]\nscans = ["nov12", "d2"]\nweights = "sigmoid"\nbeta = 4.0\n')
+    plan = plan_batch([], tmp_path / "out", batch_file=tmp_path / "survey.toml")
+    assert [(s.name, s.field_log) for s in plan.scans] == [("nov12", (tmp_path / "d1/field_log.toml").resolve()),
+                                                          ("d2", (tmp_path / "d2/field_log.toml").resolve())]
+    (m,) = plan.merges
+    assert (m.name, m.scan_a, m.scan_b, m.weights, m.beta) == ("nov12+d2", "nov12", "d2", "sigmoid", 4.0)
+    assert m.out == (tmp_path / "out" / "nov12+d2").resolve()
