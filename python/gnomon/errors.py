@@ -18,3 +18,7 @@ class FieldLogError(GnomonError):
 
 class FrameError(GnomonError):
     """A frame that is missing, unreadable or inconsistent (names the frame)."""
+
+
+class OutputError(GnomonError):
+    """An output that cannot be written: no space, file too large, read-only, permission (names the path)."""

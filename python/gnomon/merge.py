@@ -27,9 +27,9 @@ from gnomon.pipeline import (
     build_surface,
     open_recorder,
     record_surface,
-    staged_outputs,
     write_surface,
 )
+from gnomon.publish import staged_outputs
 from gnomon.triangulation import supported_by_neighbours
 
 

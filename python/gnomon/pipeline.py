@@ -5,17 +5,16 @@ Data flow (DESIGN.md): frames → streaming tracker (kernel) → shadow-time map
 → shadow planes from the light → triangulation (kernel) and σZ → fusion of
 the two edges → outlier rejection → mesh → outputs + recording.
 
-All outputs are first written into a staging folder beside the output folder
-and moved into place only when the whole scan has succeeded, each by an atomic
-rename: a failed or interrupted scan leaves no outputs behind.
+All outputs are first written into a staging folder on the output folder's
+filesystem and published as a whole only when the scan has succeeded
+(:mod:`gnomon.publish`): a failed or interrupted scan leaves no outputs behind,
+and a reader never sees the previous scan's files mixed with the new ones.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +30,7 @@ from gnomon.frames import FrameSource, sha256_file
 from gnomon.fusion import fuse_depths
 from gnomon.meshing import GridMesh, grid_mesh, remove_small_components, write_obj
 from gnomon.progress import Progress
+from gnomon.publish import OUTPUT_FILES, staged_outputs  # noqa: F401  (re-exported for merge)
 from gnomon.reference_lines import PlaneInCamera, ReferenceLines, measure_reference_lines
 from gnomon.shadow_planes import (
     lamp_shadow_planes,
@@ -49,8 +49,6 @@ from gnomon.uncertainty import (
     undersampled,
 )
 
-OUTPUT_FILES = ("points.ply", "mesh.ply", "mesh.obj", "depth.npy", "sigma.npy", "shadow_time.npy",
-                "undersampled.npy", "report.json", "scan.rrd", "merge.rrd")
 
 
 @dataclass
@@ -418,30 +416,6 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
         log = dataclasses.replace(log, pose=pose)
         check_geometry(log, pose)
     return log, report
-
-
-class staged_outputs:
-    """Context manager: a staging folder whose files move into ``out`` on success only."""
-
-    def __init__(self, out: Path, rrd_path: Path | None = None):
-        self.out, self.rrd_path = out, rrd_path
-
-    def __enter__(self) -> Path:
-        self.out.parent.mkdir(parents=True, exist_ok=True)
-        self.staging = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.partial-", dir=self.out.parent))
-        return self.staging
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        try:
-            if exc_type is None:
-                self.out.mkdir(parents=True, exist_ok=True)
-                for name in OUTPUT_FILES:
-                    if (self.staging / name).exists():
-                        target = self.rrd_path if (name == "scan.rrd" and self.rrd_path) else self.out / name
-                        Path(target).parent.mkdir(parents=True, exist_ok=True)
-                        (self.staging / name).replace(target)
-        finally:
-            shutil.rmtree(self.staging, ignore_errors=True)
 
 
 def open_recorder(staging: Path, opts: ScanOptions, name: str, filename: str = "scan.rrd"):
