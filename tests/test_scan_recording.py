@@ -12,16 +12,11 @@ import pytest
 from gnomon import ply
 from gnomon.cli import main
 from gnomon.review import summarize
-from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
 
 @pytest.fixture(scope="module")
-def scanned(tmp_path_factory):
-    root = tmp_path_factory.mktemp("rec")
-    simulate_desk_lamp(root / "capture", DeskLampConfig(width=400, height=300, frames=120, seed=5, pencil_photos=0))
-    assert main(["scan", str(root / "capture" / "field_log.toml"), "--out", str(root / "scan"), "--quiet",
-                 "--frame-stride", "10"]) == 0
-    return root
+def scanned(desk_scan):
+    return desk_scan
 
 
 def test_rrd_verify_passes(scanned) -> None:

@@ -6,4 +6,6 @@ planes at each instant, and a known light, Gnomon recovers dense 3D
 (Bouguet & Perona, "3D photography on your desk", ICCV 1998).
 """
 
-__version__ = "0.1.0"
+# The version's one home is Cargo.toml ([workspace.package] version): the
+# compiled kernel carries it, and maturin writes it into the package metadata.
+from gnomon._kernel import __version__

@@ -1,37 +1,80 @@
-"""A triangle mesh on the pixel grid, cut at depth discontinuities.
+"""A triangle mesh on the pixel grid, cut at depth discontinuities, and its files.
 
 Each 2×2 block of valid pixels gives two triangles (split along the shorter
 diagonal in depth); a triangle is kept only when the depths of its corners
 agree within ``max_relative_jump`` of their depth, so the mesh does not bridge
 an occlusion boundary with a curtain of long thin triangles.
+
+Pieces are *edge*-connected components (triangles sharing an edge); small
+pieces are dropped, and a vertex where pieces (or fans of one piece) touch
+only at that vertex is split into one copy per fan, so the mesh has no
+non-manifold vertices (every vertex's triangles form a single fan).
+
+Normals come from the pixel grid: the cross product of the surface's
+tangents along the image rows and columns (central differences between
+neighbours on the same side of any depth jump), oriented towards the camera.
+
+Writers: Wavefront OBJ with a material (``.mtl``) and a texture image
+(texture coordinates from each vertex's pixel), binary STL. Both are written
+with array operations only (no per-vertex Python loop).
 """
 
 from __future__ import annotations
 
-import io
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+
+__all__ = [
+    "GridMesh",
+    "grid_mesh",
+    "grid_normals",
+    "face_components",
+    "component_labels",
+    "remove_small_components",
+    "split_non_manifold_vertices",
+    "non_manifold_vertex_count",
+    "face_normals",
+    "write_obj",
+    "write_stl",
+]
 
 
 @dataclass
 class GridMesh:
-    """``vertices`` (V, 3) float32, ``faces`` (F, 3) int32 into them, ``pixel_index`` (V,) row-major."""
+    """A triangle mesh whose vertices are pixels of a grid.
+
+    ``vertices`` (V, 3) float32 (world frame, world units); ``faces`` (F, 3)
+    int32 into them, counter-clockwise seen from the camera; ``pixel_index``
+    (V,) the row-major pixel each vertex comes from (a pixel carries several
+    vertices where a non-manifold vertex was split); ``normals`` (V, 3) float32
+    unit normals towards the camera, or None.
+    """
 
     vertices: np.ndarray
     faces: np.ndarray
     pixel_index: np.ndarray
+    normals: np.ndarray | None = None
+
+    def pixel_uv(self, width: int) -> np.ndarray:
+        """(V, 2) float32 pixel coordinates (u, v) of the vertices (OpenCV: centres at integers)."""
+        v, u = np.divmod(self.pixel_index.astype(np.int64), int(width))
+        return np.stack([u, v], axis=1).astype(np.float32)
 
 
 def grid_mesh(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, max_relative_jump: float,
-              sigma: np.ndarray | None = None, sigma_factor: float = 5.0) -> GridMesh:
+              sigma: np.ndarray | None = None, sigma_factor: float = 5.0,
+              normals: np.ndarray | None = None) -> GridMesh:
     """Mesh the valid pixels of an (H, W) grid.
 
     ``points`` (H, W, 3) the coordinates to use for vertices (any frame),
     ``depth`` (H, W) camera Z for the discontinuity test. A triangle is cut
     when its corners' depths spread more than ``max_relative_jump·Z`` and, when
     ``sigma`` (σZ per pixel) is given, more than ``sigma_factor·σ`` too, so
-    noise alone never tears a smooth surface.
+    noise alone never tears a smooth surface. ``normals`` (H, W, 3), when
+    given, become the vertices' normals.
     Faces are oriented counter-clockwise as seen from the camera.
     """
     h, w = valid.shape
@@ -71,68 +114,374 @@ def grid_mesh(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, max_rela
         tris.append(np.stack([p[keep], q[keep], r[keep]], axis=1))
     faces = np.concatenate(tris).astype(np.int32) if tris else np.zeros((0, 3), np.int32)
     vertices = points.reshape(-1, 3)[pixel_index].astype(np.float32)
-    return GridMesh(vertices, faces, pixel_index)
+    vn = None if normals is None else normals.reshape(-1, 3)[pixel_index].astype(np.float32)
+    return GridMesh(vertices, faces, pixel_index, vn)
+
+
+def grid_normals(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, camera_centre: np.ndarray,
+                 max_relative_jump: float) -> np.ndarray:
+    """Unit surface normals (H, W, 3) float32 from the pixel grid, oriented towards the camera.
+
+    ``points`` (H, W, 3) in any frame (world units), ``camera_centre`` (3,) the
+    camera's centre in that frame, ``depth`` (H, W) camera Z for the
+    discontinuity test: a neighbour whose depth differs by more than
+    ``max_relative_jump·Z`` lies across an occlusion and is not used. The
+    tangents along the row and the column are central differences where both
+    neighbours qualify, one-sided where only one does; a pixel with no
+    qualifying neighbour in a direction gets the unit vector towards the
+    camera. NaN where ``valid`` is False.
+    """
+    p = np.where(valid[..., None], points, np.nan).astype(np.float64)
+    z = np.where(valid, depth, np.nan).astype(np.float64)
+    h, w = valid.shape
+
+    def tangent(axis: int) -> np.ndarray:
+        pad = [(0, 0)] * 3
+        pad[axis] = (1, 1)
+        pp = np.pad(p, pad, constant_values=np.nan)
+        zp = np.pad(z, pad[:2], constant_values=np.nan)
+        sl = [slice(None)] * 2
+        lo, hi, mid = list(sl), list(sl), list(sl)
+        lo[axis], hi[axis] = slice(0, -2), slice(2, None)
+        mid[axis] = slice(1, -1)
+        with np.errstate(invalid="ignore"):
+            ok_lo = np.abs(zp[tuple(lo)] - z) <= max_relative_jump * np.abs(z)
+            ok_hi = np.abs(zp[tuple(hi)] - z) <= max_relative_jump * np.abs(z)
+        t_both = pp[tuple(hi)] - pp[tuple(lo)]
+        t_hi = pp[tuple(hi)] - p
+        t_lo = p - pp[tuple(lo)]
+        t = np.where((ok_lo & ok_hi)[..., None], t_both, np.where(ok_hi[..., None], t_hi,
+                                                                  np.where(ok_lo[..., None], t_lo, np.nan)))
+        return t
+
+    n = np.cross(tangent(1), tangent(0))  # along u × along v
+    to_cam = np.asarray(camera_centre, dtype=np.float64).reshape(1, 1, 3) - p
+    to_cam /= np.linalg.norm(to_cam, axis=2, keepdims=True)
+    norm = np.linalg.norm(n, axis=2, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = n / norm
+    bad = ~np.isfinite(n).all(axis=2) | (norm[..., 0] == 0)
+    n[bad] = to_cam[bad]
+    flip = np.einsum("hwk,hwk->hw", n, to_cam) < 0
+    n[flip] *= -1.0
+    n[~valid] = np.nan
+    assert n.shape == (h, w, 3)
+    return n.astype(np.float32)
+
+
+def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 3) float32 unit normals of the triangles (right-hand rule over the corner order)."""
+    v = np.asarray(vertices, dtype=np.float32)
+    f = np.asarray(faces)
+    a = v[f[:, 0]]
+    b = v[f[:, 1]] - a
+    c = v[f[:, 2]] - a
+    n = np.empty_like(a)
+    n[:, 0] = b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1]
+    n[:, 1] = b[:, 2] * c[:, 0] - b[:, 0] * c[:, 2]
+    n[:, 2] = b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]
+    norm = np.sqrt(np.einsum("ij,ij->i", n, n))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n /= norm[:, None]
+    n[norm == 0] = 0.0
+    return n
+
+
+def _connected(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Component label (0..k-1) of n nodes linked by the pairs (a[i], b[i])."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    g = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n, n))
+    return connected_components(g, directed=False)[1]
+
+
+def face_components(faces: np.ndarray) -> np.ndarray:
+    """Edge-connected component label of every face: faces sharing an edge are connected.
+
+    Faces touching at a single vertex are *not* connected.
+    """
+    f = np.asarray(faces, dtype=np.int64)
+    m = len(f)
+    if m == 0:
+        return np.zeros(0, dtype=np.int64)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    key = np.minimum(e[:, 0], e[:, 1]) * (int(f.max()) + 1) + np.maximum(e[:, 0], e[:, 1])
+    face = np.tile(np.arange(m), 3)
+    order = np.argsort(key, kind="stable")
+    k, fo = key[order], face[order]
+    same = k[1:] == k[:-1]
+    return _connected(m, fo[:-1][same], fo[1:][same])
 
 
 def component_labels(n_vertices: int, faces: np.ndarray) -> np.ndarray:
-    """Connected-component label of every vertex (vertices sharing a face are connected).
+    """Edge-connected component label of every vertex (−1 for a vertex in no face).
 
-    Label propagation with pointer jumping: each pass gives every face's
-    vertices the smallest label among them, then shortcuts label chains.
+    A vertex shared by several components (they touch only there) takes the
+    label of one of them; :func:`split_non_manifold_vertices` separates them.
     """
-    labels = np.arange(n_vertices)
-    if len(faces) == 0:
-        return labels
-    f = faces.astype(np.int64)
-    while True:
-        m = np.minimum(np.minimum(labels[f[:, 0]], labels[f[:, 1]]), labels[f[:, 2]])
-        new = labels.copy()
-        for k in range(3):
-            np.minimum.at(new, f[:, k], m)
-        np.minimum.at(new, labels, new)  # a root takes the smallest label pointing to it
-        while True:
-            jumped = new[new]
-            if np.array_equal(jumped, new):
-                break
-            new = jumped
-        if np.array_equal(new, labels):
-            return labels
-        labels = new
+    labels = np.full(n_vertices, -1, dtype=np.int64)
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f):
+        comp = face_components(f)
+        labels[f.ravel()] = np.repeat(comp, 3)
+    return labels
+
+
+def _fans(faces: np.ndarray, corners: np.ndarray | None = None) -> np.ndarray:
+    """Fan label of face corners (``corners`` indices into ``faces.ravel()``, default all).
+
+    Two corners at the same vertex are in one fan when their triangles share
+    an edge at that vertex; a manifold vertex has exactly one fan.
+    """
+    f = np.asarray(faces, dtype=np.int64)
+    corner = np.arange(f.size) if corners is None else np.asarray(corners, dtype=np.int64)
+    v = f.ravel()[corner]
+    nxt = f[:, [1, 2, 0]].ravel()[corner]
+    prv = f[:, [2, 0, 1]].ravel()[corner]
+    n = int(f.max()) + 1
+    # Each corner has two edges at its vertex: (v, next) and (v, previous).
+    key = np.concatenate([v * n + nxt, v * n + prv])
+    owner = np.tile(np.arange(len(corner)), 2)
+    order = np.argsort(key, kind="stable")
+    k, o = key[order], owner[order]
+    same = k[1:] == k[:-1]
+    return _connected(len(corner), o[:-1][same], o[1:][same])
+
+
+def _candidate_corners(f: np.ndarray) -> np.ndarray:
+    """Corners at vertices that may have several fans.
+
+    A vertex whose triangles form one fan has as many triangles as interior
+    edges (a closed fan) or one more (an open fan); more than one more means
+    several open fans. (A closed fan plus another fan cannot occur on a pixel
+    grid: the closed fan fills every quad around the vertex.)
+    """
+    n = int(f.max()) + 1
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    lo, hi = np.minimum(e[:, 0], e[:, 1]), np.maximum(e[:, 0], e[:, 1])
+    keys, counts = np.unique(lo * n + hi, return_counts=True)
+    shared = keys[counts >= 2]
+    interior = np.bincount(shared // n, minlength=n) + np.bincount(shared % n, minlength=n)
+    open_fans = np.bincount(f.ravel(), minlength=n) - interior
+    return np.flatnonzero((open_fans >= 2)[f.ravel()])
+
+
+def non_manifold_vertex_count(faces: np.ndarray) -> int:
+    """Vertices whose triangles form more than one fan (pieces touching at a point)."""
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return 0
+    fan = _fans(f)
+    # a fan belongs to one vertex: count the distinct fans at each vertex
+    first = np.unique(fan, return_index=True)[1]
+    return int(np.count_nonzero(np.bincount(f.ravel()[first]) > 1))
+
+
+def split_non_manifold_vertices(mesh: GridMesh) -> GridMesh:
+    """One vertex copy per fan: pieces that touch only at a vertex get their own vertices.
+
+    Positions, pixels and normals are copied; the faces' shape is unchanged.
+    Vertices in no face are dropped.
+    """
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    if len(f) == 0:
+        return GridMesh(mesh.vertices[:0], mesh.faces[:0].astype(np.int32), mesh.pixel_index[:0],
+                        None if mesh.normals is None else mesh.normals[:0])
+    n = len(mesh.vertices)
+    v = f.ravel()
+    old = np.flatnonzero(np.bincount(v, minlength=n) > 0)  # used vertices keep their order
+    remap = np.full(n, -1, dtype=np.int64)
+    remap[old] = np.arange(len(old))
+    new = remap[v]
+    corners = _candidate_corners(f)
+    if len(corners):
+        fan = _fans(f, corners)
+        fans, first = np.unique(fan, return_index=True)  # fans, in order of label
+        fan_vertex = v[corners[first]]
+        # the first fan at each vertex keeps it; every further fan gets a copy
+        order = np.lexsort((fans, fan_vertex))
+        extra = np.zeros(len(fans), dtype=bool)
+        extra[order[1:]] = fan_vertex[order[1:]] == fan_vertex[order[:-1]]
+        copy_id = np.full(len(fans), -1, dtype=np.int64)
+        copy_id[extra] = len(old) + np.arange(int(extra.sum()))
+        fan_to_new = np.where(extra, copy_id, remap[fan_vertex])
+        new[corners] = fan_to_new[np.searchsorted(fans, fan)]
+        old = np.concatenate([old, fan_vertex[extra]])
+    faces = new.reshape(-1, 3).astype(np.int32)
+    normals = None if mesh.normals is None else mesh.normals[old]
+    return GridMesh(mesh.vertices[old], faces, mesh.pixel_index[old], normals)
 
 
 def remove_small_components(mesh: GridMesh, min_vertices: int = 50) -> GridMesh:
-    """Drop mesh pieces with fewer than ``min_vertices`` vertices (specks, torn slivers).
+    """Drop edge-connected pieces with fewer than ``min_vertices`` vertices (specks, torn slivers).
 
-    Isolated vertices (in no face) are kept out of the mesh too; the point
-    cloud still has them.
+    Vertices in no face are dropped too (the point cloud still has them), and
+    the vertices where kept pieces touch only at a point are split
+    (:func:`split_non_manifold_vertices`): the result has no non-manifold vertex.
     """
-    labels = component_labels(len(mesh.vertices), mesh.faces)
-    sizes = np.bincount(labels, minlength=len(mesh.vertices))
-    in_face = np.zeros(len(mesh.vertices), dtype=bool)
-    in_face[mesh.faces.ravel()] = True
-    keep_v = in_face & (sizes[labels] >= min_vertices)
-    remap = np.full(len(mesh.vertices), -1, dtype=np.int64)
-    remap[keep_v] = np.arange(int(keep_v.sum()))
-    faces = remap[mesh.faces]
-    faces = faces[np.all(faces >= 0, axis=1)].astype(np.int32)
-    return GridMesh(mesh.vertices[keep_v], faces, mesh.pixel_index[keep_v])
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    if len(f):
+        comp = face_components(f)
+        # vertices per component (a vertex shared by two components counts for each)
+        # vertices per piece (a vertex where pieces touch counts for one of them)
+        vertex_comp = np.full(len(mesh.vertices), -1, dtype=np.int64)
+        vertex_comp[f.ravel()] = np.repeat(comp, 3)
+        used = vertex_comp[vertex_comp >= 0]
+        sizes = np.bincount(used, minlength=int(comp.max()) + 1)
+        f = f[sizes[comp] >= min_vertices]
+    return split_non_manifold_vertices(GridMesh(mesh.vertices, f.astype(np.int32), mesh.pixel_index,
+                                                mesh.normals))
 
 
-def write_obj(path, vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray | None = None) -> None:
-    """Write a triangle mesh as Wavefront OBJ, atomically.
+# --------------------------------------------------------------------------- writers
 
-    Vertices as ``v x y z`` (world units), with ``r g b`` in 0..1 appended when
-    colours are given (the common vertex-colour extension); faces 1-based.
+def _int_chars(values: np.ndarray) -> np.ndarray:
+    """(N, D) uint8 decimal digits of non-negative ints, right-aligned, NUL-padded."""
+    x = np.asarray(values, dtype=np.int64).ravel()
+    d = max(1, len(str(int(x.max())))) if x.size else 1
+    out = np.zeros((x.size, d), dtype=np.uint8)
+    rest = x.copy()
+    for j in range(d - 1, -1, -1):
+        rest, digit = np.divmod(rest, 10)
+        out[:, j] = digit + 48
+        if j < d - 1:
+            out[:, j][(rest == 0) & (digit == 0)] = 0  # leading zeros
+    return out
+
+
+def _fixed_chars(values: np.ndarray, decimals: int) -> np.ndarray:
+    """(N, W) uint8 fixed-point text of floats, right-aligned, space-padded (``-12.3400``).
+
+    NaN and inf are written as 0 (an OBJ file has no way to say "none").
+    """
+    x = np.nan_to_num(np.asarray(values, dtype=np.float64).ravel(), nan=0.0, posinf=0.0, neginf=0.0)
+    scale = 10 ** decimals
+    q = np.rint(np.abs(x) * scale).astype(np.int64)
+    neg = (x < 0) & (q > 0)
+    ip, fp = np.divmod(q, scale)
+    ichars = _int_chars(ip)
+    ichars[:, -1][ichars[:, -1] == 0] = 48
+    n, di = ichars.shape
+    out = np.full((n, 1 + di + 1 + decimals), 32, dtype=np.uint8)
+    body = out[:, 1:1 + di]
+    body[:] = np.where(ichars == 0, 32, ichars)
+    # the minus sign goes right before the first digit
+    first = np.argmax(ichars != 0, axis=1)
+    rows = np.flatnonzero(neg)
+    out[rows, first[rows]] = ord("-")
+    if decimals:
+        out[:, 1 + di] = ord(".")
+        for j in range(decimals):
+            out[:, 2 + di + j] = (fp // 10 ** (decimals - 1 - j)) % 10 + 48
+    return out
+
+
+def _decimals_for(values: np.ndarray, significant: int = 8) -> int:
+    """Decimals that keep ``significant`` digits of the largest magnitude (float32 holds ~7.2)."""
+    finite = np.abs(values[np.isfinite(values)])
+    top = float(finite.max()) if finite.size else 1.0
+    digits = len(str(int(top))) if top >= 1 else 0
+    return int(np.clip(significant - digits, 1, 9))
+
+
+def _lines(prefix: bytes, columns: list[np.ndarray]) -> bytes:
+    """Join per-row byte columns into lines ``prefix col col ...\\n`` (space-padded columns)."""
+    n = columns[0].shape[0]
+    width = len(prefix) + sum(c.shape[1] + 1 for c in columns) + 1
+    buf = np.empty((n, width), dtype=np.uint8)
+    buf[:, :len(prefix)] = np.frombuffer(prefix, dtype=np.uint8)
+    o = len(prefix)
+    for c in columns:
+        buf[:, o] = 32
+        buf[:, o + 1:o + 1 + c.shape[1]] = c
+        o += 1 + c.shape[1]
+    buf[:, o] = 10
+    return buf.tobytes()
+
+
+def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, *,
+              normals: np.ndarray | None = None, uv: np.ndarray | None = None,
+              texture: np.ndarray | None = None, comment: str = "") -> None:
+    """Write a triangle mesh as Wavefront OBJ, atomically, with its material and texture.
+
+    ``vertices`` (V, 3) world units; ``faces`` (F, 3) 0-based; ``normals``
+    (V, 3) unit vectors (``vn``); ``uv`` (V, 2) texture coordinates in [0, 1]
+    (``vt``, origin bottom-left as OBJ wants); ``texture`` (H, W, 3) uint8 RGB:
+    written as ``<stem>.png`` beside the OBJ with a material file
+    ``<stem>.mtl`` (``map_Kd``) that the OBJ names in ``mtllib``. Faces refer
+    to the same index for position, texture and normal (``f a/a/a``).
+    Only official OBJ statements are used (no per-vertex colours).
     """
     from gnomon import atomic
 
-    v = np.asarray(vertices, dtype=np.float64)
-    buf = io.StringIO()
-    buf.write(f"# gnomon mesh: {len(v)} vertices, {len(faces)} faces\n")
-    if rgb is not None:
-        table = np.concatenate([v, np.asarray(rgb, dtype=np.float64) / 255.0], axis=1)
-        np.savetxt(buf, table, fmt="v %.7g %.7g %.7g %.4f %.4f %.4f")
-    else:
-        np.savetxt(buf, v, fmt="v %.7g %.7g %.7g")
-    np.savetxt(buf, np.asarray(faces, dtype=np.int64) + 1, fmt="f %d %d %d")
-    atomic.write_text(path, buf.getvalue())
+    target = Path(path)
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise ValueError("faces index vertices out of range")
+    parts: list[bytes] = [f"# gnomon mesh: {len(v)} vertices, {len(f)} faces\n".encode()]
+    if comment:
+        parts += [f"# {line}\n".encode() for line in comment.splitlines()]
+    if texture is not None:
+        if uv is None:
+            raise ValueError("a texture needs texture coordinates (uv)")
+        parts.append(f"mtllib {target.stem}.mtl\nusemtl gnomon\n".encode())
+    if len(v):
+        dec = _decimals_for(v)
+        parts.append(_lines(b"v", [_fixed_chars(v[:, k], dec) for k in range(3)]))
+        if uv is not None:
+            t = np.asarray(uv, dtype=np.float64).reshape(len(v), 2)
+            parts.append(_lines(b"vt", [_fixed_chars(t[:, k], 6) for k in range(2)]))
+        if normals is not None:
+            n = np.asarray(normals, dtype=np.float64).reshape(len(v), 3)
+            parts.append(_lines(b"vn", [_fixed_chars(n[:, k], 5) for k in range(3)]))
+    if len(f):
+        # One token per vertex ("12/12/12", NUL-padded: removed below), gathered by the faces.
+        idx = _int_chars(np.arange(1, len(v) + 1))
+        k = 1 + (uv is not None) + (normals is not None)
+        d = idx.shape[1]
+        token = np.zeros((len(idx), k * d + (k - 1)), dtype=np.uint8)
+        for j in range(k):
+            token[:, j * (d + 1):j * (d + 1) + d] = idx
+            if j:
+                token[:, j * (d + 1) - 1] = ord("/")
+        if uv is None and normals is not None:  # position//normal
+            token = np.concatenate([token[:, :d + 1], np.full((len(idx), 1), ord("/"), np.uint8),
+                                    token[:, d + 1:]], axis=1)
+        buf = _lines(b"f", [token[f[:, j]] for j in range(3)])
+        arr = np.frombuffer(buf, dtype=np.uint8)
+        parts.append(arr[arr != 0].tobytes())
+    if texture is not None:
+        import cv2
+
+        img = np.asarray(texture, dtype=np.uint8)
+        ok, png = cv2.imencode(".png", img[:, :, ::-1] if img.ndim == 3 else img)
+        if not ok:  # pragma: no cover
+            raise RuntimeError("PNG encoding failed")
+        atomic.write_bytes(target.with_suffix(".png"), png.tobytes())
+        atomic.write_text(target.with_suffix(".mtl"),
+                          "# gnomon material: the scan's colours as a texture\n"
+                          "newmtl gnomon\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n"
+                          f"map_Kd {target.stem}.png\n")
+    atomic.write_bytes(target, b"".join(parts))
+
+
+def write_stl(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, header: str = "gnomon mesh") -> None:
+    """Write a triangle mesh as binary STL (float32, little-endian), atomically.
+
+    Each triangle carries its unit normal (right-hand rule over its corners);
+    STL has no units: the coordinates are the world units (say which in
+    ``header``, at most 80 ASCII characters; it must not start with ``solid``).
+    """
+    from gnomon import atomic
+
+    v = np.asarray(vertices, dtype=np.float32).reshape(-1, 3)
+    f = np.asarray(faces, dtype=np.intp).reshape(-1, 3)
+    head = header.encode("ascii")[:80]
+    if head.lower().startswith(b"solid"):
+        raise ValueError("a binary STL header must not start with 'solid'")
+    table = np.zeros(len(f), dtype=np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")]))
+    table["n"] = face_normals(v, f)
+    table["v"] = v[f]
+    atomic.write_bytes(path, head.ljust(80, b" ") + np.uint32(len(f)).astype("<u4").tobytes() + table.tobytes())

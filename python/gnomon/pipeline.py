@@ -28,7 +28,7 @@ from gnomon.errors import FrameError, GnomonError
 from gnomon.fieldlog import FieldLog, check_geometry, load_field_log
 from gnomon.frames import FrameSource, sha256_file
 from gnomon.fusion import fuse_depths
-from gnomon.meshing import GridMesh, grid_mesh, remove_small_components, write_obj
+from gnomon.meshing import GridMesh, grid_mesh, grid_normals, remove_small_components, write_obj, write_stl
 from gnomon.progress import Progress
 from gnomon.publish import OUTPUT_FILES, staged_outputs  # noqa: F401  (re-exported for merge)
 from gnomon.reference_lines import PlaneInCamera, ReferenceLines, measure_reference_lines
@@ -298,6 +298,8 @@ class Surface:
     uv: np.ndarray  # (N, 2) float32 pixel of each point
     mesh: GridMesh
     vertex_rgb: np.ndarray  # (V, 3) uint8
+    normals: np.ndarray  # (N, 3) float32 unit normals (world frame, towards the camera)
+    rgb: np.ndarray  # (H, W, 3) uint8 colour image (the mesh's texture)
 
 
 def build_surface(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np.ndarray, valid: np.ndarray,
@@ -308,21 +310,29 @@ def build_surface(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np.
     points_cam = points_from_depth(ray_map, depth)
     world_grid = np.full(points_cam.shape, np.nan, dtype=np.float32)
     world_grid[valid] = pose.camera_to_world(points_cam[valid].astype(np.float64))
-    mesh = remove_small_components(grid_mesh(world_grid, depth, valid, max_relative_jump, sigma=sigma))
+    normals = grid_normals(world_grid, depth, valid, pose.camera_centre_world, max_relative_jump)
+    mesh = remove_small_components(grid_mesh(world_grid, depth, valid, max_relative_jump, sigma=sigma,
+                                             normals=normals))
     v, u = np.nonzero(valid)
     uv = np.stack([u, v], axis=1).astype(np.float32)
     return Surface(depth, sigma, valid, world_grid[valid], rgb[valid], uv, mesh,
-                   rgb.reshape(-1, 3)[mesh.pixel_index])
+                   rgb.reshape(-1, 3)[mesh.pixel_index], normals[valid], rgb)
 
 
 def write_surface(folder: Path, surface: Surface, units: str) -> None:
-    """points.ply, mesh.ply, mesh.obj, depth.npy, sigma.npy (each atomically)."""
+    """points.ply, mesh.ply, mesh.obj (+ .mtl, .png texture), mesh.stl, depth.npy, sigma.npy (each atomically)."""
     comments = [f"gnomon {__version__}", ply.units_comment(units), "frame world"]
     ply.write_points_ply(folder / "points.ply", surface.points_world, surface.colors,
-                         surface.sigma[surface.valid], surface.uv, comments=comments)
-    ply.write_mesh_ply(folder / "mesh.ply", surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb,
-                       comments=comments)
-    write_obj(folder / "mesh.obj", surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb)
+                         surface.sigma[surface.valid], surface.uv, comments=comments, normals=surface.normals)
+    mesh = surface.mesh
+    ply.write_mesh_ply(folder / "mesh.ply", mesh.vertices, mesh.faces, surface.vertex_rgb,
+                       comments=comments, normals=mesh.normals)
+    h, w = surface.valid.shape
+    tex_uv = (mesh.pixel_uv(w) + 0.5) / np.array([w, h], dtype=np.float32)
+    tex_uv[:, 1] = 1.0 - tex_uv[:, 1]  # OBJ: v up from the image's bottom
+    write_obj(folder / "mesh.obj", mesh.vertices, mesh.faces, normals=mesh.normals, uv=tex_uv,
+              texture=surface.rgb, comment=f"gnomon {__version__}, units {units}, frame world")
+    write_stl(folder / "mesh.stl", mesh.vertices, mesh.faces, header=f"gnomon {__version__} mesh, units {units}")
     atomic.save_npy(folder / "depth.npy", surface.depth)
     atomic.save_npy(folder / "sigma.npy", surface.sigma)
 

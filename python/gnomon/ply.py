@@ -2,14 +2,15 @@
 
 Layouts written by Gnomon (DESIGN.md, "Outputs of `gnomon scan`")::
 
-    points.ply   element vertex N: float x y z [uchar red green blue] [float sigma]
-                 [float u v]
-    mesh.ply     element vertex N: float x y z [uchar red green blue]
+    points.ply   element vertex N: float x y z [float nx ny nz] [uchar red green blue]
+                 [float sigma] [float u v]
+    mesh.ply     element vertex N: float x y z [float nx ny nz] [uchar red green blue]
                  element face M:   list uchar int vertex_indices   (triangles)
 
 Coordinates are float32 in world units (the units go into a ``comment units
 <u>`` line, see :func:`units_comment`); ``sigma`` is the per-point standard
-deviation of the depth in the same units; ``u v`` are the pixel coordinates
+deviation of the depth in the same units; ``nx ny nz`` the unit surface
+normal (world frame, towards the camera); ``u v`` are the pixel coordinates
 (OpenCV convention, pixel centres at integers) the point came from.
 
 Files are written atomically (temporary file beside the target, then rename).
@@ -96,6 +97,7 @@ def _vertex_table(
     rgb: np.ndarray | None,
     sigma: np.ndarray | None = None,
     uv: np.ndarray | None = None,
+    normals: np.ndarray | None = None,
 ) -> tuple[np.ndarray, list[str]]:
     xyz = np.asarray(xyz)
     if xyz.ndim != 2 or xyz.shape[1] != 3:
@@ -105,9 +107,13 @@ def _vertex_table(
     rgb = _as_rows(rgb, n, 3, "u1", "rgb")
     sigma = _as_rows(sigma, n, None, "<f4", "sigma")
     uv = _as_rows(uv, n, 2, "<f4", "uv")
+    normals = _as_rows(normals, n, 3, "<f4", "normals")
 
     fields: list[tuple] = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     props = ["property float x", "property float y", "property float z"]
+    if normals is not None:
+        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+        props += ["property float nx", "property float ny", "property float nz"]
     if rgb is not None:
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
         props += ["property uchar red", "property uchar green", "property uchar blue"]
@@ -120,6 +126,8 @@ def _vertex_table(
 
     table = np.empty(n, dtype=np.dtype(fields))  # packed: no alignment padding
     table["x"], table["y"], table["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    if normals is not None:
+        table["nx"], table["ny"], table["nz"] = normals[:, 0], normals[:, 1], normals[:, 2]
     if rgb is not None:
         table["red"], table["green"], table["blue"] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
     if sigma is not None:
@@ -136,14 +144,16 @@ def write_points_ply(
     sigma: np.ndarray | None = None,
     uv: np.ndarray | None = None,
     comments: Iterable[str] = (),
+    normals: np.ndarray | None = None,
 ) -> None:
     """Write a point cloud as binary little-endian PLY, atomically.
 
     ``xyz`` (N, 3) float32 world coordinates; ``rgb`` (N, 3) uint8 or None;
     ``sigma`` (N,) float32 or None; ``uv`` (N, 2) float32 pixel coordinates or
-    None; ``comments`` one line each (e.g. :func:`units_comment`).
+    None; ``normals`` (N, 3) float32 unit normals or None; ``comments`` one
+    line each (e.g. :func:`units_comment`).
     """
-    table, props = _vertex_table(xyz, rgb, sigma, uv)
+    table, props = _vertex_table(xyz, rgb, sigma, uv, normals)
     header = _header([("vertex", len(table), props)], _check_comments(comments))
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
@@ -157,13 +167,15 @@ def write_mesh_ply(
     faces: np.ndarray,
     rgb: np.ndarray | None = None,
     comments: Iterable[str] = (),
+    normals: np.ndarray | None = None,
 ) -> None:
     """Write a triangle mesh as binary little-endian PLY, atomically.
 
     ``vertices`` (N, 3) float32; ``faces`` (M, 3) int32 vertex indices (0-based);
-    ``rgb`` (N, 3) uint8 per-vertex colour or None.
+    ``rgb`` (N, 3) uint8 per-vertex colour or None; ``normals`` (N, 3) float32
+    per-vertex unit normals or None.
     """
-    table, props = _vertex_table(vertices, rgb)
+    table, props = _vertex_table(vertices, rgb, normals=normals)
     f = np.asarray(faces)
     if f.ndim != 2 or f.shape[1] != 3:
         raise ValueError(f"faces must have shape (M, 3), got {f.shape}")
@@ -354,7 +366,7 @@ def read_ply(path: str | os.PathLike) -> dict[str, object]:
     Keys (present only when the file has the matching properties):
 
     * ``xyz`` (N, 3) float32 (from vertex x, y, z; other float types are kept
-      as they are), ``rgb`` (N, 3) uint8 (red, green, blue), ``sigma`` (N,),
+      as they are), ``normals`` (N, 3) (nx, ny, nz), ``rgb`` (N, 3) uint8 (red, green, blue), ``sigma`` (N,),
       ``uv`` (N, 2) (u, v), ``faces`` (M, 3) int32 when every face is a triangle
       (otherwise an object array of index arrays);
     * ``elements``: {element name: {property name: array}} with every element
@@ -387,6 +399,8 @@ def read_ply(path: str | os.PathLike) -> dict[str, object]:
     v = data.get("vertex", {})
     if all(k in v for k in ("x", "y", "z")):
         out["xyz"] = np.stack([v["x"], v["y"], v["z"]], axis=1)
+    if all(k in v for k in ("nx", "ny", "nz")):
+        out["normals"] = np.stack([v["nx"], v["ny"], v["nz"]], axis=1)
     if all(k in v for k in ("red", "green", "blue")):
         out["rgb"] = np.stack([v["red"], v["green"], v["blue"]], axis=1).astype(np.uint8, copy=False)
     if "sigma" in v:

@@ -57,7 +57,7 @@ __all__ = [
     "staged_outputs",
 ]
 
-OUTPUT_FILES = ("points.ply", "mesh.ply", "mesh.obj", "depth.npy", "sigma.npy", "shadow_time.npy",
+OUTPUT_FILES = ("points.ply", "mesh.ply", "mesh.obj", "mesh.mtl", "mesh.png", "mesh.stl", "depth.npy", "sigma.npy", "shadow_time.npy",
                 "undersampled.npy", "report.json", "scan.rrd", "merge.rrd")
 """Every file a scan or a merge may publish into its output folder."""
 

@@ -1,23 +1,26 @@
 """Reading and writing the small TOML files Gnomon uses (field logs, camera files).
 
-Reading is the standard library's ``tomllib``. Writing covers what our files
-hold — tables, arrays of tables, strings, numbers, booleans and (nested) lists
-of those — so we need no extra dependency. Floats are written with ``repr``,
-which round-trips exactly.
+Reading is the standard library's ``tomllib``; writing is ``tomli-w``, which
+quotes keys and escapes strings as TOML requires (a key with a space, a
+string with a control character), so everything written reads back equal.
+numpy scalars and arrays are written as plain numbers and (nested) arrays;
+floats with ``repr``, which round-trips exactly.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import tomllib
 from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+import tomli_w
 
 from gnomon import atomic
 from gnomon.errors import GnomonError
+
+__all__ = ["load", "dumps", "dump"]
 
 
 def load(path: str | os.PathLike) -> dict[str, Any]:
@@ -32,58 +35,31 @@ def load(path: str | os.PathLike) -> dict[str, Any]:
         raise GnomonError(f"{p}: not valid TOML: {exc}") from None
 
 
-def _value(v: Any) -> str:
+def _plain(v: Any) -> Any:
+    """numpy scalars and arrays, tuples and paths → the types tomli-w writes."""
+    if isinstance(v, Mapping):
+        return {str(k): _plain(x) for k, x in v.items()}
     if isinstance(v, (bool, np.bool_)):
-        return "true" if v else "false"
+        return bool(v)
     if isinstance(v, (int, np.integer)):
-        return str(int(v))
+        return int(v)
     if isinstance(v, (float, np.floating)):
-        f = float(v)
-        if math.isnan(f):
-            return "nan"
-        if math.isinf(f):
-            return "inf" if f > 0 else "-inf"
-        return repr(f)
-    if isinstance(v, str):
-        escaped = v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n")
-        return f'"{escaped}"'
+        return float(v)
     if isinstance(v, np.ndarray):
-        return _value(v.tolist())
+        return _plain(v.tolist())
     if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
+        return [_plain(x) for x in v]
+    if isinstance(v, Path):
+        return str(v)
+    if isinstance(v, str):
+        return v
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
-
-
-def _is_table(v: Any) -> bool:
-    return isinstance(v, Mapping)
-
-
-def _is_table_array(v: Any) -> bool:
-    return isinstance(v, (list, tuple)) and len(v) > 0 and all(_is_table(x) for x in v)
-
-
-def _emit(table: Mapping[str, Any], prefix: str, out: list[str]) -> None:
-    for key, v in table.items():
-        if not (_is_table(v) or _is_table_array(v)):
-            out.append(f"{key} = {_value(v)}")
-    for key, v in table.items():
-        name = f"{prefix}.{key}" if prefix else key
-        if _is_table(v):
-            out.append("")
-            out.append(f"[{name}]")
-            _emit(v, name, out)
-        elif _is_table_array(v):
-            for item in v:
-                out.append("")
-                out.append(f"[[{name}]]")
-                _emit(item, name, out)
 
 
 def dumps(data: Mapping[str, Any], header: str = "") -> str:
     """Serialise nested dicts to TOML text; ``header`` lines become comments."""
-    out: list[str] = [f"# {line}" if line else "#" for line in header.splitlines()]
-    _emit(data, "", out)
-    return "\n".join(out).lstrip("\n") + "\n"
+    head = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
+    return head + tomli_w.dumps(_plain(data))
 
 
 def dump(data: Mapping[str, Any], path: str | os.PathLike, header: str = "") -> None:
