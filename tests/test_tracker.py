@@ -243,3 +243,49 @@ def test_kernel_tracker_arguments():
     with pytest.raises(ValueError, match="65536"):
         t.finish(1.0, decoding_lut(2.2, np.uint8))
     assert t.finish(1.0, decoding_lut(2.2, np.uint16))["valid"].dtype == bool
+
+
+_PATH_SCRIPT = """
+import sys, numpy as np
+from gnomon import _kernel
+frames = np.load(sys.argv[1])
+t = _kernel.TemporalTracker(*frames.shape[1:], "uint8", window=3, block=5)
+for f in frames:
+    t.update(f)
+r = t.finish(10.0)
+np.savez(sys.argv[2], path=_kernel.simd_path(), **{k: np.asarray(v) for k, v in r.items()})
+"""
+
+
+def test_every_simd_path_gives_identical_results(tmp_path):
+    """Each instruction set this CPU supports, forced with GNOMON_SIMD in a fresh
+    process (the path is chosen once per process), tracks a noisy sweep to the
+    same bits as the default path in this process."""
+    import os
+    import subprocess
+    import sys
+
+    paths = _kernel.simd_paths()
+    assert _kernel.simd_path() in paths and paths[-1] == "portable"
+    rng = np.random.default_rng(5)
+    shape = (7, 75)  # a width that is no multiple of any vector's lanes: tails too
+    inside, _, _ = edge_profiles(shape[0] * shape[1], 45, rng, scale=0.8)
+    frames = np.stack(to_frames(200 - 160 * inside + rng.normal(0, 2, inside.shape), shape, np.uint8))
+    np.save(tmp_path / "frames.npy", frames)
+    here = run_kernel(list(frames), min_contrast=10.0, window=3, block=5)
+    for path in paths:
+        out = tmp_path / f"{path}.npz"
+        env = {**os.environ, "GNOMON_SIMD": path, "PYTHONPATH": os.pathsep.join(sys.path)}
+        subprocess.run([sys.executable, "-c", _PATH_SCRIPT, str(tmp_path / "frames.npy"), str(out)],
+                       check=True, env=env)
+        got = np.load(out)
+        assert str(got["path"]) == path
+        for key in ("imax", "imin", "threshold", "enter", "leave", "enter_slope", "leave_slope", "valid"):
+            np.testing.assert_array_equal(got[key], getattr(here, key), err_msg=f"{path}: {key}")
+
+
+def test_version_names_the_simd_path():
+    from gnomon.cli import version_text
+
+    text = version_text()
+    assert text.startswith("gnomon ") and text.endswith(f"SIMD {_kernel.simd_path()})")

@@ -12,6 +12,14 @@ import numpy.typing as npt
 
 __version__: str
 
+def simd_path() -> Literal["avx2", "sse2", "portable"]:
+    """The instruction set new trackers' hot loops run on: the best this CPU has
+    (detected at run time), or a lower one forced by the ``GNOMON_SIMD`` environment
+    variable. Results do not depend on it."""
+
+def simd_paths() -> list[Literal["avx2", "sse2", "portable"]]:
+    """Every instruction set this CPU can run the hot loops on, best first."""
+
 class TemporalTracker:
     """Streaming per-pixel shadow tracker; memory independent of the number of frames.
 

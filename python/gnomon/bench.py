@@ -91,11 +91,14 @@ class BenchResult:
     block: int
     cpus: int
     machine: str
+    simd_path: str
     kernel: Throughput
     numpy: Throughput
     kernel_finish_s: float
     numpy_finish_s: float
     memory_mib: dict[int, float]
+    load_average: float
+    """1-minute load average of the machine when the run ended (other processes skew wall times)."""
 
     @property
     def speedup(self) -> float:
@@ -159,18 +162,30 @@ def run_bench(
         block=block,
         cpus=os.cpu_count() or 1,
         machine=f"{platform.machine()} {platform.processor() or platform.system()}".strip(),
+        simd_path=_kernel.simd_path(),
         kernel=kernel_t,
         numpy=numpy_t,
         kernel_finish_s=kernel_finish,
         numpy_finish_s=numpy_finish,
         memory_mib=memory,
+        load_average=_load_average(),
     )
+
+
+def _load_average() -> float:
+    try:
+        return os.getloadavg()[0]
+    except OSError:
+        return float("nan")
 
 
 def format_table(r: BenchResult) -> str:
     """A compact plain-text table of the figures."""
     lines = [
-        f"gnomon bench: {r.width}x{r.height} {r.dtype}, window {r.window}, block {r.block}, {r.cpus} CPUs",
+        (
+            f"gnomon bench: {r.width}x{r.height} {r.dtype}, window {r.window}, block {r.block}, {r.cpus} CPUs, "
+            f"kernel SIMD path {r.simd_path} (GNOMON_SIMD forces a lower one), load average {r.load_average:.1f}"
+        ),
         f"  {'tracker':<8} {'frames':>7} {'seconds':>9} {'frames/s':>10} {'CPU ms/frame':>13} {'finish':>10}",
         *(
             f"  {name:<8} {t.frames:>7} {t.seconds:>9.3f} {t.fps:>10.0f} "

@@ -10,9 +10,15 @@ import argparse
 import importlib
 import sys
 
-from gnomon import __version__
+from gnomon import __version__, _kernel
 from gnomon.commands import COMMANDS
 from gnomon.errors import GnomonError
+
+
+def version_text() -> str:
+    """``gnomon X.Y.Z (kernel X.Y.Z, SIMD avx2)``: the version and the instruction set
+    the kernel's hot loops run on here (chosen at run time; see ``gnomon bench``)."""
+    return f"gnomon {__version__} (kernel {_kernel.__version__}, SIMD {_kernel.simd_path()})"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -20,7 +26,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="gnomon",
         description="Shadow-sweep 3D scanning with a desk lamp or the sun.",
     )
-    parser.add_argument("--version", action="version", version=f"gnomon {__version__}")
+    parser.add_argument("--version", action="version", version=version_text())
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
         module = importlib.import_module(f"gnomon.commands.{name}")

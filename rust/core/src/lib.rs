@@ -12,11 +12,13 @@
 pub mod error;
 pub mod geometry;
 pub mod sample;
+pub mod simd;
 pub mod tracker;
 pub mod triangulate;
 
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
 pub use sample::Sample;
+pub use simd::SimdPath;
 pub use tracker::{find_crossing, Crossing, Edge, ShadowTimes, TemporalTracker, TrackerParams};
 pub use triangulate::{plane_at, triangulate};

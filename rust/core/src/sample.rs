@@ -13,6 +13,8 @@
 
 use std::fmt::Debug;
 
+use crate::simd::{Portable, Vector};
+
 mod sealed {
     pub trait Sealed {}
     impl Sealed for u8 {}
@@ -37,12 +39,25 @@ pub trait Sample: Copy + Ord + Debug + Default + Send + Sync + 'static + sealed:
     /// The value as an offset or a LUT index.
     fn index(self) -> usize;
     fn to_f32(self) -> f32;
+    /// 128-bit SSE2 vector of this sample type.
+    #[cfg(target_arch = "x86_64")]
+    type Sse2: Vector<Self>;
+    /// 256-bit AVX2 vector of this sample type.
+    #[cfg(target_arch = "x86_64")]
+    type Avx2: Vector<Self>;
+    /// 16 lanes folded lane by lane (left to the auto-vectoriser).
+    type Portable: Vector<Self>;
 }
 
 /// The two sample types differ only in width: one implementation for both.
 macro_rules! impl_sample {
-    ($t:ty, $bits:expr, $dtype:expr) => {
+    ($t:ty, $bits:expr, $dtype:expr, $sse2:ty, $avx2:ty) => {
         impl Sample for $t {
+            #[cfg(target_arch = "x86_64")]
+            type Sse2 = $sse2;
+            #[cfg(target_arch = "x86_64")]
+            type Avx2 = $avx2;
+            type Portable = Portable<$t, 16>;
             const MIN: Self = <$t>::MIN;
             const MAX: Self = <$t>::MAX;
             const NO_OFFSET: Self = <$t>::MAX;
@@ -69,5 +84,17 @@ macro_rules! impl_sample {
     };
 }
 
-impl_sample!(u8, 8, "uint8");
-impl_sample!(u16, 16, "uint16");
+#[cfg(target_arch = "x86_64")]
+impl_sample!(u8, 8, "uint8", crate::simd::Sse2U8, crate::simd::Avx2U8);
+#[cfg(target_arch = "x86_64")]
+impl_sample!(
+    u16,
+    16,
+    "uint16",
+    crate::simd::Sse2U16,
+    crate::simd::Avx2U16
+);
+#[cfg(not(target_arch = "x86_64"))]
+impl_sample!(u8, 8, "uint8", (), ());
+#[cfg(not(target_arch = "x86_64"))]
+impl_sample!(u16, 16, "uint16", (), ());

@@ -41,10 +41,7 @@ use rayon::prelude::*;
 
 use crate::error::KernelError;
 use crate::sample::Sample;
-
-/// Pixels folded together, their state held in registers (one AVX-512
-/// register per state variable for `u8`, two for `u16`).
-const LANES: usize = 64;
+use crate::simd::{Portable, SimdPath, Vector};
 
 /// Pixels tested together for "any window to capture" before a scalar scan.
 const GROUP: usize = 64;
@@ -277,21 +274,8 @@ impl<T: Sample> RowState<T> {
     }
 }
 
-/// A vector of `N` neighbouring pixels' state, held in registers while a
-/// whole block of frames is folded into it.
-#[derive(Clone, Copy)]
-struct Span<T, const N: usize> {
-    imax: [T; N],
-    imin: [T; N],
-    best_fall: [T; N],
-    best_rise: [T; N],
-    /// Block-local offset of the steepest fall/rise in this block, or `NO_OFFSET`.
-    fall_offset: [T; N],
-    rise_offset: [T; N],
-}
-
-/// Samples ahead of the current span to prefetch in each of a block's rows.
-const PREFETCH_AHEAD: usize = 4 * LANES;
+/// Samples ahead of the current vector to prefetch in each of a block's rows.
+const PREFETCH_AHEAD: usize = 256;
 
 /// Hint the cache to fetch `slice[at]` (no effect past the end).
 #[inline(always)]
@@ -309,121 +293,144 @@ fn prefetch<T>(slice: &[T], at: usize) {
     let _ = (slice, at);
 }
 
+/// Load `V::LANES` samples of `slice` from `x0`.
 #[inline(always)]
-fn lanes<T: Sample, const N: usize>(slice: &[T], x0: usize) -> [T; N] {
-    let mut out = [T::MIN; N];
-    out.copy_from_slice(&slice[x0..x0 + N]);
-    out
+fn load<T: Sample, V: Vector<T>>(slice: &[T], x0: usize) -> V {
+    assert!(x0 + V::LANES <= slice.len());
+    // SAFETY: in bounds (checked above); `V` is only used on CPUs that have it.
+    unsafe { V::load(slice.as_ptr().add(x0)) }
 }
 
-impl<T: Sample, const N: usize> Span<T, N> {
-    /// Fold frame `cur` (predecessor `prev`) at block-local `offset`.
-    /// Branch-free: the selects compile to SIMD blends/masked moves.
-    #[inline(always)]
-    fn fold(&mut self, cur: &[T; N], prev: &[T; N], offset: T) {
-        for x in 0..N {
-            let (v, p) = (cur[x], prev[x]);
-            self.imax[x] = self.imax[x].max(v);
-            self.imin[x] = self.imin[x].min(v);
-            // Saturated to 0 when not a fall (rise): never beats the best (≥ 0).
-            let fall = p.saturating_sub(v);
-            let rise = v.saturating_sub(p);
-            let steeper_fall = fall > self.best_fall[x];
-            let steeper_rise = rise > self.best_rise[x];
-            self.best_fall[x] = self.best_fall[x].max(fall);
-            self.best_rise[x] = self.best_rise[x].max(rise);
-            self.fall_offset[x] = if steeper_fall {
-                offset
-            } else {
-                self.fall_offset[x]
-            };
-            self.rise_offset[x] = if steeper_rise {
-                offset
-            } else {
-                self.rise_offset[x]
-            };
-        }
-    }
+/// Store `v` into `V::LANES` samples of `slice` from `x0`.
+#[inline(always)]
+fn store<T: Sample, V: Vector<T>>(v: V, slice: &mut [T], x0: usize) {
+    assert!(x0 + V::LANES <= slice.len());
+    // SAFETY: as in `load`.
+    unsafe { v.store(slice.as_mut_ptr().add(x0)) }
 }
 
 /// Fold the block `rows` (one row of each frame, `prev` the row of the
-/// frame before the first) into the `N` pixels from `x0` of a row's state.
+/// frame before the first) into the `V::LANES` pixels from `x0` of a row's
+/// state. The pixels' state stays in registers across the block's frames:
+/// per pixel and frame one load and a few branch-free vector operations.
 #[inline(always)]
-fn fold_span<T: Sample, const N: usize>(
+fn fold_span<T: Sample, V: Vector<T>>(
     state: &mut RowState<T>,
     prev: &[T],
     rows: &[&[T]],
     first: usize,
     x0: usize,
 ) {
-    let mut span = Span::<T, N> {
-        imax: lanes(&state.imax, x0),
-        imin: lanes(&state.imin, x0),
-        best_fall: lanes(&state.best_fall, x0),
-        best_rise: lanes(&state.best_rise, x0),
-        fall_offset: [T::NO_OFFSET; N],
-        rise_offset: [T::NO_OFFSET; N],
-    };
-    let mut before: [T; N] = lanes(prev, x0);
+    let mut imax: V = load(&state.imax, x0);
+    let mut imin: V = load(&state.imin, x0);
+    let mut best_fall: V = load(&state.best_fall, x0);
+    let mut best_rise: V = load(&state.best_rise, x0);
+    let none = V::splat(T::NO_OFFSET);
+    let (mut fall_offset, mut rise_offset) = (none, none);
+    let mut before: V = load(prev, x0);
     for (k, row) in rows.iter().enumerate() {
         prefetch(row, x0 + PREFETCH_AHEAD);
-        let cur: [T; N] = lanes(row, x0);
-        span.fold(&cur, &before, T::from_offset(k));
+        let cur: V = load(row, x0);
+        imax = imax.max(cur);
+        imin = imin.min(cur);
+        // Saturated to 0 when not a fall (rise): never beats the best (≥ 0).
+        let fall = before.sub_sat(cur);
+        let rise = cur.sub_sat(before);
+        let offset = V::splat(T::from_offset(k));
+        fall_offset = V::select(fall.gt(best_fall), offset, fall_offset);
+        rise_offset = V::select(rise.gt(best_rise), offset, rise_offset);
+        best_fall = best_fall.max(fall);
+        best_rise = best_rise.max(rise);
         before = cur;
     }
-    state.imax[x0..x0 + N].copy_from_slice(&span.imax);
-    state.imin[x0..x0 + N].copy_from_slice(&span.imin);
-    state.best_fall[x0..x0 + N].copy_from_slice(&span.best_fall);
-    state.best_rise[x0..x0 + N].copy_from_slice(&span.best_rise);
+    store(imax, &mut state.imax, x0);
+    store(imin, &mut state.imin, x0);
+    store(best_fall, &mut state.best_fall, x0);
+    store(best_rise, &mut state.best_rise, x0);
     // Moves are rare once the sweep is under way: a vectorised test first.
-    let moved = span
-        .fall_offset
-        .iter()
-        .zip(&span.rise_offset)
-        .fold(false, |any, (&f, &r)| {
-            any | (f != T::NO_OFFSET) | (r != T::NO_OFFSET)
-        });
-    if moved {
-        for (i, (&f, &r)) in span.fall_offset.iter().zip(&span.rise_offset).enumerate() {
-            let x = x0 + i;
-            if f != T::NO_OFFSET {
-                state.fall_at[x] = (first + f.index()) as u32;
-                state.moved[x] |= FELL;
-            }
-            if r != T::NO_OFFSET {
-                state.rise_at[x] = (first + r.index()) as u32;
-                state.moved[x] |= ROSE;
-            }
+    if !fall_offset.ne(none).or(rise_offset.ne(none)).any() {
+        return;
+    }
+    let mut offsets = [T::NO_OFFSET; 2 * MAX_LANES];
+    store(fall_offset, &mut offsets, 0);
+    store(rise_offset, &mut offsets, MAX_LANES);
+    for i in 0..V::LANES {
+        let x = x0 + i;
+        let (f, r) = (offsets[i], offsets[MAX_LANES + i]);
+        if f != T::NO_OFFSET {
+            state.fall_at[x] = (first + f.index()) as u32;
+            state.moved[x] |= FELL;
+        }
+        if r != T::NO_OFFSET {
+            state.rise_at[x] = (first + r.index()) as u32;
+            state.moved[x] |= ROSE;
         }
     }
 }
 
+/// The most lanes of any [`Vector`].
+const MAX_LANES: usize = 64;
+
 /// Fold the frames `frames` (present in `ring` with their predecessors) into
-/// one row's state: statistics, `fall_at`/`rise_at` and the `moved` bits.
-/// Windows are not captured here.
-///
-/// Pixels are taken `LANES` at a time, their state kept in registers across
-/// all the block's frames: per pixel and frame, one load and a few SIMD
-/// operations.
-fn fold_row<T: Sample>(
+/// one row's state with vectors `V`: statistics, `fall_at`/`rise_at` and the
+/// `moved` bits. Windows are not captured here.
+#[inline(always)]
+fn fold_row_with<T: Sample, V: Vector<T>>(
     state: &mut RowState<T>,
     ring: &FrameRing<T>,
     row: usize,
     frames: Range<usize>,
 ) {
     debug_assert!(frames.len() < T::NO_OFFSET.index());
+    debug_assert!(V::LANES <= MAX_LANES);
     let width = state.imax.len();
     let prev = ring.row(frames.start.saturating_sub(1), row);
     let rows: Vec<&[T]> = frames.clone().map(|j| ring.row(j, row)).collect();
-    let split = width - width % LANES;
-    for x0 in (0..split).step_by(LANES) {
-        fold_span::<T, LANES>(state, prev, &rows, frames.start, x0);
+    let split = width - width % V::LANES;
+    for x0 in (0..split).step_by(V::LANES) {
+        fold_span::<T, V>(state, prev, &rows, frames.start, x0);
     }
     for x0 in split..width {
-        fold_span::<T, 1>(state, prev, &rows, frames.start, x0);
+        fold_span::<T, Portable<T, 1>>(state, prev, &rows, frames.start, x0);
     }
 }
 
+/// [`fold_row_with`] compiled for AVX2.
+///
+/// # Safety
+/// The CPU must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn fold_row_avx2<T: Sample>(
+    state: &mut RowState<T>,
+    ring: &FrameRing<T>,
+    row: usize,
+    frames: Range<usize>,
+) {
+    fold_row_with::<T, T::Avx2>(state, ring, row, frames)
+}
+
+/// Fold `frames` into one row's state on the instruction set `path`
+/// (which the CPU must support: checked when the tracker is made).
+fn fold_row<T: Sample>(
+    path: SimdPath,
+    state: &mut RowState<T>,
+    ring: &FrameRing<T>,
+    row: usize,
+    frames: Range<usize>,
+) {
+    match path {
+        #[cfg(target_arch = "x86_64")]
+        SimdPath::Avx2 => {
+            debug_assert!(path.is_supported());
+            // SAFETY: the tracker only holds a path the CPU supports.
+            unsafe { fold_row_avx2(state, ring, row, frames) }
+        }
+        #[cfg(target_arch = "x86_64")]
+        SimdPath::Sse2 => fold_row_with::<T, T::Sse2>(state, ring, row, frames),
+        _ => fold_row_with::<T, T::Portable>(state, ring, row, frames),
+    }
+}
 /// Copy the `2m` samples of frames `j−m … j+m−1` (clamped to `[0, last]`) of
 /// pixel `(row, col)` into `dst`.
 fn capture_window<T: Sample>(
@@ -496,6 +503,7 @@ pub struct TemporalTracker<T: Sample> {
     rows: Vec<RowState<T>>,
     frames_seen: usize,
     frames_folded: usize,
+    path: SimdPath,
 }
 
 impl<T: Sample> TemporalTracker<T> {
@@ -518,6 +526,7 @@ impl<T: Sample> TemporalTracker<T> {
                 .collect(),
             frames_seen: 0,
             frames_folded: 0,
+            path: SimdPath::active(),
         })
     }
 
@@ -531,6 +540,23 @@ impl<T: Sample> TemporalTracker<T> {
 
     pub fn params(&self) -> TrackerParams {
         self.params
+    }
+
+    /// The instruction set the hot loops run on ([`SimdPath::active`] when made).
+    pub fn simd_path(&self) -> SimdPath {
+        self.path
+    }
+
+    /// Run the hot loops on `path` from now on (results do not depend on it).
+    pub fn set_simd_path(&mut self, path: SimdPath) -> Result<(), KernelError> {
+        if !path.is_supported() {
+            return Err(KernelError::parameter(
+                "simd_path",
+                format!("{} is not supported by this CPU", path.name()),
+            ));
+        }
+        self.path = path;
+        Ok(())
     }
 
     /// Number of frames given to [`update`](Self::update) so far.
@@ -556,13 +582,13 @@ impl<T: Sample> TemporalTracker<T> {
         if self.frames_seen == self.frames_folded + block + self.params.lag() {
             let frames = self.frames_folded..self.frames_folded + block;
             let last = self.frames_seen - 1;
-            let ring = &self.ring;
+            let (ring, path) = (&self.ring, self.path);
             self.rows
                 .par_iter_mut()
                 .enumerate()
                 .for_each(|(row, state)| {
                     capture_row(state, ring, row, last, half);
-                    fold_row(state, ring, row, frames.clone());
+                    fold_row(path, state, ring, row, frames.clone());
                 });
             self.frames_folded += block;
         }
@@ -603,7 +629,7 @@ impl<T: Sample> TemporalTracker<T> {
                 let mut state = folded.clone();
                 capture_row(&mut state, &self.ring, row, last, half);
                 if !pending.is_empty() {
-                    fold_row(&mut state, &self.ring, row, pending.clone());
+                    fold_row(self.path, &mut state, &self.ring, row, pending.clone());
                     capture_row(&mut state, &self.ring, row, last, half);
                 }
                 resolve_row(&state, &lut, min_contrast, half, &mut out);

@@ -2,7 +2,7 @@
 //! direct (non-streaming) reference on random sequences.
 
 use gnomon_core::{
-    find_crossing, Edge, KernelError, Sample, ShadowTimes, TemporalTracker, TrackerParams,
+    find_crossing, Edge, KernelError, Sample, ShadowTimes, SimdPath, TemporalTracker, TrackerParams,
 };
 
 /// Frames 0-9: 200; 10-13: 180 140 100 60; 14-23: 40; 24-27: 70 110 150 190;
@@ -19,7 +19,8 @@ fn ramp_profile() -> Vec<u16> {
     p
 }
 
-/// Feed per-pixel profiles (all the same length) as frames of `height × width`.
+/// Feed per-pixel profiles (all the same length) as frames of `height × width`,
+/// on every instruction set this CPU supports: the results must be identical.
 fn track<T: Sample>(
     profiles: &[Vec<T>],
     height: usize,
@@ -29,12 +30,50 @@ fn track<T: Sample>(
     lut: Option<&[f32]>,
 ) -> ShadowTimes {
     assert_eq!(profiles.len(), height * width);
-    let mut tracker = TemporalTracker::<T>::new(height, width, params).unwrap();
-    for f in 0..profiles[0].len() {
-        let frame: Vec<T> = profiles.iter().map(|p| p[f]).collect();
-        tracker.update(&frame).unwrap();
+    let mut results = SimdPath::supported().into_iter().map(|path| {
+        let mut tracker = TemporalTracker::<T>::new(height, width, params).unwrap();
+        tracker.set_simd_path(path).unwrap();
+        for f in 0..profiles[0].len() {
+            let frame: Vec<T> = profiles.iter().map(|p| p[f]).collect();
+            tracker.update(&frame).unwrap();
+        }
+        (path, tracker.finish(min_contrast, lut).unwrap())
+    });
+    let (_, first) = results.next().unwrap();
+    for (path, other) in results {
+        assert!(
+            identical(&first, &other),
+            "{} differs from the best path",
+            path.name()
+        );
     }
-    tracker.finish(min_contrast, lut).unwrap()
+    first
+}
+
+/// Equal arrays, NaN equal to NaN.
+fn identical(a: &ShadowTimes, b: &ShadowTimes) -> bool {
+    let eq = |x: &[f32], y: &[f32]| x.iter().zip(y).all(|(&p, &q)| same(p, q));
+    eq(&a.imax, &b.imax)
+        && eq(&a.imin, &b.imin)
+        && eq(&a.threshold, &b.threshold)
+        && eq(&a.enter, &b.enter)
+        && eq(&a.leave, &b.leave)
+        && eq(&a.enter_slope, &b.enter_slope)
+        && eq(&a.leave_slope, &b.leave_slope)
+        && a.valid == b.valid
+}
+
+#[test]
+fn the_paths_this_cpu_supports() {
+    let paths = SimdPath::supported();
+    assert_eq!(paths.last(), Some(&SimdPath::Portable));
+    assert!(paths.contains(&SimdPath::active()));
+    assert_eq!(paths[0], SimdPath::detect());
+    #[cfg(target_arch = "x86_64")]
+    assert!(paths.contains(&SimdPath::Sse2));
+    for p in paths {
+        assert_eq!(SimdPath::from_name(p.name()), Some(p));
+    }
 }
 
 fn params(window: usize, block: usize) -> TrackerParams {

@@ -348,10 +348,28 @@ fn triangulate<'py>(
     Ok((points.into_pyarray(py), mask(py, valid, h, w)?))
 }
 
+/// The instruction set new trackers' hot loops run on: `"avx2"`, `"sse2"` or
+/// `"portable"` (detected at run time; `GNOMON_SIMD` may force a lower one).
+#[pyfunction]
+fn simd_path() -> &'static str {
+    gnomon_core::SimdPath::active().name()
+}
+
+/// Every instruction set this CPU can run the hot loops on, best first.
+#[pyfunction]
+fn simd_paths() -> Vec<&'static str> {
+    gnomon_core::SimdPath::supported()
+        .into_iter()
+        .map(|p| p.name())
+        .collect()
+}
+
 #[pymodule]
 fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<TemporalTracker>()?;
     m.add_function(wrap_pyfunction!(triangulate, m)?)?;
+    m.add_function(wrap_pyfunction!(simd_path, m)?)?;
+    m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }
