@@ -105,7 +105,9 @@ def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
     log_path = write_tiny_capture(tmp_path / "cap")
     data = tomllib.loads(log_path.read_text())
     data["camera"] = truth["camera"]
-    data["planes"] = [{"name": "desk", "point": [0, 0, 0], "normal": [0, 0, 1], "regions": [[0, 0, 640, 20]],
+    # The frames are 48x36 (same aspect as the 640x480 camera, which is rescaled to
+    # them); the board's photo is at the camera's own 640x480.
+    data["planes"] = [{"name": "desk", "point": [0, 0, 0], "normal": [0, 0, 1], "regions": [[0, 0, 48, 2]],
                        "chessboard": "9x6", "square": 25.0, "image": "../cb/view_00.png"}]
     data["light"]["position"] = [0.0, 0.0, -400.0]  # the board's z points away from the camera
     toml_io.dump(data, log_path)

@@ -23,12 +23,11 @@ import tracemalloc
 
 import numpy as np
 import pytest
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
-
 from gnomon import cli, tsai
 from gnomon.errors import GnomonError
 from gnomon.simulate.chessboard import TruthTsai, board_points
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 W, H = 1280, 960
 PITCH = 0.00375

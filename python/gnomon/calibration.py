@@ -97,14 +97,61 @@ def board_points(cols: int, rows: int, square: float) -> np.ndarray:
 
 
 def read_grey(path: str | os.PathLike) -> np.ndarray:
-    """Read an image file as a 2-D grey array (uint8 or uint16). Unreadable → GnomonError naming it."""
+    """Read an image file as a 2-D grey array (uint8 or uint16), upright by its EXIF orientation.
+
+    Unreadable → GnomonError naming it.
+    """
+    from gnomon.frames import apply_exif_orientation, exif_orientation
+
     p = Path(path)
     if not p.is_file():
         raise GnomonError(f"{p}: image not found")
-    img = cv2.imread(str(p), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_GRAYSCALE)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise GnomonError(f"{p}: cannot be read ({exc.strerror})") from None
+    flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION
+    img = cv2.imdecode(np.frombuffer(raw, np.uint8), flags)
     if img is None:
         raise GnomonError(f"{p}: not a readable image")
-    return img
+    return apply_exif_orientation(img, exif_orientation(raw))
+
+
+def fit_camera_to_frames(
+    camera: OpenCVCamera | TsaiCamera, width: int, height: int, where: str, frame_name: str = "frame 0"
+) -> tuple[OpenCVCamera | TsaiCamera, str | None]:
+    """The camera for frames of ``width × height`` pixels: as it is, or rescaled from its own size.
+
+    Intrinsics calibrated on stills at another resolution of the same sensor
+    (same aspect ratio, within 1 %) are rescaled: focal lengths and pixel
+    pitch by the size ratio, the centre with pixel centres at integer
+    coordinates (``c' = (c + ½)·s − ½``); distortion is unchanged (it acts on
+    normalised or sensor coordinates). Returns (camera, a note saying so, or
+    None). Another aspect ratio means the video is a crop of the sensor, which
+    no rescaling fixes: GnomonError, one line naming the frame and ``where``.
+    """
+    w0, h0 = int(camera.width), int(camera.height)
+    if (w0, h0) == (int(width), int(height)):
+        return camera, None
+    sw, sh = width / w0, height / h0
+    if abs(sw / sh - 1.0) > 0.01:
+        raise GnomonError(
+            f"{frame_name} is {width}x{height} but the camera's {w0}x{h0} ({where}) has another aspect ratio "
+            f"({w0 / h0:.3f} vs {width / height:.3f}): the frames are a crop of the sensor, which rescaling cannot fix; "
+            f"calibrate the camera from frames of the capture itself"
+        )
+    if isinstance(camera, OpenCVCamera):
+        new: OpenCVCamera | TsaiCamera = OpenCVCamera(
+            width=int(width), height=int(height), fx=camera.fx * sw, fy=camera.fy * sh,
+            cx=(camera.cx + 0.5) * sw - 0.5, cy=(camera.cy + 0.5) * sh - 0.5, dist=tuple(camera.dist),
+        )
+    else:
+        new = TsaiCamera(
+            width=int(width), height=int(height), f_mm=camera.f_mm, kappa1=camera.kappa1,
+            cx=(camera.cx + 0.5) * sw - 0.5, cy=(camera.cy + 0.5) * sh - 0.5,
+            dx_mm=camera.dx_mm / sw, dy_mm=camera.dy_mm / sh, sx=camera.sx,
+        )
+    return new, f"{where}: camera calibrated at {w0}x{h0}, rescaled to the frames' {width}x{height}"
 
 
 def to_grey_u8(image: np.ndarray) -> np.ndarray:
@@ -134,20 +181,73 @@ def expand_image_args(items: Sequence[str | os.PathLike]) -> list[Path]:
     return out
 
 
+def _canonical_order(corners: np.ndarray, found: tuple[int, int], board: tuple[int, int]) -> np.ndarray:
+    """Corners found with ``patternSize = found`` → OpenCV's order for ``board`` (cols, rows).
+
+    A board found with its sides swapped, (rows, cols), is transposed, then one
+    axis reversed so that the grid keeps the handedness OpenCV reports for a
+    board found directly: the first row's direction turned by +90° (image
+    x right, y down) points along the columns. That is a 90° turn of the board,
+    never a mirror image.
+    """
+    cols, rows = board
+    if found == board:
+        return corners
+    g = corners.reshape(found[1], found[0], 2).transpose(1, 0, 2)  # (rows, cols, 2)
+    if _handedness(g) < 0:
+        g = g[:, ::-1]
+    return np.ascontiguousarray(g.reshape(-1, 2))
+
+
+def _handedness(grid: np.ndarray) -> float:
+    a = grid[0, -1] - grid[0, 0]
+    b = grid[-1, 0] - grid[0, 0]
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+# Detector settings tried in turn: OpenCV's most accurate first; on some real
+# photos (JPEG, uneven light) CALIB_CB_ACCURACY / NORMALIZE_IMAGE make the
+# sector-based detector miss a board it finds without them, and the classic
+# detector is the last resort.
+_SB_FALLBACK_FLAGS = (_SB_FLAGS, cv2.CALIB_CB_EXHAUSTIVE)
+_CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+
+
+def _find_board(grey: np.ndarray, board: tuple[int, int]) -> np.ndarray | None:
+    cols, rows = board
+    sizes = [(cols, rows)] if cols == rows else [(cols, rows), (rows, cols)]
+    for flags in _SB_FALLBACK_FLAGS:
+        for size in sizes:
+            ok, corners = cv2.findChessboardCornersSB(grey, size, flags=flags)
+            if ok and corners is not None:
+                return _canonical_order(corners.reshape(-1, 2).astype(np.float64), size, board)
+    for size in sizes:
+        ok, corners = cv2.findChessboardCorners(grey, size, flags=_CLASSIC_FLAGS)
+        if ok and corners is not None:
+            pts = corners.reshape(-1, 2).astype(np.float64)
+            g = pts.reshape(size[1], size[0], 2)
+            if _handedness(g) < 0:  # the classic detector may report either handedness
+                pts = np.ascontiguousarray(g[:, ::-1].reshape(-1, 2))
+            return _canonical_order(pts, size, board)
+    return None
+
+
 def detect_chessboard(image: np.ndarray, board: tuple[int, int], *, refine: bool = True) -> np.ndarray | None:
     """Find the chessboard's inner corners: (cols·rows, 2) pixels in OpenCV's order, or None.
 
-    ``cv2.findChessboardCornersSB`` finds the board; ``cv2.cornerSubPix``
-    then refines each corner in a window of 0.4× the smallest corner spacing
-    (larger windows average more gradient; on our rendered views this halves
-    the SB detector's error, to ≈0.03–0.06 px RMS).
+    ``cv2.findChessboardCornersSB`` finds the board, in either orientation
+    (``board`` or its sides swapped, reordered to ``board``'s order, see
+    :func:`_canonical_order`), with OpenCV's accurate settings first and
+    plainer ones, then the classic detector, when they fail (as on some real
+    JPEG photos); ``cv2.cornerSubPix`` then refines each corner in a window of
+    0.4× the smallest corner spacing (larger windows average more gradient; on
+    our rendered views this halves the SB detector's error, to ≈0.03–0.06 px RMS).
     """
     grey = to_grey_u8(image)
     cols, rows = board
-    ok, corners = cv2.findChessboardCornersSB(grey, (cols, rows), flags=_SB_FLAGS)
-    if not ok or corners is None:
+    pts = _find_board(grey, board)
+    if pts is None:
         return None
-    pts = corners.reshape(-1, 2).astype(np.float64)
     if not refine:
         return pts
     grid = pts.reshape(rows, cols, 2)

@@ -18,6 +18,7 @@ import numpy as np
 from gnomon import toml_io
 from gnomon.camera import CameraModel, Pose
 from gnomon.errors import FieldLogError
+from gnomon.frames import glob_frames, image_size, video_size
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
 UNITS = ("mm", "m")
@@ -242,7 +243,7 @@ def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
     folder = (base / pattern).parent
     if not folder.is_dir():
         raise FieldLogError(f"{t.where('frames')}: frames folder {folder} not found")
-    files = tuple(sorted(p for p in base.glob(pattern) if p.is_file()))
+    files = glob_frames(base, pattern)
     if not files:
         raise FieldLogError(f"{t.where('frames')}: no files match {pattern!r} in {base}")
     if len(files) < 2:
@@ -273,6 +274,18 @@ def _parse_camera(t: _Table, base: Path) -> tuple[CameraModel, Pose | None, Path
     t.data.clear()
     calibration = table.get("calibration", {}) if isinstance(table.get("calibration"), dict) else {}
     return camera_from_table(table, f"{t.path}: [camera]"), pose, None, calibration
+
+
+def _fit_camera(camera: CameraModel, calibration: dict, capture: CaptureSpec, where: str) -> tuple[CameraModel, dict]:
+    """The camera rescaled to the frames' size when it was calibrated at another one (same aspect)."""
+    from gnomon.calibration import fit_camera_to_frames
+
+    first = capture.video if capture.video is not None else capture.image_files[0]
+    size = video_size(first) if capture.video is not None else image_size(first)
+    fitted, note = fit_camera_to_frames(camera, size[0], size[1], where, frame_name=f"frame 0 ({first.name})")  # type: ignore[arg-type]
+    if note is None:
+        return camera, calibration
+    return fitted, {**calibration, "rescaled_from": [int(camera.width), int(camera.height)]}
 
 
 def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
@@ -423,6 +436,7 @@ def load_field_log(path: str | Path) -> FieldLog:
 
     capture = _parse_capture(section("capture"), base)  # type: ignore[arg-type]
     camera, pose, camera_file, calibration = _parse_camera(section("camera"), base)  # type: ignore[arg-type]
+    camera, calibration = _fit_camera(camera, calibration, capture, f"{p}: [camera]")
     raw_planes = root.data.pop("planes", None)
     if not isinstance(raw_planes, list) or not raw_planes:
         raise FieldLogError(f"{p}: missing required [[planes]] (at least one reference plane)")

@@ -8,12 +8,20 @@ through a small bounded queue.
 Problems with the input raise :class:`FrameError` naming the frame: a file that
 cannot be decoded or is truncated (the decoder only warns about those), a frame whose size differs from the first, a video that
 ends before the number of frames it announced (or the field log expects).
+
+Image files are turned upright by their EXIF orientation tag (as a phone
+records a portrait photo) wherever Gnomon reads them: :func:`decode_image_file`,
+:func:`image_size` and :func:`gnomon.calibration.read_grey` all go through
+:func:`apply_exif_orientation`. :func:`glob_frames` matches a pattern's file
+suffix in any case (``*.jpg`` finds ``.JPG`` too).
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 import queue
+import re
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -74,8 +82,49 @@ def truncation_problem(raw: bytes) -> str | None:
     return None
 
 
+_EXIF_ORIENTATION = 0x0112
+
+
+def exif_orientation(raw: bytes) -> int:
+    """The EXIF orientation tag (1–8) of an encoded image; 1 (upright) when absent or unreadable."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(io.BytesIO(raw)) as im:
+            value = im.getexif().get(_EXIF_ORIENTATION, 1)
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError):
+        return 1
+    return int(value) if isinstance(value, int) and 1 <= value <= 8 else 1
+
+
+def apply_exif_orientation(image: np.ndarray, orientation: int) -> np.ndarray:
+    """Turn a decoded image (H, W[, C]) upright according to its EXIF orientation (1–8).
+
+    1 upright; 2 mirrored left–right; 3 turned 180°; 4 mirrored top–bottom;
+    5 transposed; 6 stored turned 90° anticlockwise (shown turned 90°
+    clockwise); 7 transversed; 8 stored turned 90° clockwise.
+    """
+    if orientation == 2:
+        out = image[:, ::-1]
+    elif orientation == 3:
+        out = image[::-1, ::-1]
+    elif orientation == 4:
+        out = image[::-1]
+    elif orientation == 5:
+        out = image.swapaxes(0, 1)
+    elif orientation == 6:
+        out = np.rot90(image, k=-1)
+    elif orientation == 7:
+        out = image.swapaxes(0, 1)[::-1, ::-1]
+    elif orientation == 8:
+        out = np.rot90(image, k=1)
+    else:
+        return image
+    return np.ascontiguousarray(out)
+
+
 def decode_image_file(path: Path) -> tuple[np.ndarray, bytes]:
-    """Decode an image file as stored (keeping 16-bit data); return it and its raw bytes.
+    """Decode an image file as stored (keeping 16-bit data), turned upright by its EXIF orientation; return it and its raw bytes.
 
     Raises :class:`FrameError` naming the file when it cannot be read or
     decoded, or when it is truncated (see :func:`truncation_problem`: the
@@ -88,12 +137,55 @@ def decode_image_file(path: Path) -> tuple[np.ndarray, bytes]:
     problem = truncation_problem(raw)
     if problem is not None:
         raise FrameError(f"{path}: corrupt frame: {problem}")
-    image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)
+    image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)  # ignores EXIF: applied below
     if image is None or image.size == 0:
         raise FrameError(f"{path}: cannot be decoded as an image")
     if image.dtype not in (np.uint8, np.uint16):
         raise FrameError(f"{path}: unsupported sample type {image.dtype} (8- or 16-bit images only)")
-    return image, raw
+    return apply_exif_orientation(image, exif_orientation(raw)), raw
+
+
+def image_size(path: Path) -> tuple[int, int]:
+    """(width, height) of an image file as shown (after its EXIF orientation), from its header."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            w, h = im.size
+            orientation = im.getexif().get(_EXIF_ORIENTATION, 1)
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError):
+        image, _ = decode_image_file(path)  # formats PIL cannot read: decode (raises naming the file)
+        return int(image.shape[1]), int(image.shape[0])
+    return (h, w) if orientation in (5, 6, 7, 8) else (w, h)
+
+
+def video_size(path: Path) -> tuple[int, int]:
+    """(width, height) of a video's frames."""
+    cap = cv2.VideoCapture(str(path))
+    try:
+        if not cap.isOpened():
+            raise FrameError(f"{path}: cannot be opened as a video")
+        return int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+    finally:
+        cap.release()
+
+
+def _any_case(suffix: str) -> str:
+    return "".join(f"[{c.lower()}{c.upper()}]" if c.isalpha() else c for c in suffix)
+
+
+def glob_frames(base: Path, pattern: str) -> tuple[Path, ...]:
+    """Files matching ``pattern`` under ``base``, sorted by path; the suffix matches in any case.
+
+    ``frames/*.jpg`` finds ``IMG_0001.JPG`` too (cameras and phones write
+    upper-case suffixes; Linux file systems are case-sensitive). Only a plain
+    alphanumeric suffix of the pattern's last component is widened.
+    """
+    head, sep, name = pattern.rpartition("/")
+    m = re.fullmatch(r"(.*\.)([A-Za-z0-9]+)", name)
+    if m:
+        pattern = head + sep + m.group(1) + _any_case(m.group(2))
+    return tuple(sorted({p for p in base.glob(pattern) if p.is_file()}))
 
 
 @dataclass

@@ -390,7 +390,7 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
     it (residuals and the angle between measured and declared planes go into
     report.json).
     """
-    from gnomon.calibration import read_grey
+    from gnomon.calibration import fit_camera_to_frames, read_grey
     from gnomon.markers import plane_pose_from_chessboard, plane_pose_from_markers
 
     measured_planes = [p for p in log.planes if p.markers or p.chessboard]
@@ -406,13 +406,15 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
             image = first
             name = log.capture.image_files[0].name if log.capture.image_files else f"{log.capture.video} frame 0"
         where = f"{log.path}: [[planes]] {plane.name}: {name}"
+        # A plane's own photo may be a still at another resolution of the same sensor.
+        camera, _ = fit_camera_to_frames(log.camera, image.shape[1], image.shape[0], f"{log.path}: [camera]", name)
         if plane.markers:
             pp = plane_pose_from_markers(
-                image, log.camera, plane.marker_world(), np.array([m.pixel_hint for m in plane.markers]),
+                image, camera, plane.marker_world(), np.array([m.pixel_hint for m in plane.markers]),
                 names=[f"{plane.name} marker {m.id}" for m in plane.markers], source=where,
             )
         else:
-            pp = plane_pose_from_chessboard(image, log.camera, plane.chessboard, plane.square, source=where)
+            pp = plane_pose_from_chessboard(image, camera, plane.chessboard, plane.square, source=where)
         measured.append((plane, pp))
     pose = log.pose if log.pose is not None else measured[0][1].pose
     report = []

@@ -334,7 +334,7 @@ def _stage2(R: np.ndarray, tx: float, ty: float, world: np.ndarray, xd: np.ndarr
         return np.concatenate([xd * d - f * xi / z, yd * d - f * yi / z])
 
     def jac(p):
-        f, tz, k = p
+        f, tz, _ = p
         z = wi + tz
         return np.concatenate(
             [np.stack([-xi / z, f * xi / z**2, xd * r2], axis=1), np.stack([-yi / z, f * yi / z**2, yd * r2], axis=1)]

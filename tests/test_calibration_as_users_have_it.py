@@ -1,0 +1,172 @@
+"""Calibration as users have it: boards in either orientation, intrinsics from stills at another
+resolution, EXIF orientation, upper-case suffixes. All on synthetic images.
+
+Boards are rendered by the simulator (gnomon.simulate.chessboard, its own
+camera model and ray caster); EXIF orientations are checked against Pillow's
+own ``ImageOps.exif_transpose``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image, ImageOps
+
+from gnomon import calibration, toml_io
+from gnomon.camera import OpenCVCamera, TsaiCamera
+from gnomon.errors import GnomonError
+from gnomon.fieldlog import load_field_log
+from gnomon.frames import FrameSource, decode_image_file, glob_frames, image_size
+from gnomon.simulate import chessboard as sim
+
+from conftest import write_tiny_capture
+
+COLS, ROWS, SQ = 9, 6, 25.0
+
+
+@pytest.fixture(scope="module")
+def turned_views():
+    """Four views of a 9x6 board: two as usual, two turned by 90° in its plane (portrait)."""
+    cam = sim.default_truth_camera(640, 480)
+    rays = sim.SampleRays(cam, 2)
+    poses = sim.random_poses(cam, COLS, ROWS, SQ, 4, seed=7, fill=(0.35, 0.5))
+    c = np.array([(COLS - 1) * SQ / 2, (ROWS - 1) * SQ / 2, 0.0])
+    out = []
+    for k, (R, t) in enumerate(poses):
+        if k % 2:
+            R2 = R @ cv2.Rodrigues(np.array([0.0, 0.0, np.pi / 2]))[0]
+            t = t + R @ c - R2 @ c
+            R = R2
+        img = sim.render_view(rays, COLS, ROWS, SQ, R, t, seed=k)
+        truth = cam.project(sim.board_points(COLS, ROWS, SQ) @ R.T + t)
+        out.append((img, truth, bool(k % 2)))
+    return out
+
+
+def _err_up_to_half_turn(found, truth):
+    # A 9x6 board's origin is fixed up to a half-turn only when cols, rows differ in parity;
+    # compare both ways round.
+    return min(np.abs(found - truth).max(), np.abs(found[::-1] - truth).max())
+
+
+def test_boards_are_found_in_either_orientation(turned_views):
+    for img, truth, turned in turned_views:
+        for board in ((COLS, ROWS), (ROWS, COLS)):
+            found = calibration.detect_chessboard(img, board)
+            assert found is not None, (turned, board)
+            if board == (COLS, ROWS):
+                assert _err_up_to_half_turn(found, truth) < 0.5
+
+
+def test_a_board_found_with_its_sides_swapped_is_reordered_without_mirroring(turned_views):
+    for img, truth, _ in turned_views:
+        ok, corners = cv2.findChessboardCornersSB(img, (ROWS, COLS), flags=cv2.CALIB_CB_EXHAUSTIVE)
+        assert ok
+        pts = calibration._canonical_order(corners.reshape(-1, 2).astype(np.float64), (ROWS, COLS), (COLS, ROWS))
+        # A 90° turn of the board: the corners land on the truth (up to the half-turn every
+        # 9x6 detection has), with the board's handedness, not its mirror image.
+        assert _err_up_to_half_turn(pts, truth) < 0.5
+        assert calibration._handedness(pts.reshape(ROWS, COLS, 2)) > 0
+
+
+# --------------------------------------------------------------------------- rescaling
+
+
+def _opencv():
+    return OpenCVCamera(1280, 960, 1100.0, 1098.0, 645.2, 470.9, (-0.1, 0.05, 1e-4, -2e-4, 0.0))
+
+
+def _tsai():
+    return TsaiCamera(1280, 960, 6.0, 3e-3, 645.2, 470.9, 0.00375, 0.00375, 1.01)
+
+
+@pytest.mark.parametrize("make", [_opencv, _tsai])
+@pytest.mark.parametrize("size", [(640, 480), (1920, 1440), (641, 481)])
+def test_intrinsics_rescale_to_frames_of_the_same_aspect(make, size):
+    cam = make()
+    fitted, note = calibration.fit_camera_to_frames(cam, *size, "cam.toml")
+    assert (fitted.width, fitted.height) == size and "rescaled" in note and note.startswith("cam.toml")
+    pts = np.random.default_rng(0).uniform([-200, -150, 400], [200, 150, 900], (200, 3))
+    sw, sh = size[0] / 1280, size[1] / 960
+    expected = (cam.project(pts) + 0.5) * [sw, sh] - 0.5  # the same sensor, pixels resampled
+    assert np.max(np.abs(fitted.project(pts) - expected)) < 1e-9
+    same, none = calibration.fit_camera_to_frames(cam, 1280, 960, "cam.toml")
+    assert same is cam and none is None
+
+
+@pytest.mark.parametrize("make", [_opencv, _tsai])
+def test_intrinsics_of_another_aspect_are_refused_in_one_line(make):
+    with pytest.raises(GnomonError) as exc:
+        calibration.fit_camera_to_frames(make(), 1920, 1080, "cam.toml", "frame 0 (a.png)")
+    msg = str(exc.value)
+    assert "\n" not in msg and msg.startswith("frame 0 (a.png) is 1920x1080 but the camera's 1280x960 (cam.toml)")
+    assert "crop" in msg and "calibrate the camera from frames" in msg
+
+
+def test_field_log_camera_file_from_stills_is_rescaled(tmp_path):
+    log_path = write_tiny_capture(tmp_path / "cap")  # 48x36 frames, fx = 60
+    cam = OpenCVCamera(96, 72, 120.0, 120.0, 47.5, 35.5, (0.0,) * 5)
+    calibration.write_camera_file(tmp_path / "cap" / "stills.toml", cam)
+    data = toml_io.load(log_path)
+    pose = data["camera"]["pose"]
+    data["camera"] = {"file": "stills.toml", "pose": pose}
+    toml_io.dump(data, log_path)
+    log = load_field_log(log_path)
+    assert (log.camera.width, log.camera.height) == (48, 36)
+    assert log.camera.fx == pytest.approx(60.0) and log.camera.cx == pytest.approx(23.5)
+    assert log.calibration["rescaled_from"] == [96, 72]
+    # Another aspect ratio (a crop): refused when the field log is read, naming the frame.
+    calibration.write_camera_file(tmp_path / "cap" / "stills.toml", OpenCVCamera(96, 54, 120.0, 120.0, 47.5, 26.5, (0.0,) * 5))
+    with pytest.raises(GnomonError, match=r"frame 0 \(frame_0000\.png\) is 48x36 but the camera's 96x54 .*stills|crop"):
+        load_field_log(log_path)
+
+
+# --------------------------------------------------------------------------- EXIF and suffixes
+
+
+def _asymmetric(h=30, w=40):
+    img = np.zeros((h, w), np.uint8)
+    img[:5, :10] = 255  # a bright block in the top-left corner
+    img[:, -1] = 128  # and a grey right edge
+    return img
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_exif_orientation_is_applied_like_pillow(tmp_path, orientation):
+    stored = _asymmetric()
+    path = tmp_path / f"o{orientation}.png"
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    Image.fromarray(stored).save(path, exif=exif)
+    with Image.open(path) as im:
+        upright = np.asarray(ImageOps.exif_transpose(im))
+    decoded, _ = decode_image_file(path)
+    assert np.array_equal(decoded, upright)
+    assert np.array_equal(calibration.read_grey(path), upright)
+    assert image_size(path) == (upright.shape[1], upright.shape[0])
+
+
+def test_exif_orientation_in_a_jpeg_frame_sequence(tmp_path):
+    exif = Image.Exif()
+    exif[0x0112] = 6  # a phone held upright: stored landscape, shown portrait
+    for i in range(3):
+        Image.fromarray(_asymmetric()).save(tmp_path / f"IMG_{i}.JPG", exif=exif, quality=95)
+    files = glob_frames(tmp_path, "*.jpg")
+    assert [p.name for p in files] == ["IMG_0.JPG", "IMG_1.JPG", "IMG_2.JPG"]
+    frames = list(FrameSource(files))
+    assert frames[0].grey.shape == (40, 30)
+    assert frames[0].grey[2, -3] > 200 and frames[0].grey[-1, 15] < 200  # the block is now top-right
+
+
+def test_frames_glob_matches_upper_case_suffixes(tmp_path):
+    log_path = write_tiny_capture(tmp_path / "cap", n_frames=6)
+    frames = tmp_path / "cap" / "frames"
+    for k, p in enumerate(sorted(frames.iterdir())):
+        if k % 2:
+            p.rename(p.with_suffix(".PNG"))
+    log = load_field_log(log_path)  # frames = "frames/*.png"
+    assert [p.name for p in log.capture.image_files] == [f"frame_{i:04d}.{'PNG' if i % 2 else 'png'}" for i in range(6)]
+    assert glob_frames(frames, "frame_000[0-2].Png") == tuple(sorted(frames.glob("frame_000[0-2].*")))
