@@ -101,6 +101,8 @@ SHADOW_TIME[5:40, 4:60] = np.linspace(0, 29, 56, dtype=np.float32)[None, :]
 DEPTH = np.where(np.isfinite(SHADOW_TIME), 400.0, np.nan).astype(np.float32)
 SIGMA_MAP = np.where(np.isfinite(SHADOW_TIME), 0.05, np.nan).astype(np.float32)
 METRICS = {"coverage": 0.93, "depth_rms_mm": 0.12, "timings": {"total_s": 1.5, "kernel s": 0.25}, "note": "x"}
+COVERAGE = np.where(np.isfinite(SHADOW_TIME), 1, 0).astype(np.uint8)
+COVERAGE[:3] = 2
 WARNINGS = ["low contrast in 7% of pixels", "frame 17: edge fit residual 2.1 px"]
 
 
@@ -135,6 +137,8 @@ def write_scan(path, **kwargs) -> ScanRecording:
         rec.log_points(XYZ, RGB, SIGMA, uv=UV)
         rec.log_mesh(MESH_V, MESH_F, RGB[:40])
         rec.log_maps(SHADOW_TIME, DEPTH, SIGMA_MAP)
+        rec.log_camera_depth(DEPTH)
+        rec.log_coverage(COVERAGE)
         rec.log_metrics(METRICS)
     return rec
 
@@ -163,8 +167,8 @@ def test_entities(scan):
     expected = {
         "/world/camera", "/world/camera/image", "/world/camera/image/edges", "/world/shadow_plane",
         "/world/planes/ground", "/world/planes/back_wall", "/world/light", "/world/points", "/world/mesh",
-        "/maps/shadow_time", "/maps/depth", "/maps/sigma", "/log",
-        "/metrics/coverage", "/metrics/depth_rms_mm", "/metrics/timings/total_s", "/metrics/timings/kernel_s",
+        "/maps/shadow_time", "/maps/depth", "/maps/sigma", "/log", "/world", "/world/camera/depth",
+        "/maps/coverage", "/metrics/coverage", "/metrics/depth_rms_mm", "/metrics/timings/total_s", "/metrics/timings/kernel_s",
     }
     assert set(data) - {"/__properties"} == expected
 
@@ -184,7 +188,7 @@ def test_recording_properties_and_blueprint(scan):
         if "ViewBlueprint:space_origin" in c.to_record_batch().schema.names
     ]
     assert sorted(v.strip("/") for v in views) == sorted(
-        ["world", "world/camera/image", "maps/shadow_time", "maps/depth", "maps/sigma", "log", "metrics"]
+        ["world", "world/camera/image", "maps/shadow_time", "maps/depth", "maps/sigma", "maps/coverage", "log", "metrics"]
     )
 
 
@@ -297,7 +301,8 @@ def test_warnings_and_metrics(scan):
     _, _, data = scan
     texts = rows(data, ENTITY["log"], "TextLog:text")
     assert sorted(v[0] for _, v in texts) == sorted(WARNINGS)
-    assert (17, [WARNINGS[1]]) in texts
+    # on the frame timeline (the default layout's Warnings view): a run's warning from frame 0
+    assert (0, [WARNINGS[0]]) in texts and (17, [WARNINGS[1]]) in texts
     assert {v[0] for _, v in rows(data, ENTITY["log"], "TextLog:level")} == {"WARN"}
     assert one(data, "metrics/coverage", "Scalars:scalars") == [0.93]
     assert one(data, "metrics/timings/total_s", "Scalars:scalars") == [1.5]
@@ -506,3 +511,30 @@ def test_command_line_options(tmp_path):
     for argv in (["--no-rrd", "--rrd", "a.rrd"], ["--frame-stride", "0"], ["--rrd", str(tmp_path)]):
         with pytest.raises(GnomonError):
             recording_from_args(parser.parse_args(argv), tmp_path, recording_name="s")
+
+
+def test_world_is_z_up_and_depth_sits_under_the_camera(scan):
+    import rerun as rr
+
+    _, _, data = scan
+    vc = one(data, "world", "ViewCoordinates:xyz")
+    assert list(vc[0]) == list(rr.ViewCoordinates.RIGHT_HAND_Z_UP.as_arrow_array().to_pylist()[0])
+    fmt = one(data, ENTITY["camera_depth"], "DepthImage:format")[0]
+    # stored at the pinhole's (downscaled) resolution, in world units
+    res = one(data, ENTITY["camera"], "Pinhole:resolution")[0]
+    assert (fmt["width"], fmt["height"]) == tuple(int(round(x)) for x in res)
+    assert one(data, ENTITY["camera_depth"], "DepthImage:meter") == [1.0]
+    buf = np.frombuffer(bytes(one(data, ENTITY["camera_depth"], "DepthImage:buffer")[0]), np.float32)
+    assert np.nanmax(buf) == 400.0 and np.isnan(buf).any()
+
+
+def test_coverage_is_a_segmentation_image_with_named_classes(scan):
+    from gnomon.preview import COVERAGE_CLASSES
+
+    _, _, data = scan
+    fmt = one(data, ENTITY["coverage"], "SegmentationImage:format")[0]
+    buf = np.frombuffer(bytes(one(data, ENTITY["coverage"], "SegmentationImage:buffer")[0]), np.uint8)
+    assert np.array_equal(buf.reshape(fmt["height"], fmt["width"]), COVERAGE)
+    ctx = one(data, ENTITY["coverage"], "AnnotationContext:context")[0]
+    labels = {c["class_id"]: c["class_description"]["info"]["label"] for c in ctx}
+    assert labels == {k: name for k, (name, _) in COVERAGE_CLASSES.items()}

@@ -22,9 +22,18 @@ Entities (paths as stored; rerun shows them with a leading ``/``)
         its intrinsics are K scaled by ``image_scale`` and shifted by half a
         pixel, because rerun puts pixel centres at +0.5 where OpenCV (and
         Gnomon) put them at integers. The 3D frustum is the calibrated one.
+    ``world``
+        static ``ViewCoordinates.RIGHT_HAND_Z_UP`` (Gnomon's world frames have
+        z up: the desk's normal, or up at the site for sun scans).
     ``world/camera/image``
         every ``frame_stride``-th frame, downscaled by ``image_scale`` and JPEG
-        encoded (``EncodedImage``).
+        encoded (``EncodedImage``); or, for a video input whose codec rerun
+        plays (H.264, H.265, AV1 in MP4), the video itself as a static
+        ``AssetVideo`` with a ``VideoFrameReference`` on every frame.
+    ``world/camera/depth``
+        static ``DepthImage`` of the camera Z per pixel at the stored images'
+        size (``meter`` 1: world units), under the pinhole: the 3D view shows
+        it back-projected through the camera (lens distortion not applied).
     ``world/camera/image/edges``
         per frame, the shadow edges as ``LineStrips2D`` in the stored image's
         pixel coordinates: ``x = (u + 0.5)·sx``, ``y = (v + 0.5)·sy`` for an
@@ -54,14 +63,19 @@ Entities (paths as stored; rerun shows them with a leading ``/``)
     ``maps/shadow_time``, ``maps/depth``, ``maps/sigma``
         static float32 ``DepthImage`` s with colour maps (turbo, viridis,
         inferno) over the finite range; NaN (no value) is kept as NaN.
+    ``maps/coverage``
+        static ``SegmentationImage`` (uint8 class per pixel) with its
+        ``AnnotationContext`` naming the classes (:data:`gnomon.preview.COVERAGE_CLASSES`).
     ``log``
-        ``TextLog`` of the run's warnings (level WARN).
+        ``TextLog`` of the run's warnings (level WARN) on the ``frame``
+        timeline: at the frame they concern, or at frame 0 for the whole run,
+        so the default layout's Warnings view lists them at every frame.
     ``metrics/<name>``
         the report's metrics as ``Scalars`` (static, or per frame when given
         an index). Nested names are joined with ``/``.
 
 A default blueprint shows the 3D scene, the camera image with its edges, the
-maps, the warnings and the metrics.
+maps (coverage among them), the warnings and the metrics.
 
 The recording is written to a temporary file beside ``path`` and renamed onto
 ``path`` only by :meth:`ScanRecording.close`: an interrupted run never leaves
@@ -117,6 +131,8 @@ ENTITY = {
     "shadow_time": "maps/shadow_time",
     "depth": "maps/depth",
     "sigma": "maps/sigma",
+    "coverage": "maps/coverage",
+    "camera_depth": "world/camera/depth",
     "log": "log",
     "metrics": "metrics",
 }
@@ -192,6 +208,7 @@ def default_blueprint():
                     rrb.Spatial2DView(name="Shadow time", origin=ENTITY["shadow_time"]),
                     rrb.Spatial2DView(name="Depth", origin=ENTITY["depth"]),
                     rrb.Spatial2DView(name="σ", origin=ENTITY["sigma"]),
+                    rrb.Spatial2DView(name="Coverage", origin=ENTITY["coverage"]),
                 ),
                 rrb.Tabs(
                     rrb.TextLogView(name="Warnings", origin=ENTITY["log"]),
@@ -253,6 +270,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         self._u16_shift: int | None = None
         self._capture_times: dict[int, datetime | np.datetime64] = {}
         self._planes_logged = 0
+        self._video_ns: np.ndarray | None = None  # frame timestamps of an AssetVideo input
 
         want_viewer = bool(spawn_viewer)
         if want_viewer and not display_available():
@@ -280,6 +298,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
                 return  # viewer wanted, failed, and no file: disabled
             rec.set_sinks(*sinks, default_blueprint=default_blueprint())
             rec.send_recording_name(recording_name)
+            rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         except BaseException:
             self._rec = rec
             self.abort()
@@ -432,6 +451,12 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
             return False
         self.set_time(index, capture_time)
         self.frames_seen += 1
+        if self._video_ns is not None:
+            if 0 <= int(index) < len(self._video_ns):
+                self._rec.log(ENTITY["image"], _rr().VideoFrameReference(nanoseconds=int(self._video_ns[int(index)])))
+                self.frames_stored += 1
+                return True
+            return False
         if int(index) % self.frame_stride != 0:
             return False
         rr = _rr()
@@ -453,6 +478,33 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
             raise RuntimeError("JPEG encoding failed")
         self._rec.log(ENTITY["image"], rr.EncodedImage(contents=buf.tobytes(), media_type="image/jpeg"))
         self.frames_stored += 1
+        return True
+
+    def log_video(self, path: str | os.PathLike, frame_count: int) -> bool:
+        """Store a video input as it is: a static ``AssetVideo`` at ``world/camera/image``.
+
+        Later :meth:`log_frame` calls then log a ``VideoFrameReference`` to
+        their frame instead of a JPEG still. Only where rerun can play the
+        video (its codec and container) and it has ``frame_count`` frames;
+        otherwise nothing is logged, frames stay JPEG stills, and the reason
+        is returned False (and logged at debug level). Call before the first
+        frame. The video must have the camera's full size: build the recorder
+        with ``image_scale=1``.
+        """
+        if not self.enabled:
+            return False
+        rr = _rr()
+        try:
+            asset = rr.AssetVideo(path=str(path))
+            ns = np.asarray(asset.read_frame_timestamps_nanos(), dtype=np.int64)
+        except Exception as exc:  # unsupported codec or container: keep JPEG stills
+            log.debug("%s: not stored as a video (%s)", path, exc)
+            return False
+        if len(ns) < int(frame_count):
+            log.debug("%s: %d frame timestamps for %d frames", path, len(ns), frame_count)
+            return False
+        self._rec.log(ENTITY["image"], asset, static=True)
+        self._video_ns = ns
         return True
 
     def _to_display(self, pixels: np.ndarray) -> np.ndarray:
@@ -669,6 +721,46 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
                 static=True,
             )
 
+    def log_camera_depth(self, depth: np.ndarray) -> None:
+        """Camera Z per pixel (H, W), world units, NaN = none, under the camera (static).
+
+        Resampled (nearest) to the stored images' size so that it matches the
+        pinhole; the 3D view back-projects it through the camera.
+        """
+        if not self.enabled:
+            return
+        rr = _rr()
+        d = np.asarray(depth, dtype=np.float32)
+        if d.ndim != 2:
+            raise ValueError(f"depth must be (H, W), got {d.shape}")
+        h, w = d.shape
+        dsize = self._display_size(*(self._camera_size or (w, h)))
+        if dsize != (w, h):
+            d = cv2.resize(d, dsize, interpolation=cv2.INTER_NEAREST)
+        self._rec.log(
+            ENTITY["camera_depth"],
+            rr.DepthImage(np.ascontiguousarray(d), meter=1.0, colormap="viridis", depth_range=_finite_range(d)),
+            static=True,
+        )
+
+    def log_coverage(self, classes: np.ndarray) -> None:
+        """The coverage map (H, W) uint8 at ``maps/coverage`` with its class names (static)."""
+        if not self.enabled:
+            return
+        rr = _rr()
+        from gnomon.preview import COVERAGE_CLASSES
+
+        c = np.ascontiguousarray(np.asarray(classes, dtype=np.uint8))
+        if c.ndim != 2:
+            raise ValueError(f"coverage must be (H, W), got {c.shape}")
+        self._rec.log(
+            ENTITY["coverage"],
+            rr.AnnotationContext([rr.AnnotationInfo(id=k, label=name, color=rgb)
+                                  for k, (name, rgb) in COVERAGE_CLASSES.items()]),
+            rr.SegmentationImage(c),
+            static=True,
+        )
+
     def log_warning(
         self,
         text: str,
@@ -677,15 +769,13 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         capture_time: datetime | np.datetime64 | None = None,
         level: str = "WARN",
     ) -> None:
-        """A warning in ``log``: at frame ``index`` if given, else on no frame (a run's warning
-        belongs to the whole run, not to whichever frame was logged last)."""
+        """A warning in ``log`` on the ``frame`` timeline: at frame ``index`` if given, else at
+        frame 0 (a run's warning belongs to the whole run: from its start it is listed in the
+        Warnings view at every frame, not only from whichever frame was logged last)."""
         if not self.enabled:
             return
         rr = _rr()
-        if index is not None:
-            self.set_time(index, capture_time)
-        else:
-            self._rec.reset_time()
+        self.set_time(0 if index is None else index, capture_time)
         self._rec.log(ENTITY["log"], rr.TextLog(str(text), level=level))
 
     def log_metrics(self, metrics: Mapping[str, Any], *, index: int | None = None) -> None:

@@ -1,0 +1,73 @@
+"""Colours from lit frames (not frame 0) and the preview picture."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from gnomon.preview import COVERAGE_CLASSES, coverage_map, preview_image, write_preview
+from gnomon.texture import LitColour, sample_indices
+
+
+def test_colour_is_the_median_of_the_frames_a_pixel_is_lit_in() -> None:
+    h, w, n = 20, 40, 50
+    albedo = np.random.default_rng(1).integers(60, 250, (h, w, 3)).astype(np.uint8)
+    # a shadow band sweeps left to right, one column per frame: column c is in shadow in frames c..c+4
+    start = np.broadcast_to(np.arange(w, dtype=np.float64)[None, :], (h, w))
+    end = start + 4
+    picks = sample_indices(np.arange(n), 5)
+    assert list(picks) == [0, 12, 24, 37, 49]
+    lit = LitColour(picks)
+    for k in range(n):
+        img = albedo.copy()
+        shadow = (np.arange(w) >= k - 4) & (np.arange(w) <= k)
+        img[:, shadow] //= 5
+        lit.add(k, img)
+    rgb = lit.finish(start, end)
+    np.testing.assert_array_equal(rgb, albedo)
+    # a pixel shadowed in most kept frames: the plain median would be dark, the lit one is not
+    lit2 = LitColour(np.array([10, 11, 12]))
+    for k in (10, 11, 12):
+        img = albedo.copy()
+        img[:, 10:13] //= 5  # columns 10..12 dark in all three
+        img[:, 20] //= 5 if k != 12 else 1  # column 20 dark in frames 10 and 11 only
+        lit2.add(k, img)
+    s0 = np.full((h, w), np.nan)
+    s0[:, 20] = 9.0
+    e0 = np.full((h, w), np.nan)
+    e0[:, 20] = 11.0
+    out = lit2.finish(s0, e0, margin=0.5)
+    np.testing.assert_array_equal(out[:, 20], albedo[:, 20])  # only frame 12 is lit
+    np.testing.assert_array_equal(out[:, 11], albedo[:, 11] // 5)  # never lit: all frames
+
+
+def test_grey_and_16_bit_frames_and_no_shadow_times() -> None:
+    lit = LitColour(np.array([0, 2]))
+    lit.add(0, np.full((2, 3), 1000 << 4, np.uint16))
+    lit.add(1, np.zeros((2, 3), np.uint16))  # not kept
+    lit.add(2, np.full((2, 3), 3000 << 4, np.uint16))
+    rgb = lit.finish(np.full((2, 3), np.nan), np.full((2, 3), np.nan))
+    assert rgb.shape == (2, 3, 3)
+    assert np.all(rgb == ((1000 << 4 >> 8) + (3000 << 4 >> 8) + 1) // 2)
+
+
+def test_preview_has_four_captioned_panels(tmp_path) -> None:
+    h, w = 60, 80
+    rgb = np.full((h, w, 3), 128, np.uint8)
+    depth = np.full((h, w), np.nan, np.float32)
+    depth[10:50, 10:70] = np.linspace(600, 700, 60)[None, :]
+    sigma = np.where(np.isfinite(depth), 0.2, np.nan).astype(np.float32)
+    contrast = np.zeros((h, w), bool)
+    contrast[5:55] = True
+    cov = coverage_map(contrast, np.isfinite(depth))
+    assert set(np.unique(cov)) == {0, 1, 2}
+    img = preview_image(rgb, depth, sigma, cov, units="mm")
+    assert img.shape[1] == 4 * w and img.shape[0] > h
+    # the coverage panel shows the class colours
+    assert tuple(img[30, 3 * w + 40]) == COVERAGE_CLASSES[1][1]
+    assert tuple(img[2, 3 * w + 40]) == COVERAGE_CLASSES[0][1]
+    # no depth → black in the depth panel; valid depth is coloured
+    assert tuple(img[2, w + 2]) == (0, 0, 0) and img[30, w + 40].sum() > 0
+    write_preview(tmp_path / "preview.png", rgb, depth, sigma, cov, units="mm")
+    back = cv2.imread(str(tmp_path / "preview.png"))[:, :, ::-1]
+    np.testing.assert_array_equal(back, img)
