@@ -161,6 +161,25 @@ class ScanSettings:
 
 
 @dataclass(frozen=True)
+class OutputSpec:
+    """[output]: what the written outputs keep (world frame, world units).
+
+    ``crop_box`` (2, 3) min and max corners of an axis-aligned box;
+    ``crop_above`` a plane name with ``crop_min_height`` (and optionally
+    ``crop_max_height``): heights above that plane, on the camera's side.
+    """
+
+    crop_box: np.ndarray | None = None
+    crop_above: str | None = None
+    crop_min_height: float = 0.0
+    crop_max_height: float | None = None
+
+    @property
+    def crops(self) -> bool:
+        return self.crop_box is not None or self.crop_above is not None
+
+
+@dataclass(frozen=True)
 class SiteSpec:
     """[site]: where a sun capture happens, and how the world frame sits in East-North-Up."""
 
@@ -205,6 +224,7 @@ class FieldLog:
     site: SiteSpec | None = None
     pole: PoleSpec | None = None
     gnomon: GnomonSpec | None = None
+    output: OutputSpec = field(default_factory=OutputSpec)
 
     @property
     def base_dir(self) -> Path:
@@ -419,6 +439,35 @@ def _parse_scan(t: _Table | None) -> ScanSettings:
     return s
 
 
+def _parse_output(t: _Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec:
+    if t is None:
+        return OutputSpec()
+    box = None
+    if "crop_box" in t.data:
+        raw = t.take("crop_box")
+        try:
+            box = np.asarray(raw, dtype=np.float64)
+        except (TypeError, ValueError):
+            box = None
+        if box is None or box.shape != (2, 3) or not np.all(np.isfinite(box)):
+            raise t.error("crop_box", f"expected [[xmin, ymin, zmin], [xmax, ymax, zmax]], got {raw!r}")
+        if np.any(box[1] <= box[0]):
+            raise t.error("crop_box", "each max must exceed its min")
+    above = None
+    low, high = 0.0, None
+    if "crop_above" in t.data:
+        names = [pl.name for pl in planes]
+        above = t.string("crop_above", None, tuple(names))
+        low = t.number("crop_min_height", 0.0)
+        high = t.number("crop_max_height") if "crop_max_height" in t.data else None
+        if high is not None and high <= low:
+            raise t.error("crop_max_height", f"must exceed crop_min_height ({low})")
+    elif "crop_min_height" in t.data or "crop_max_height" in t.data:
+        raise t.error("crop_above", "crop_min_height/crop_max_height need crop_above (a [[planes]] name)")
+    t.done()
+    return OutputSpec(box, above, low, high)
+
+
 def load_field_log(path: str | Path) -> FieldLog:
     """Read and validate a field log. Raises :class:`FieldLogError` on any problem."""
     p = Path(path)
@@ -448,6 +497,7 @@ def load_field_log(path: str | Path) -> FieldLog:
     site = _parse_site(section("site", required=False))
     pole = _parse_pole(section("pole", required=False))
     gnomon = _parse_gnomon(section("gnomon", required=False))
+    output = _parse_output(section("output", required=False), planes)
     if light.kind == "sun":
         if site is None:
             raise FieldLogError(f"{p}: [light] kind 'sun' needs a [site] table (latitude, longitude, ...)")
@@ -466,7 +516,8 @@ def load_field_log(path: str | Path) -> FieldLog:
             f"{p}: missing required table [camera.pose] (the world → camera transform), "
             "or markers or a chessboard on a [[planes]] entry to measure it"
         )
-    log = FieldLog(p, capture, camera, pose, planes, light, scan, camera_file, calibration, site, pole, gnomon)
+    log = FieldLog(p, capture, camera, pose, planes, light, scan, camera_file, calibration, site, pole, gnomon,
+                   output)
     if pose is not None:
         check_geometry(log, pose)
     return log

@@ -1,0 +1,275 @@
+"""Gnomon's Python API: scan, load and simulate from a script or a notebook.
+
+>>> import gnomon
+>>> field_log = gnomon.simulate("desk_lamp", "capture", width=400, height=300, frames=120)
+>>> s = gnomon.scan(field_log)                 # in memory; out="scan" also writes the files
+>>> s.points.shape, s.depth.shape, s.report["coverage"]["points"]
+>>> again = gnomon.load_scan("scan")           # the same arrays, read back from a scan folder
+
+Arrays are numpy, in the units the field log declares (``Scan.units``);
+``world`` is the field log's world frame (z up), ``camera`` the OpenCV
+camera frame (x right, y down, z forward). Errors in the input raise
+:class:`gnomon.errors.GnomonError` (the message names the file, key or frame).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gnomon.errors import GnomonError
+
+__all__ = ["Scan", "ScanMesh", "scan", "load_scan", "simulate", "SCENES"]
+
+#: Scenes :func:`simulate` can render.
+SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "chessboard")
+
+
+@dataclass
+class ScanMesh:
+    """The surface mesh: ``vertices`` (V, 3) float32 world, ``faces`` (F, 3) int32 (counter-clockwise
+    seen from the camera), ``normals`` (V, 3) float32 unit (towards the camera), ``colors`` (V, 3)
+    uint8 RGB, ``pixels`` (V, 2) float32 pixel (u, v) of each vertex."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray | None
+    colors: np.ndarray | None
+    pixels: np.ndarray | None
+
+
+@dataclass
+class Scan:
+    """A scan's result, in memory or read back from its folder.
+
+    Per pixel (H, W), NaN or False where there is no point:
+
+    * ``depth`` camera Z (world units), ``sigma`` its predicted standard deviation,
+      ``shadow_time`` when the shadow crossed the pixel (capture frames, sub-frame),
+      ``undersampled`` the edge crossed it in fewer than 2 frames, ``rgb`` (H, W, 3) uint8
+      colour image (the mesh's texture).
+
+    Per point (N, row-major over the pixels with a depth):
+
+    * ``points`` (N, 3) float32 world coordinates, ``colors`` (N, 3) uint8,
+      ``normals`` (N, 3) float32 unit normals towards the camera, ``point_sigma`` (N,),
+      ``pixels`` (N, 2) float32 (u, v).
+
+    ``mesh`` (:class:`ScanMesh`), ``K`` (3, 3), ``dist`` lens distortion (OpenCV
+    k1 k2 p1 p2 k3; None for a Tsai camera), ``R``, ``t`` world → camera
+    (``X_cam = R·X_world + t``), ``units``, ``report`` (report.json's content),
+    ``warnings``, ``folder`` (where the files are, None if not written).
+    """
+
+    depth: np.ndarray
+    sigma: np.ndarray
+    shadow_time: np.ndarray | None
+    undersampled: np.ndarray | None
+    rgb: np.ndarray | None
+    points: np.ndarray
+    colors: np.ndarray | None
+    normals: np.ndarray | None
+    point_sigma: np.ndarray | None
+    pixels: np.ndarray | None
+    mesh: ScanMesh | None
+    K: np.ndarray
+    dist: np.ndarray | None
+    R: np.ndarray
+    t: np.ndarray
+    units: str
+    report: dict[str, Any]
+    warnings: list[str] = field(default_factory=list)
+    folder: Path | None = None
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(H, W) bool: the pixels with a point."""
+        return np.isfinite(self.depth)
+
+    @property
+    def camera_centre(self) -> np.ndarray:
+        """(3,) the camera's centre, world frame."""
+        return -self.R.T @ self.t
+
+
+def _camera_arrays(report: dict) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+    import cv2
+
+    cam = report["camera"]
+    rvec = np.asarray(cam["pose"]["rvec"], dtype=np.float64)
+    t = np.asarray(cam["pose"]["tvec"], dtype=np.float64)
+    R = cv2.Rodrigues(rvec)[0]
+    if "fx" in cam:
+        K = np.array([[cam["fx"], 0.0, cam["cx"]], [0.0, cam["fy"], cam["cy"]], [0.0, 0.0, 1.0]])
+        dist = np.asarray(cam.get("dist", [0.0] * 5), dtype=np.float64)
+    else:  # Tsai: the pinhole part only
+        from gnomon.calibration import camera_from_table
+
+        c = camera_from_table({k: v for k, v in cam.items() if k != "pose"}, "report.json: camera")
+        K, dist = np.asarray(c.K, dtype=np.float64), None
+    return K, dist, R, t
+
+
+def _from_result(result, folder: Path | None) -> Scan:
+    """A :class:`Scan` from the pipeline's in-memory result."""
+    s = result.surface
+    K, dist, R, t = _camera_arrays(result.report)
+    h, w = s.depth.shape
+    mesh = ScanMesh(s.mesh.vertices, s.mesh.faces, s.mesh.normals, s.vertex_rgb, s.mesh.pixel_uv(w))
+    return Scan(depth=s.depth, sigma=s.sigma, shadow_time=result.shadow_time, undersampled=result.undersampled,
+                rgb=s.rgb, points=s.points_world, colors=s.colors, normals=s.normals,
+                point_sigma=s.sigma[s.valid], pixels=s.uv, mesh=mesh, K=K, dist=dist, R=R, t=t,
+                units=str(result.report["units"]), report=result.report, warnings=list(result.warnings),
+                folder=folder)
+
+
+def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, rrd: bool | None = None,
+         progress: bool = False, frame_stride: int = 10) -> Scan:
+    """Scan the capture a field log describes; return the result, and write it if ``out`` is given.
+
+    ``field_log`` the capture's TOML field log (format: field_logs/README.md).
+    ``out`` a folder for the files `gnomon scan` writes (points.ply, mesh.*,
+    depth.npz, …, published as a whole only on success); None keeps
+    everything in memory. ``rrd`` also write the rerun recording
+    (default: when ``out`` is given). ``progress`` a progress bar on stderr.
+    """
+    from gnomon.fieldlog import load_field_log
+    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.pipeline import scan as scan_in_memory
+    from gnomon.scan_setup import frame_source, resolve_scan
+
+    if out is not None:
+        opts = ScanOptions(rrd=True if rrd is None else bool(rrd), progress=progress,
+                           frame_stride=max(1, int(frame_stride)))
+        result = run_scan(field_log, out, opts)
+        return _from_result(result, Path(out))
+    if rrd:
+        raise ValueError("a recording needs an output folder: give out=")
+    log = load_field_log(field_log)
+    source = frame_source(log)
+    setup = resolve_scan(log, source)
+    result = scan_in_memory(setup, source, None, progress=progress, frame_stride=frame_stride)
+    result.report["timings_s"]["total_s"] = result.report["timings_s"].get("total_s", 0.0)
+    return _from_result(result, None)
+
+
+def _load_npy(path: Path, shape: tuple[int, int] | None = None) -> np.ndarray | None:
+    if not path.is_file():
+        return None
+    try:
+        a = np.load(path, allow_pickle=False)
+    except (ValueError, OSError) as exc:
+        raise GnomonError(f"{path}: not a numpy array file ({exc})") from None
+    if shape is not None and a.shape[:2] != shape:
+        raise GnomonError(f"{path}: shape {a.shape} does not match the {shape[1]}x{shape[0]} camera")
+    return a
+
+
+def load_scan(folder: str | os.PathLike) -> Scan:
+    """Read a scan's output folder (written by `gnomon scan` or :func:`scan`) back into a :class:`Scan`.
+
+    Needs report.json, points.ply and depth (depth.npz or depth.npy); reads the
+    mesh, maps and texture when present. A missing or malformed file raises
+    :class:`GnomonError` naming it.
+    """
+    import cv2
+
+    from gnomon import ply
+
+    f = Path(folder)
+    if not f.is_dir():
+        raise GnomonError(f"{f}: not a scan output folder")
+    try:
+        report = json.loads((f / "report.json").read_text())
+        K, dist, R, t = _camera_arrays(report)
+        w, h = (int(x) for x in report["inputs"]["image_size"])
+        units = str(report["units"])
+    except FileNotFoundError:
+        raise GnomonError(f"{f / 'report.json'}: missing (is it the output folder of `gnomon scan`?)") from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise GnomonError(f"{f / 'report.json'}: not a gnomon scan report ({exc})") from None
+    depth = sigma = None
+    if (f / "depth.npz").is_file():
+        try:
+            with np.load(f / "depth.npz", allow_pickle=False) as z:
+                depth, sigma = z["depth"], z["sigma"]
+        except (ValueError, OSError, KeyError) as exc:
+            raise GnomonError(f"{f / 'depth.npz'}: not a gnomon depth file ({exc})") from None
+    else:
+        depth, sigma = _load_npy(f / "depth.npy", (h, w)), _load_npy(f / "sigma.npy", (h, w))
+    if depth is None:
+        raise GnomonError(f"{f}: missing depth.npz (or depth.npy)")
+    if depth.shape != (h, w):
+        raise GnomonError(f"{f}: depth shape {depth.shape} does not match the {w}x{h} camera")
+    pts = ply.read_ply(f / "points.ply")
+    mesh = None
+    if (f / "mesh.ply").is_file():
+        m = ply.read_ply(f / "mesh.ply")
+        mesh = ScanMesh(m["xyz"], np.asarray(m.get("faces", np.zeros((0, 3), np.int32))), m.get("normals"),
+                        m.get("rgb"), None)
+    rgb = None
+    if (f / "mesh.png").is_file():
+        img = cv2.imread(str(f / "mesh.png"), cv2.IMREAD_COLOR)
+        rgb = None if img is None else np.ascontiguousarray(img[:, :, ::-1])
+    return Scan(depth=depth, sigma=sigma if sigma is not None else np.full_like(depth, np.nan),
+                shadow_time=_load_npy(f / "shadow_time.npy", (h, w)),
+                undersampled=_load_npy(f / "undersampled.npy", (h, w)), rgb=rgb,
+                points=pts["xyz"], colors=pts.get("rgb"), normals=pts.get("normals"),
+                point_sigma=pts.get("sigma"), pixels=pts.get("uv"), mesh=mesh, K=K, dist=dist, R=R, t=t,
+                units=units, report=report, warnings=list(report.get("warnings", [])), folder=f)
+
+
+def simulate(scene: str, out: str | os.PathLike, *, progress: bool = False, **options: Any) -> Path:
+    """Render a synthetic capture with exact ground truth into ``out``; return its field log's path.
+
+    ``scene`` one of :data:`SCENES`. ``options`` are the scene's settings
+    (:class:`gnomon.simulate.DeskLampConfig`, ``TwoPlaneConfig``,
+    ``FacadeSunConfig``), e.g. ``width=400, height=300, frames=120, seed=1``.
+    The folder gets ``frames/``, ``ground_truth.npz``, ``ground_truth.json``
+    and, last, ``field_log.toml``. ``chessboard`` writes 12 views of a 9x6
+    board (25 mm squares) and the true camera instead, and returns the folder.
+    """
+    result = simulate_scene(scene, out, progress=progress, **options)
+    return Path(out) if scene == "chessboard" else Path(result.field_log)
+
+
+def simulate_scene(scene: str, out: str | os.PathLike, *, progress: bool = False, **options: Any) -> Any:
+    """:func:`simulate`, returning the simulator's own result (frames, ground truth, field log paths)."""
+    from gnomon.progress import Progress
+
+    if scene not in SCENES:
+        raise GnomonError(f"simulate: unknown scene {scene!r} (one of {', '.join(SCENES)})")
+    if scene == "chessboard":
+        from gnomon.simulate.chessboard import default_truth_camera, write_chessboard_views
+
+        width, height = options.pop("width", 1280), options.pop("height", 960)
+        write_chessboard_views(out, camera=default_truth_camera(width, height), cols=9, rows=6, square=25.0,
+                               n_views=12, seed=options.pop("seed", 0))
+        if options:
+            raise GnomonError(f"simulate chessboard: unknown options {sorted(options)}")
+        return None
+    if scene in ("desk_lamp", "desk_lamp_right"):
+        from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
+
+        options.setdefault("lamp_side", "left" if scene == "desk_lamp" else "right")
+        config_type, run = DeskLampConfig, simulate_desk_lamp
+    elif scene == "two_plane":
+        from gnomon.simulate import TwoPlaneConfig, simulate_two_plane
+
+        config_type, run = TwoPlaneConfig, simulate_two_plane
+    else:
+        from gnomon.simulate.facade_sun import FacadeSunConfig, simulate_facade_sun
+
+        config_type, run = FacadeSunConfig, simulate_facade_sun
+    try:
+        config = config_type(**options)
+    except TypeError as exc:
+        raise GnomonError(f"simulate {scene}: {exc}") from None
+    config.validate()
+    with Progress("simulate", config.frames, enabled=progress) as bar:
+        return run(out, config, progress=lambda done, total: bar.update(done))
