@@ -46,6 +46,11 @@ def test_valid_log_loads(tiny_capture: Path) -> None:
         (lambda d: d["capture"].update(frames="missing/*.png"), "frames folder"),
         (lambda d: d["capture"].update(frames="frames/*.tif"), "no files match"),
         (lambda d: d["light"].update(position=[0, 0, -300]), "below the plane 'desk'"),
+        (lambda d: d["planes"][0].pop("regions"), "[planes.0] needs 'regions' (rectangles or polygons) or a 'mask'"),
+        (lambda d: d["planes"][0].update(regions=[{"polygon": [[0, 0], [5, 5]]}]), "polygon: expected at least 3"),
+        (lambda d: d["planes"][0].update(mask="nowhere.png"), "[planes.0] mask: "),
+        (lambda d: d["planes"][0].update(x_axis=[1, 0, 0], markers=[
+            {"plane_xy": [0, 0], "pixel": [1, 1], "pixel_hint": [1, 1]}] * 4), "give either 'pixel_hint'"),
     ],
 )
 def test_mistakes_name_file_and_key(tiny_capture: Path, edit, message: str) -> None:
@@ -118,3 +123,19 @@ def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
     np.testing.assert_allclose(log.pose.t, view["tvec"], atol=0.002 * np.linalg.norm(view["tvec"]))
     np.testing.assert_allclose(log.pose.rvec, view["rvec"], atol=np.radians(0.1))
     assert report[0]["method"] == "chessboard" and report[0]["rms_px"] < 0.3
+
+
+def test_regions_as_rectangles_polygons_and_a_mask(tiny_capture: Path) -> None:
+    import cv2
+
+    mask = np.zeros((36, 48), dtype=np.uint8)
+    mask[20:25, 40:46] = 255
+    cv2.imwrite(str(tiny_capture.parent / "desk_mask.png"), mask)
+    rewrite(tiny_capture, lambda d: d["planes"][0].update(
+        regions=[[0, 0, 10, 4], {"polygon": [[20, 10], [30, 10], [30, 20]]}], mask="desk_mask.png"))
+    plane = load_field_log(tiny_capture).planes[0]
+    m = plane.region_mask((36, 48))
+    assert m[0:4, 0:10].all() and not m[4, 0]
+    assert m[12, 29] and not m[19, 21]  # inside / outside the triangle (pixel centres)
+    assert m[20:25, 40:46].all()
+    assert m.sum() == 40 + int(m[10:21, 20:31].sum()) + 30

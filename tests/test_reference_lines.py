@@ -81,3 +81,50 @@ def test_lamp_planes_contain_lamp_and_line() -> None:
     # consistently oriented normals, so interpolation between frames is safe
     valid = planes[np.isfinite(planes[:, 0])]
     assert np.all(np.sum(valid[1:, :3] * valid[:-1, :3], axis=1) > 0)
+
+
+def test_one_fit_over_a_mask_with_holes_and_a_gap() -> None:
+    """Regions of any shape are one set: a polygon with a hole (a marker) and a
+    disjoint rectangle give one line per frame, fitted over all crossings."""
+    from gnomon.reference_lines import lines_on_plane, region_mask
+
+    times = desk_times()
+    poly = np.array([[5.0, 2.0], [150.0, 2.0], [150.0, 40.0], [5.0, 40.0]])
+    mask = region_mask(times.shape, rectangles=[(0, 95, 160, 120)], polygons=[poly])
+    mask[10:30, 60:90] = False  # a marker punched out of the polygon
+    assert mask[20, 20] and not mask[20, 70] and not mask[60, 80] and mask[100, 80]
+    plane_cam = PlaneSpec("desk", np.zeros(3), np.array([0, 0, 1.0]), ((0, 0, 1, 1),))
+    from gnomon.reference_lines import PlaneInCamera
+
+    plane = PlaneInCamera.from_world(plane_cam.point, plane_cam.normal, POSE)
+    lines = lines_on_plane(times, 60, plane, mask, CAMERA, "desk")
+    found = np.flatnonzero(lines.found & ~lines.extrapolated)
+    assert len(found) > 40
+    for t in found:
+        p_world = POSE.camera_to_world(lines.point[t])
+        assert p_world[0] == pytest.approx(X0 + SPEED * t, abs=0.02)
+        # judged by extent: the line runs through both areas (and across the hole)
+        assert lines.extent[t] > 0.5 * np.nanmax(lines.extent)
+
+
+def test_short_lines_take_their_direction_from_neighbours() -> None:
+    """A line seen only over a short stretch (most of it hidden) is not trusted
+    for its direction: that comes from the neighbouring long lines, and its
+    offset is still measured."""
+    from gnomon.reference_lines import PlaneInCamera, lines_on_plane
+
+    times = desk_times()
+    rng = np.random.default_rng(3)
+    # Mostly hidden for the frames 25..35: only a short stretch of the line is bare.
+    hidden = (times > 25) & (times < 35)
+    hidden[:, :] &= np.arange(times.shape[0])[:, None] > 20
+    times = times + rng.normal(0, 0.01, times.shape)
+    times[hidden] = np.nan
+    plane = PlaneInCamera.from_world(np.zeros(3), np.array([0, 0, 1.0]), POSE)
+    lines = lines_on_plane(times, 60, plane, np.ones(times.shape, dtype=bool), CAMERA, "desk")
+    short = [t for t in range(27, 34) if lines.found[t]]
+    assert short and all(lines.extrapolated[t] for t in short)
+    for t in short:
+        d_world = POSE.R.T @ lines.direction[t]
+        assert abs(abs(d_world[1]) - 1) < 1e-4
+        assert POSE.camera_to_world(lines.point[t])[0] == pytest.approx(X0 + SPEED * t, abs=0.1)

@@ -90,3 +90,45 @@ def test_markers_set_the_camera_pose(two_plane, tmp_path) -> None:
     assert np.degrees(np.linalg.norm(rvec - truth["rvec"].ravel())) < 0.1
     acc = depth_accuracy(measured.depth, truth["depth"], truth["swept"], float(truth["camera_distance_mm"]))
     assert acc.rms_pct <= 0.15 and acc.coverage >= 0.90
+
+
+def test_every_plane_from_its_own_markers(two_plane) -> None:
+    """No [camera.pose] and the wall given only in its own 2-D frame: the desk's
+    markers set the world frame, the wall's markers (given as exact pixels, as
+    if clicked) place the wall in it; regions as a polygon and a mask image."""
+    import cv2
+
+    from gnomon import toml_io
+    from gnomon.reference_lines import region_mask
+
+    root, reference, truth = two_plane
+    log = tomllib.loads((root / "capture" / "field_log.toml").read_text())
+    del log["camera"]["pose"]
+    desk, wall = log["planes"]
+    w, h = log["camera"]["width"], log["camera"]["height"]
+    # desk: the first rectangle as a polygon, the others as a mask image
+    u0, v0, u1, v1 = desk["regions"][0]
+    others = region_mask((h, w), desk["regions"][1:])
+    cv2.imwrite(str(root / "capture" / "desk_mask.png"), others.astype(np.uint8) * 255)
+    desk["regions"] = [{"polygon": [[u0 - 0.5, v0 - 0.5], [u1 - 0.5, v0 - 0.5], [u1 - 0.5, v1 - 0.5], [u0 - 0.5, v1 - 0.5]]}]
+    desk["mask"] = "desk_mask.png"
+    wall.update(point=[0.0, 0.0, 0.0], normal=[0.0, 0.0, 1.0], x_axis=[1.0, 0.0, 0.0])
+    for m, pixel in zip(wall["markers"], truth["marker_pixels"][1]):
+        del m["pixel_hint"]
+        m["pixel"] = [float(x) for x in pixel]
+    toml_io.dump(log, root / "capture" / "own_markers.toml")
+    result = run_scan(root / "capture" / "own_markers.toml", root / "scan_own", ScanOptions(progress=False, rrd=False))
+
+    planes = {p["plane"]: p for p in result.report["reference_planes"]}
+    assert planes["wall"]["method"] == "pixels" and planes["wall"]["rms_px"] < 0.05  # exact pixels, true geometry
+    # The wall in the desk's world frame: the plane y = wall_y, normal (0, −1, 0).
+    normal = np.array(planes["wall"]["world_normal"])
+    point = np.array(planes["wall"]["world_point"])
+    print(normal, point, planes["wall"]["angle_to_first_deg"])
+    assert np.degrees(np.arccos(min(1.0, abs(normal @ [0.0, -1.0, 0.0])))) < 0.2
+    assert abs(point[1] - float(truth["wall_y"])) < 0.5  # mm, against a marker spacing of ~100 mm
+    np.testing.assert_allclose(result.field_log.pose.t, truth["tvec"], atol=1.0)
+    acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], float(truth["camera_distance_mm"]))
+    print(acc.table("two_plane, planes from their markers"))
+    assert acc.rms_pct <= 0.15
+    assert acc.coverage >= 0.90

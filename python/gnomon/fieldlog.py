@@ -112,11 +112,17 @@ class CaptureSpec:
 
 @dataclass(frozen=True)
 class MarkerSpec:
-    """A printed 2×2 checker marker: its centre on the plane and a rough pixel hint."""
+    """A marker: its centre on the plane and its pixel.
+
+    A printed 2×2 checker marker is given by a rough ``pixel_hint`` that the
+    scan refines (``exact`` False); any other mark (a hand-drawn cross) by
+    its exact ``pixel``, used as given (``exact`` True).
+    """
 
     id: int
     plane_xy: np.ndarray  # (2,) in the plane's own 2-D frame, world units
     pixel_hint: np.ndarray  # (2,) pixels
+    exact: bool = False
 
 
 @dataclass(frozen=True)
@@ -136,6 +142,24 @@ class PlaneSpec:
     chessboard: tuple[int, int] | None = None  # inner corners (cols, rows) of a board lying on the plane
     square: float | None = None  # the board's square, world units
     image: Path | None = None  # the photo with the markers or board (default: the first frame)
+    polygons: tuple[np.ndarray, ...] = ()  # (K, 2) pixel vertices each
+    mask_file: Path | None = None  # an image: non-zero where the plane is bare and swept
+
+    def region_mask(self, shape: tuple[int, int]) -> np.ndarray:
+        """(H, W) bool: the union of the plane's rectangles, polygons and mask image."""
+        from gnomon.reference_lines import region_mask
+
+        mask = None
+        if self.mask_file is not None:
+            import cv2
+
+            mask = cv2.imread(str(self.mask_file), cv2.IMREAD_GRAYSCALE)
+            if mask is None:
+                raise FieldLogError(f"{self.mask_file}: not a readable image (plane {self.name!r} mask)")
+            if mask.shape != tuple(shape):
+                raise FieldLogError(f"{self.mask_file}: mask is {mask.shape[1]}x{mask.shape[0]}, "
+                                    f"the frames {shape[1]}x{shape[0]} (plane {self.name!r})")
+        return region_mask(shape, self.regions, self.polygons, mask)
 
     def marker_world(self) -> np.ndarray:
         """(N, 3) world coordinates of the markers' centres."""
@@ -314,18 +338,39 @@ def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
     normal = t.vector("normal", 3, [0.0, 0.0, 1.0])
     if np.linalg.norm(normal) < 1e-12:
         raise t.error("normal", "must not be the zero vector")
-    raw = t.take("regions")
-    if not isinstance(raw, list) or not raw:
-        raise t.error("regions", "expected a non-empty list of [u0, v0, u1, v1] rectangles")
-    regions = []
+    raw = t.take("regions", [])
+    if not isinstance(raw, list):
+        raise t.error("regions", "expected a list of [u0, v0, u1, v1] rectangles or { polygon = [[u, v], ...] }")
+    regions, polygons = [], []
     for r in raw:
+        if isinstance(r, dict):
+            rt = _Table(t.path, f"{t.name}.regions", r)
+            poly = rt.take("polygon")
+            ok = isinstance(poly, list) and len(poly) >= 3 and all(
+                isinstance(q, list) and len(q) == 2
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in q)
+                for q in poly)
+            if not ok:
+                raise rt.error("polygon", f"expected at least 3 [u, v] vertices in pixels, got {poly!r}")
+            rt.done()
+            polygons.append(np.asarray(poly, dtype=np.float64))
+            continue
         ok = isinstance(r, list) and len(r) == 4 and all(isinstance(x, int) and not isinstance(x, bool) for x in r)
         if not ok:
-            raise t.error("regions", f"each region is [u0, v0, u1, v1] in whole pixels, got {r!r}")
+            raise t.error("regions", f"each region is [u0, v0, u1, v1] in whole pixels or "
+                                     f"{{ polygon = [[u, v], ...] }}, got {r!r}")
         u0, v0, u1, v1 = r
         if not (0 <= u0 < u1 <= width and 0 <= v0 < v1 <= height):
             raise t.error("regions", f"region {r} is empty or outside the {width}x{height} image")
         regions.append((u0, v0, u1, v1))
+    mask_file = None
+    if "mask" in t.data:
+        mask_file = t.path.resolve().parent / t.string("mask")
+        if not mask_file.is_file():
+            raise t.error("mask", f"{mask_file} not found")
+    if not regions and not polygons and mask_file is None:
+        raise FieldLogError(f"{t.path}: [{t.name}] needs 'regions' (rectangles or polygons) or a 'mask' image "
+                            f"(where the plane is bare and swept)")
     normal = normal / np.linalg.norm(normal)
     x_axis = None
     if "x_axis" in t.data:
@@ -340,7 +385,12 @@ def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
         raise t.error("markers", "expected a list of { id, plane_xy = [x, y], pixel_hint = [u, v] } tables")
     for k, m in enumerate(raw_markers):
         mt = _Table(t.path, f"{t.name}.markers.{k}", m)
-        markers.append(MarkerSpec(mt.integer("id", k), mt.vector("plane_xy", 2), mt.vector("pixel_hint", 2)))
+        mid, xy = mt.integer("id", k), mt.vector("plane_xy", 2)
+        if ("pixel" in mt.data) == ("pixel_hint" in mt.data):
+            raise mt.error("pixel", "give either 'pixel_hint' (a printed checker marker, refined) or 'pixel' "
+                                    "(an exact pixel, e.g. a clicked cross)")
+        exact = "pixel" in mt.data
+        markers.append(MarkerSpec(mid, xy, mt.vector("pixel" if exact else "pixel_hint", 2), exact))
         mt.done()
     if markers and x_axis is None:
         raise FieldLogError(f"{t.path}: [{t.name}] markers need 'x_axis' (the plane's 2-D frame)")
@@ -358,7 +408,8 @@ def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
     if image is not None and not image.is_file():
         raise t.error("image", f"{image} not found")
     t.done()
-    return PlaneSpec(name, point, normal, tuple(regions), x_axis, tuple(markers), chessboard, square, image)
+    return PlaneSpec(name, point, normal, tuple(regions), x_axis, tuple(markers), chessboard, square, image,
+                     tuple(polygons), mask_file)
 
 
 def _parse_light(t: _Table, base: Path) -> LightSpec:

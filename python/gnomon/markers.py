@@ -435,6 +435,7 @@ def plane_pose_from_markers(
     radius_px: int = 6,
     min_contrast: float = 20.0,
     source: str = "image",
+    exact: np.ndarray | None = None,
 ) -> PlanePose:
     """A reference plane from ≥ 4 printed 2×2 markers.
 
@@ -443,7 +444,8 @@ def plane_pose_from_markers(
     world coordinates; ``hints``: (N, 2) approximate pixels (from the field
     log); ``names``: marker names for messages. Each marker is found within
     ``search_px`` of its hint (see :func:`find_marker`), then the pose is
-    fitted (:func:`fit_plane_pose`).
+    fitted (:func:`fit_plane_pose`). ``exact``: (N,) bool, hints that are
+    already exact pixels (a clicked cross) and are used as given.
     """
     pts = np.asarray(plane_points, dtype=np.float64)
     hints = np.asarray(hints, dtype=np.float64).reshape(-1, 2)
@@ -452,8 +454,13 @@ def plane_pose_from_markers(
         raise GnomonError(f"{source}: {len(pts)} marker coordinates, {len(hints)} hints and {len(names)} names")
     if len(hints) < 4:
         raise GnomonError(f"{source}: a plane from markers needs at least 4 markers, got {len(hints)}")
-    dets = find_markers(image, hints, names=names, search_px=search_px, radius_px=radius_px, min_contrast=min_contrast, source=source)
-    pix = np.array([d.pixel for d in dets])
+    exact = np.zeros(len(hints), dtype=bool) if exact is None else np.asarray(exact, dtype=bool)
+    pix = hints.copy()
+    refine = np.flatnonzero(~exact)
+    if refine.size:
+        dets = find_markers(image, hints[refine], names=[names[i] for i in refine], search_px=search_px,
+                            radius_px=radius_px, min_contrast=min_contrast, source=source)
+        pix[refine] = np.array([d.pixel for d in dets])
     return fit_plane_pose(camera, pts, pix, names=names, method="markers", source=source)
 
 

@@ -272,7 +272,8 @@ def _reconstruct_pole(tracked: _Tracked, log: FieldLog, ray_map: np.ndarray, sun
 def _reconstruct_edge(name: str, times_map: np.ndarray, slope: np.ndarray, log: FieldLog, tracked: _Tracked,
                       ray_map: np.ndarray, sun: _SunContext | None = None) -> EdgeResult:
     cam, pose = log.camera, log.pose
-    lines = [measure_reference_lines(times_map, tracked.n_frames, p, cam, pose) for p in log.planes]
+    lines = [measure_reference_lines(times_map, tracked.n_frames, p, cam, pose, p.region_mask(times_map.shape))
+             for p in log.planes]
     planes, degenerate = _planes_for(log, lines, pose, sun)
     tri = triangulate(ray_map, times_map, planes)
     sigma_t_pixel = _pixel_time_sigma(slope, tracked)
@@ -380,18 +381,21 @@ def _first_frame(source: FrameSource) -> np.ndarray:
 
 
 def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldLog, list[dict]]:
-    """Measure the planes that carry printed markers or a chessboard.
+    """Measure the planes that carry markers or a chessboard, each from its own.
 
-    Marker centres are known on their plane (``plane_xy``), hence in the world
-    frame, so finding them in the image gives the world → camera pose; a
-    chessboard gives its own frame's pose (the world frame, when it sets it).
-    The photo is the plane's ``image`` or the capture's first frame. Without a
-    ``[camera.pose]`` the first such plane sets it; with one, the plane checks
-    it (residuals and the angle between measured and declared planes go into
-    report.json).
+    A plane's markers are known in its own 2-D frame (``plane_xy``, placed in
+    3-D by the plane's ``point``, ``normal`` and ``x_axis``), so finding them
+    in the image gives that frame's pose in the camera; a chessboard gives its
+    own frame's pose. The photo is the plane's ``image`` or the capture's
+    first frame. Without a ``[camera.pose]`` the first such plane's frame is
+    the world frame and every other measured plane is placed in it from its
+    own pose (its declared ``point``/``normal`` then only define its own
+    frame); no relative pose needs typing. With a ``[camera.pose]`` the planes
+    check it (residuals and the angle between measured and declared planes go
+    into report.json).
     """
     from gnomon.calibration import fit_camera_to_frames, read_grey
-    from gnomon.markers import plane_pose_from_chessboard, plane_pose_from_markers
+    from gnomon.markers import fit_plane_pose, plane_pose_from_chessboard, plane_pose_from_markers
 
     measured_planes = [p for p in log.planes if p.markers or p.chessboard]
     if not measured_planes:
@@ -409,24 +413,49 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
         # A plane's own photo may be a still at another resolution of the same sensor.
         camera, _ = fit_camera_to_frames(log.camera, image.shape[1], image.shape[0], f"{log.path}: [camera]", name)
         if plane.markers:
-            pp = plane_pose_from_markers(
-                image, camera, plane.marker_world(), np.array([m.pixel_hint for m in plane.markers]),
-                names=[f"{plane.name} marker {m.id}" for m in plane.markers], source=where,
-            )
+            names = [f"{plane.name} marker {m.id}" for m in plane.markers]
+            pixels = np.array([m.pixel_hint for m in plane.markers])
+            if all(m.exact for m in plane.markers):
+                pp = fit_plane_pose(camera, plane.marker_world(), pixels, names=names, method="pixels",
+                                    source=where)
+            else:
+                exact = np.array([m.exact for m in plane.markers])
+                pp = plane_pose_from_markers(image, camera, plane.marker_world(), pixels, names=names,
+                                             source=where, exact=exact)
         else:
             pp = plane_pose_from_chessboard(image, camera, plane.chessboard, plane.square, source=where)
         measured.append((plane, pp))
-    pose = log.pose if log.pose is not None else measured[0][1].pose
+    declared = log.pose is not None
+    pose = log.pose if declared else measured[0][1].pose
     report = []
+    placed = {}
     for plane, pp in measured:
         entry = {"plane": plane.name, **pp.to_report()}
-        declared_cam = pose.R @ plane.normal
-        cosang = abs(float(declared_cam @ pp.normal_cam))
-        entry["angle_to_declared_deg"] = float(np.degrees(np.arccos(min(1.0, cosang))))
+        if declared:
+            declared_cam = pose.R @ plane.normal
+            cosang = abs(float(declared_cam @ pp.normal_cam))
+            entry["angle_to_declared_deg"] = float(np.degrees(np.arccos(min(1.0, cosang))))
+        else:
+            # The plane in the world frame, from its own pose: its frame's origin and normal.
+            origin_cam = pp.pose.world_to_camera(plane.point)
+            normal_cam = pp.pose.R @ plane.normal
+            placed[plane.name] = (pose.camera_to_world(origin_cam), pose.R.T @ normal_cam,
+                                  None if plane.x_axis is None else pose.R.T @ (pp.pose.R @ plane.x_axis))
+            entry["world_point"] = placed[plane.name][0].tolist()
+            entry["world_normal"] = placed[plane.name][1].tolist()
         report.append(entry)
-    if log.pose is None:
-        log = dataclasses.replace(log, pose=pose)
+    if not declared:
+        planes = []
+        for p in log.planes:
+            if p.name in placed and (p.markers or p.chessboard):
+                point, normal, x_axis = placed[p.name]
+                p = dataclasses.replace(p, point=point, normal=normal / np.linalg.norm(normal), x_axis=x_axis)
+            planes.append(p)
+        log = dataclasses.replace(log, pose=pose, planes=tuple(planes))
         check_geometry(log, pose)
+        if len(measured) >= 2:
+            a, b = measured[0][1], measured[1][1]
+            report[1]["angle_to_first_deg"] = float(np.degrees(np.arccos(min(1.0, abs(float(a.normal_cam @ b.normal_cam))))))
     return log, report
 
 

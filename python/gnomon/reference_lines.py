@@ -23,13 +23,24 @@ line in plane coordinates.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
 from gnomon.camera import CameraModel, Pose
 from gnomon.fieldlog import PlaneSpec
 
-MIN_POINTS_PER_REGION = 5
+# Crossings a frame needs for a line.
+MIN_POINTS = 10
+
+__all__ = [
+    "PlaneInCamera", "ReferenceLines", "fit_line_robust", "isochrone_crossings", "lines_on_plane", "mask_crossings",
+    "measure_reference_lines", "region_mask",
+]
+# A frame's own fit sets the line's direction when its inliers span at least
+# this fraction of the longest lines seen on the plane; shorter lines keep
+# only their offset (their direction comes from the neighbouring frames).
+MIN_EXTENT_FRACTION = 0.5
 # How many measured frames (at most this far away) set an extrapolated line's direction.
 EXTRAPOLATION_FRAMES = 8
 # Frames between two measured lines at most this far apart interpolate their direction.
@@ -79,8 +90,9 @@ class ReferenceLines:
     ``point[t]`` and ``direction[t]`` (unit) define the line at frame t; rows of
     NaN mark frames without a reliable line. ``rms`` is the fit's residual RMS
     in world units, ``count`` its inliers, ``pixels[t]`` the inlier crossings
-    (image pixels, for display). ``extrapolated[t]``: the line was seen in one
-    region only, so its direction comes from the neighbouring frames.
+    (image pixels, for display), ``extent[t]`` the length its inliers cover
+    along it (world units). ``extrapolated[t]``: the line was too short to
+    set its own direction, which comes from the neighbouring frames.
     """
 
     plane_name: str
@@ -92,6 +104,7 @@ class ReferenceLines:
     pixels: list[np.ndarray]
     extrapolated: np.ndarray  # (N,) bool: direction taken from neighbouring frames
     points: list[np.ndarray]  # per frame (K, 3) camera-frame crossings: the line's inliers, or all
+    extent: np.ndarray | None = None  # (N,) world units covered along the line by its inliers
 
     @property
     def found(self) -> np.ndarray:
@@ -183,30 +196,106 @@ def fit_line_robust(xy: np.ndarray, k: float = 3.0, iterations: int = 5) -> tupl
     return centre, direction, mask
 
 
+def region_mask(
+    shape: tuple[int, int],
+    rectangles: Sequence[Sequence[int]] = (),
+    polygons: Sequence[np.ndarray] = (),
+    mask: np.ndarray | None = None,
+) -> np.ndarray:
+    """The union of a plane's reference regions as a boolean (H, W) image mask.
+
+    ``rectangles``: ``[u0, v0, u1, v1]`` (pixels, ``u0 ≤ u < u1``, ``v0 ≤ v < v1``);
+    ``polygons``: (K, 2) vertex arrays in pixels (a pixel belongs to a polygon
+    when its centre is inside it); ``mask``: a boolean or 0/non-zero image of
+    the same shape. Shapes may overlap: the regions of one plane are one set.
+    """
+    import cv2
+
+    h, w = shape
+    out = np.zeros((h, w), dtype=bool)
+    for u0, v0, u1, v1 in rectangles:
+        out[max(v0, 0):max(v1, 0), max(u0, 0):max(u1, 0)] = True
+    if len(polygons):
+        canvas = np.zeros((h, w), dtype=np.uint8)
+        for poly in polygons:
+            pts = np.round(np.asarray(poly, dtype=np.float64) * 16).astype(np.int32).reshape(-1, 1, 2)
+            cv2.fillPoly(canvas, [pts], 1, lineType=cv2.LINE_8, shift=4)
+        out |= canvas.astype(bool)
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape[:2] != (h, w):
+            raise ValueError(f"region mask is {m.shape[1]}x{m.shape[0]}, the image {w}x{h}")
+        out |= (m if m.ndim == 2 else m[..., 0]) != 0
+    return out
+
+
+def mask_crossings(times: np.ndarray, mask: np.ndarray, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Isochrone crossings of the shadow-time map inside a region mask.
+
+    Pixels outside ``mask`` are ignored (a crossing needs both neighbours
+    inside), so holes (markers, an object) and several disjoint areas are one
+    region. Returns (frame (K,), pixel (K, 2) as u, v).
+    """
+    rows, cols = np.nonzero(mask)
+    if rows.size == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+    v0, v1, u0, u1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    sub = np.where(mask[v0:v1, u0:u1], times[v0:v1, u0:u1], np.nan)
+    f, u, v = isochrone_crossings(sub, n_frames)
+    return f, np.stack([u + u0, v + v0], axis=1)
+
+
 def measure_reference_lines(
     times: np.ndarray,
     n_frames: int,
     plane_spec: PlaneSpec,
     camera: CameraModel,
     pose: Pose,
+    mask: np.ndarray | None = None,
 ) -> ReferenceLines:
     """The shadow line on one reference plane at every integer frame.
 
     ``times``: (H, W) shadow-time map of the whole image (frames, NaN = none).
-    A frame's line is kept when at least ``MIN_POINTS_PER_REGION`` inlier
-    crossings lie in each of two regions (or in the only region).
+    The plane's regions (``mask``, or the union of ``plane_spec.regions``)
+    are used together: see :func:`lines_on_plane`.
     """
     plane = PlaneInCamera.from_world(plane_spec.point, plane_spec.normal, pose)
-    frames, us, vs, region_ids = [], [], [], []
-    for rid, (u0, v0, u1, v1) in enumerate(plane_spec.regions):
-        f, u, v = isochrone_crossings(times[v0:v1, u0:u1], n_frames)
-        frames.append(f)
-        us.append(u + u0)
-        vs.append(v + v0)
-        region_ids.append(np.full(len(f), rid))
-    frame = np.concatenate(frames)
-    pix = np.stack([np.concatenate(us), np.concatenate(vs)], axis=1)
-    region = np.concatenate(region_ids)
+    if mask is None:
+        mask = region_mask(times.shape, plane_spec.regions)
+    return lines_on_plane(times, n_frames, plane, mask, camera, plane_spec.name)
+
+
+def _extent(along: np.ndarray) -> float:
+    """Length covered by points along a line (5th to 95th percentile, stretched to the full range)."""
+    if along.size < 2:
+        return 0.0
+    lo, hi = np.percentile(along, [5.0, 95.0])
+    return float(hi - lo) / 0.9
+
+
+def lines_on_plane(
+    times: np.ndarray,
+    n_frames: int,
+    plane: PlaneInCamera,
+    mask: np.ndarray,
+    camera: CameraModel,
+    name: str = "plane",
+    min_extent_fraction: float = MIN_EXTENT_FRACTION,
+) -> ReferenceLines:
+    """The shadow line on one reference plane at every integer frame, from all its regions at once.
+
+    ``times``: (H, W) shadow times (frames, NaN = none); ``mask``: (H, W) bool,
+    the bare parts of the plane (any shape, holes allowed); ``plane`` in the
+    camera frame. Every crossing of frame t inside the mask is back-projected
+    onto the plane and one robust line is fitted to them all. The fit sets the
+    line's direction when its inliers cover at least ``min_extent_fraction``
+    of the longest line seen on this plane (the 90th percentile of the
+    frames' extents, world units along the line); a shorter line (at the ends
+    of the sweep, or mostly hidden) keeps only its offset, with the direction
+    interpolated from the measured frames (or extrapolated from the nearest
+    few at the ends).
+    """
+    frame, pix = mask_crossings(times, mask, n_frames)
 
     point = np.full((n_frames, 3), np.nan)
     direction = np.full((n_frames, 3), np.nan)
@@ -215,19 +304,18 @@ def measure_reference_lines(
     pixels: list[np.ndarray] = [np.zeros((0, 2)) for _ in range(n_frames)]
     extrapolated = np.zeros(n_frames, dtype=bool)
     points3d: list[np.ndarray] = [np.zeros((0, 3)) for _ in range(n_frames)]
+    extent = np.zeros(n_frames)
     if len(frame) == 0:
-        return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels, extrapolated, points3d)
+        return ReferenceLines(name, plane, point, direction, rms, count, pixels, extrapolated, points3d, extent)
 
     on_plane = plane.intersect(camera.rays(pix))
     good = np.isfinite(on_plane[:, 0])
-    frame, pix, region, on_plane = frame[good], pix[good], region[good], on_plane[good]
+    frame, pix, on_plane = frame[good], pix[good], on_plane[good]
     xy = plane.to_plane_coords(on_plane)
 
-    regions_needed = min(2, len(plane_spec.regions))
     order = np.argsort(frame, kind="stable")
     bounds = np.searchsorted(frame[order], np.arange(n_frames + 1))
     per_frame = [order[bounds[t]:bounds[t + 1]] for t in range(n_frames)]
-    angle = np.full(n_frames, np.nan)  # line direction in plane coordinates
 
     def keep(t: int, idx: np.ndarray, centre: np.ndarray, d2: np.ndarray, inl: np.ndarray) -> None:
         normal2 = np.array([-d2[1], d2[0]])
@@ -239,29 +327,41 @@ def measure_reference_lines(
         sel = pix[idx][inl]
         pixels[t] = sel[np.argsort(sel[:, 1])]
         points3d[t] = on_plane[idx][inl]
+        extent[t] = _extent(xy[idx][inl] @ d2)
 
+    # Every frame's own fit first; which of them set the direction is decided
+    # by their extent against the longest lines of the plane.
+    fits: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, float]] = {}
     for t, idx in enumerate(per_frame):
-        if len(idx) < MIN_POINTS_PER_REGION * regions_needed:
+        if len(idx) < MIN_POINTS:
             continue
         centre, d2, inl = fit_line_robust(xy[idx])
-        per_region = np.bincount(region[idx][inl], minlength=len(plane_spec.regions))
-        if np.count_nonzero(per_region >= MIN_POINTS_PER_REGION) < regions_needed:
+        if inl.sum() < MIN_POINTS:
             continue
-        if angle[np.isfinite(angle)].size and np.cos(np.arctan2(d2[1], d2[0]) - angle[np.isfinite(angle)][-1]) < 0:
-            d2 = -d2  # keep a consistent sense, so angles can be extrapolated
+        fits[t] = (centre, d2, inl, _extent(xy[idx][inl] @ d2))
+    if not fits:
+        return ReferenceLines(name, plane, point, direction, rms, count, pixels, extrapolated, points3d, extent)
+    longest = float(np.percentile([f[3] for f in fits.values()], 90))
+    angle = np.full(n_frames, np.nan)  # line direction in plane coordinates
+    for t in sorted(fits):
+        centre, d2, inl, ext = fits[t]
+        if ext < min_extent_fraction * longest:
+            continue
+        previous = angle[np.isfinite(angle)]
+        if previous.size and np.cos(np.arctan2(d2[1], d2[0]) - previous[-1]) < 0:
+            d2 = -d2  # keep a consistent sense, so angles can be interpolated
         angle[t] = np.arctan2(d2[1], d2[0])
-        keep(t, idx, centre, d2, inl)
+        keep(t, per_frame[t], centre, d2, inl)
 
-    # When the line crosses only one region (at the ends of the sweep, or
-    # where regions leave a gap) its direction is not measured well. It changes
-    # slowly with time, so take it from the measured frames — interpolated
-    # between the nearest ones on either side, or extrapolated linearly from
-    # the nearest few at the ends — and fit only the line's offset.
+    # A short line's direction is poorly measured. It changes slowly with
+    # time, so take it from the measured frames — interpolated between the
+    # nearest ones on either side, or extrapolated linearly from the nearest
+    # few at the ends — and fit only the line's offset.
     measured = np.flatnonzero(np.isfinite(angle))
-    if len(measured) >= 3 and regions_needed == 2:
+    if len(measured) >= 3:
         unwrapped = np.unwrap(angle[measured])
         for t, idx in enumerate(per_frame):
-            if np.isfinite(angle[t]) or len(idx) < 2 * MIN_POINTS_PER_REGION:
+            if np.isfinite(angle[t]) or len(idx) < MIN_POINTS:
                 continue
             before, after = measured[measured < t], measured[measured > t]
             if len(before) and len(after) and after[0] - before[-1] <= MAX_INTERPOLATION_GAP:
@@ -278,7 +378,7 @@ def measure_reference_lines(
             med = np.median(offsets)
             mad = 1.4826 * np.median(np.abs(offsets - med))
             inl = np.abs(offsets - med) <= 3.0 * max(mad, 1e-9 * (1.0 + abs(med)))
-            if inl.sum() < 2 * MIN_POINTS_PER_REGION:
+            if inl.sum() < MIN_POINTS:
                 continue
             along = xy[idx][inl] @ d2
             centre = np.mean(offsets[inl]) * normal2 + np.mean(along) * d2
@@ -287,4 +387,4 @@ def measure_reference_lines(
     for t, idx in enumerate(per_frame):
         if not np.isfinite(point[t, 0]) and len(idx):
             points3d[t] = on_plane[idx]
-    return ReferenceLines(plane_spec.name, plane, point, direction, rms, count, pixels, extrapolated, points3d)
+    return ReferenceLines(name, plane, point, direction, rms, count, pixels, extrapolated, points3d, extent)
