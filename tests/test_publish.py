@@ -37,11 +37,21 @@ def publish_run(out: Path, run: int, names=NAMES) -> None:
 def test_new_folder_then_exchange_then_stale_output_removed(tmp_path: Path) -> None:
     out = tmp_path / "out"
     publish_run(out, 1)
-    assert sorted(os.listdir(out)) == list(NAMES)
+    assert sorted(os.listdir(out)) == [".gnomon-outputs", *NAMES]
     publish_run(out, 2, names=("a.txt", "b.txt"))  # the new run writes no c.txt
-    assert sorted(os.listdir(out)) == ["a.txt", "b.txt"]
+    assert sorted(os.listdir(out)) == [".gnomon-outputs", "a.txt", "b.txt"]
     assert (out / "a.txt").read_text() == "run 2\n"
     assert [p for p in tmp_path.iterdir() if p.name != "out"] == []  # no staging left
+
+
+def test_outputs_listed_by_the_previous_run_are_removed(tmp_path: Path) -> None:
+    """An output name publish does not know (a newer format) is still removed when not rewritten."""
+    out = tmp_path / "out"
+    publish_run(out, 1, names=("a.txt", "new-format.bin"))
+    assert (out / ".gnomon-outputs").read_text() == "a.txt\nnew-format.bin\n"
+    (out / "notes.md").write_text("mine")
+    publish_run(out, 2, names=("a.txt",))
+    assert sorted(os.listdir(out)) == [".gnomon-outputs", "a.txt", "notes.md"]
 
 
 def test_foreign_files_are_kept_and_stale_outputs_removed(tmp_path: Path) -> None:
@@ -50,7 +60,7 @@ def test_foreign_files_are_kept_and_stale_outputs_removed(tmp_path: Path) -> Non
     (out / "notes.md").write_text("mine")
     (out / "sub").mkdir()
     publish_run(out, 2, names=("a.txt",))
-    assert sorted(os.listdir(out)) == ["a.txt", "notes.md", "sub"]
+    assert sorted(os.listdir(out)) == [".gnomon-outputs", "a.txt", "notes.md", "sub"]
     assert (out / "notes.md").read_text() == "mine"
     assert (out / "a.txt").read_text() == "run 2\n"
 
@@ -115,7 +125,7 @@ def test_stale_staging_of_dead_processes_is_removed(tmp_path: Path) -> None:
     publish_run(out, 2)
     assert not beside.exists() and not inside.exists() and not old_layout.exists()
     assert alive.exists()
-    assert sorted(os.listdir(out)) == list(NAMES)
+    assert sorted(os.listdir(out)) == [".gnomon-outputs", *NAMES]
 
 
 def test_commit_folder_of_a_killed_run_is_completed(tmp_path: Path) -> None:
@@ -125,7 +135,7 @@ def test_commit_folder_of_a_killed_run_is_completed(tmp_path: Path) -> None:
     (out / "foreign").write_text("x")  # forces the per-file path
     commit = out / f".gnomon-commit-{dead_pid()}-q1"
     commit.mkdir()
-    (commit / ".gnomon-manifest").write_text("a.txt\nb.txt\n")
+    (commit / ".gnomon-outputs").write_text("a.txt\nb.txt\n")
     (commit / "a.txt").write_text("run 2\n")
     (commit / "b.txt").write_text("run 2\n")
     os.replace(commit / "a.txt", out / "a.txt")  # killed after the first move
@@ -173,7 +183,7 @@ def test_rrd_on_another_filesystem_is_copied(tmp_path: Path, monkeypatch) -> Non
         (staging / "scan.rrd").write_bytes(b"R" * 100_000)
     assert crossed
     assert rrd.read_bytes() == b"R" * 100_000
-    assert sorted(os.listdir(out)) == ["points.ply"]
+    assert sorted(os.listdir(out)) == [".gnomon-outputs", "points.ply"]
     assert sorted(os.listdir(rrd.parent)) == ["rec.rrd"]
 
 
@@ -216,7 +226,9 @@ def test_out_is_a_mount_point(tmp_path: Path, capsys) -> None:
         assert os.stat(out).st_dev != os.stat(tmp_path).st_dev
         assert main(["scan", str(log), "--out", str(out), "--quiet"]) == 0, capsys.readouterr().err
         assert main(["scan", str(log), "--out", str(out), "--quiet", "--no-rrd"]) == 0, capsys.readouterr().err
-        assert sorted(os.listdir(out)) == sorted(set(publish.OUTPUT_FILES) - {"scan.rrd", "merge.rrd"})
+        names = set(os.listdir(out))
+        assert "scan.rrd" not in names and {"points.ply", "depth.npy", "report.json"} <= names
+        assert not [n for n in names if n.startswith(".gnomon-") and n != ".gnomon-outputs"]
         assert sorted(p.name for p in tmp_path.iterdir()) == ["cap", "mnt"]
     finally:
         subprocess.run(["umount", str(out)], check=False)

@@ -1,18 +1,50 @@
 """The `gnomon` command line.
 
 User errors (:class:`gnomon.errors.GnomonError`) print one line on stderr,
-``gnomon: error: ...``, and exit with code 2. So do bad arguments (argparse).
+``gnomon: error: ...``, and exit with code 2. So do bad arguments (argparse)
+and failures of the filesystem an output is written to (no space, a file-size
+limit, a read-only filesystem, no permission): they name the path.
+
+SIGTERM and SIGHUP (``timeout``, a closed SSH session) stop a run like Ctrl-C:
+the run's staging folder is removed, nothing is published, and the exit code
+is 128 + the signal's number. A closed pipe on stdout (``gnomon sun | head -1``)
+ends the run quietly. Writes past a file-size limit (``ulimit -f``) fail with
+EFBIG instead of killing the process (SIGXFSZ is ignored).
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import os
+import signal
 import sys
 
 from gnomon import __version__, _kernel
 from gnomon.commands import COMMANDS
 from gnomon.errors import GnomonError
+
+#: ``OSError`` numbers that describe the environment (disk, permissions, limits), not a bug.
+ENVIRONMENT_ERRNOS = frozenset(
+    getattr(errno, name) for name in (
+        "ENOSPC", "EDQUOT", "EFBIG", "EROFS", "EACCES", "EPERM", "ENOENT", "ENOTDIR", "EISDIR", "EXDEV",
+        "EIO", "ENAMETOOLONG", "ELOOP", "EMFILE", "ENFILE", "ENOMEM", "ETXTBSY", "EBUSY", "ENOTEMPTY",
+        "EEXIST", "ESTALE",
+    ) if hasattr(errno, name)
+)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, delivered as an interrupt so every cleanup runs."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _raise_terminated(signum: int, frame) -> None:
+    raise Terminated(signum)
 
 
 def version_text() -> str:
@@ -34,17 +66,79 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def _install_signal_handlers() -> dict:
+    """SIGTERM/SIGHUP → :class:`Terminated`; SIGXFSZ ignored. Returns the previous handlers."""
+    previous: dict = {}
     try:
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            previous[sig] = signal.signal(sig, _raise_terminated)
+        if hasattr(signal, "SIGXFSZ"):
+            previous[signal.SIGXFSZ] = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    except ValueError:  # not the main thread (an embedding application): leave signals alone
+        pass
+    return previous
+
+
+def _restore_signal_handlers(previous: dict) -> None:
+    for sig, handler in previous.items():
+        try:
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+        except (ValueError, TypeError):
+            pass
+
+
+def _stdout_closed() -> None:
+    """stdout's reader went away: point stdout at /dev/null so the final flush cannot fail too."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _os_error_line(exc: OSError) -> str:
+    where = exc.filename if exc.filename is not None else "?"
+    extra = f" -> {exc.filename2}" if getattr(exc, "filename2", None) else ""
+    return f"{where}{extra}: {exc.strerror or exc}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    # rerun's writer thread logs its own errors on stderr; ours are one line.
+    os.environ.setdefault("RUST_LOG", "off")
+    previous = _install_signal_handlers()
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
         return int(args.func(args) or 0)
     except GnomonError as exc:
         print(f"gnomon: error: {exc}", file=sys.stderr)
         return 2
+    except Terminated as exc:
+        print(f"gnomon: terminated ({exc})", file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         print("gnomon: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        _stdout_closed()
+        return 128 + getattr(signal, "SIGPIPE", 13)
+    except OSError as exc:
+        if exc.errno not in ENVIRONMENT_ERRNOS:
+            raise
+        print(f"gnomon: error: {_os_error_line(exc)}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("gnomon: error: out of memory (an input larger than this machine can hold?)", file=sys.stderr)
+        return 2
+    finally:
+        _restore_signal_handlers(previous)
+        try:
+            sys.stdout.flush()
+        except BrokenPipeError:
+            _stdout_closed()
+        except (OSError, ValueError):
+            pass
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -57,9 +57,10 @@ __all__ = [
     "staged_outputs",
 ]
 
-OUTPUT_FILES = ("points.ply", "mesh.ply", "mesh.obj", "mesh.mtl", "mesh.png", "mesh.stl", "depth.npy", "sigma.npy", "shadow_time.npy",
-                "undersampled.npy", "report.json", "scan.rrd", "merge.rrd")
-"""Every file a scan or a merge may publish into its output folder."""
+OUTPUT_FILES = ("points.ply", "mesh.ply", "mesh.obj", "mesh.mtl", "mesh.png", "mesh.stl", "depth.npy", "sigma.npy",
+                "shadow_time.npy", "undersampled.npy", "report.json", "scan.rrd", "merge.rrd")
+"""Files a scan or a merge of this or an earlier version may have published into its output folder
+(a folder written by this version also lists its own in ``.gnomon-outputs``)."""
 
 _INSIDE_PARTIAL = ".gnomon-partial-"
 _INSIDE_COMMIT = ".gnomon-commit-"
@@ -222,12 +223,20 @@ def _owner_alive(name: str, prefix: str) -> bool:
     return True
 
 
-_MANIFEST = ".gnomon-manifest"
+_MANIFEST = ".gnomon-outputs"
+
+
+def _read_names(path: Path) -> set[str]:
+    try:
+        return set(path.read_text(encoding="utf-8").split("\n")) - {""}
+    except (FileNotFoundError, NotADirectoryError, UnicodeDecodeError):
+        return set()
 
 
 def _write_manifest(staging: Path) -> None:
-    """The names a run publishes, kept in its commit folder until every one is moved in."""
-    names = sorted(n for n in os.listdir(staging) if n != _MANIFEST)
+    """The names a run publishes: ``OUT/.gnomon-outputs`` once published (the next run removes
+    those it does not write again), and the list a commit folder is completed from."""
+    names = sorted(n for n in os.listdir(staging) if not n.startswith("."))
     with open(staging / _MANIFEST, "w", encoding="utf-8") as fh:
         fh.write("".join(f"{n}\n" for n in names))
         fh.flush()
@@ -235,18 +244,19 @@ def _write_manifest(staging: Path) -> None:
 
 
 def _roll_forward(out: Path, commit: Path, outputs: Iterable[str]) -> None:
-    """Move a complete commit folder's files over ``out``'s and drop outputs it does not have."""
-    try:
-        new = set((commit / _MANIFEST).read_text(encoding="utf-8").split())
-    except FileNotFoundError:  # killed before the manifest: an incomplete stage, not a commit
+    """Move a complete commit folder's files over ``out``'s and drop earlier outputs it does not have."""
+    if not (commit / _MANIFEST).is_file():  # killed before the manifest: an incomplete stage, not a commit
         shutil.rmtree(commit, ignore_errors=True)
         return
+    new = _read_names(commit / _MANIFEST)
+    old = _read_names(out / _MANIFEST) | set(outputs)
     for name in sorted(new):
         if (commit / name).exists() or (commit / name).is_symlink():
             os.replace(commit / name, out / name)
-    for name in outputs:
-        if name not in new:
-            (out / name).unlink(missing_ok=True)
+    for name in sorted(old - new):
+        if (out / name).is_file():
+            (out / name).unlink()
+    os.replace(commit / _MANIFEST, out / _MANIFEST)  # last: until here, recovery can redo all of it
     _fsync_path(out, directory=True)
     shutil.rmtree(commit, ignore_errors=True)
 
@@ -298,7 +308,7 @@ def _remove_stale_files(folder: Path) -> None:
 
 
 def _only_outputs(out: Path, outputs: Iterable[str]) -> bool:
-    allowed = set(outputs)
+    allowed = set(outputs) | _read_names(out / _MANIFEST) | {_MANIFEST}
     for name in os.listdir(out):
         if name in allowed or name.startswith((_INSIDE_PARTIAL, _INSIDE_COMMIT)):
             continue
@@ -417,6 +427,7 @@ class staged_outputs:
             except OSError as exc:
                 raise output_error(exc, self.rrd_path) from None
         try:
+            _write_manifest(staging)
             fsync_tree(staging)
             with _interrupts_held():
                 self._swap_in(staging)
@@ -440,8 +451,6 @@ class staged_outputs:
             shutil.rmtree(staging, ignore_errors=True)
             return
         commit = out / f"{_INSIDE_COMMIT}{os.getpid()}-{staging.name.rsplit('-', 1)[-1]}"
-        _write_manifest(staging)
-        _fsync_path(staging, directory=True)
         os.rename(staging, commit)
         self._committed = True
         _fsync_path(out, directory=True)

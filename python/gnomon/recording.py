@@ -264,6 +264,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         self._rec: Any = None
         self._atomic: Any = None
         self._tmp: Path | None = None
+        self._stream: Any = None  # rerun's in-memory encoder when we write the file ourselves
         self._closed = False
         self._camera_size: tuple[int, int] | None = None
         self._units: str | None = None
@@ -286,7 +287,13 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
             if self.path is not None:
                 self._atomic = atomic_path(self.path)
                 self._tmp = self._atomic.__enter__()
-                sinks.append(rr.FileSink(str(self._tmp)))
+                if want_viewer:
+                    sinks.append(rr.FileSink(str(self._tmp)))
+                else:
+                    # Encoded in memory, written by close(): rerun's file writer dies on a full disk
+                    # or a file-size limit and every later flush then waits forever; our write fails
+                    # at once with an OSError naming the file.
+                    self._stream = rr.binary_stream(recording=rec)
             if want_viewer:
                 try:
                     rec.spawn(port=viewer_port, connect=False)
@@ -294,9 +301,12 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
                     self.viewer_spawned = True
                 except Exception as exc:  # no viewer binary, port in use, ...
                     log.warning("could not start the rerun viewer: %s", exc)
-            if not sinks:
+            if sinks:
+                rec.set_sinks(*sinks, default_blueprint=default_blueprint())
+            elif self._stream is not None:
+                rr.send_blueprint(default_blueprint(), make_active=False, make_default=True, recording=rec)
+            else:
                 return  # viewer wanted, failed, and no file: disabled
-            rec.set_sinks(*sinks, default_blueprint=default_blueprint())
             rec.send_recording_name(recording_name)
             rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         except BaseException:
@@ -801,12 +811,27 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         self._closed = True
         rec, self._rec = self._rec, None
         try:
-            rec.flush()
-            rec.disconnect()  # closes the file sink: footer written, file complete
+            if self._stream is not None:
+                data = self._stream.read(flush=True)  # in memory: no disk involved, cannot hang on one
+                rec.disconnect()
+                self._write_file(data or b"", self._stream.read(flush=False) or b"")
+            else:
+                rec.flush()
+                rec.disconnect()  # closes the file sink: footer written, file complete
         except BaseException as exc:
             self._finish_file(exc)
             raise
         self._finish_file(None)
+
+    def _write_file(self, *parts: bytes) -> None:
+        """The encoded recording into the temporary file; a failed write names ``path``."""
+        assert self._tmp is not None
+        try:
+            with open(self._tmp, "wb") as fh:
+                for part in parts:
+                    fh.write(part)
+        except OSError as exc:
+            raise type(exc)(exc.errno, exc.strerror, str(self.path)) from None
 
     def abort(self) -> None:
         """Stop recording and delete the temporary file; ``path`` is left untouched."""
