@@ -41,7 +41,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     except OSError as exc:
         tmp_path.unlink(missing_ok=True)
         if exc.filename is None:  # a failed write() names no file: name the output
-            raise type(exc)(exc.errno, exc.strerror, str(target)) from exc
+            raise type(exc)(exc.errno, exc.strerror or str(exc), str(target)) from exc
         raise
     except BaseException:
         tmp_path.unlink(missing_ok=True)
