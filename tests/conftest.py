@@ -68,3 +68,13 @@ def desk_scan(tmp_path_factory) -> Path:
     assert main(["scan", str(root / "capture" / "field_log.toml"), "--out", str(root / "scan"), "--quiet",
                  "--frame-stride", "10"]) == 0
     return root
+
+
+@pytest.fixture(scope="session")
+def two_plane_small(tmp_path_factory) -> Path:
+    """A small two_plane capture (400×300, 120 frames; desk and wall with printed markers): its folder."""
+    from gnomon.simulate import TwoPlaneConfig, simulate_two_plane
+
+    root = tmp_path_factory.mktemp("two_plane_small")
+    simulate_two_plane(root / "capture", TwoPlaneConfig(width=400, height=300, frames=120, seed=4))
+    return root / "capture"

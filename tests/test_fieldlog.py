@@ -46,7 +46,6 @@ def test_valid_log_loads(tiny_capture: Path) -> None:
         (lambda d: d["capture"].update(frames="missing/*.png"), "frames folder"),
         (lambda d: d["capture"].update(frames="frames/*.tif"), "no files match"),
         (lambda d: d["light"].update(position=[0, 0, -300]), "below the plane 'desk'"),
-        (lambda d: d["planes"][0].pop("regions"), "[planes.0] needs 'regions' (rectangles or polygons) or a 'mask'"),
         (lambda d: d["planes"][0].update(regions=[{"polygon": [[0, 0], [5, 5]]}]), "polygon: expected at least 3"),
         (lambda d: d["planes"][0].update(mask="nowhere.png"), "[planes.0] mask: "),
         (lambda d: d["planes"][0].update(x_axis=[1, 0, 0], markers=[

@@ -145,6 +145,10 @@ class PlaneSpec:
     polygons: tuple[np.ndarray, ...] = ()  # (K, 2) pixel vertices each
     mask_file: Path | None = None  # an image: non-zero where the plane is bare and swept
 
+    @property
+    def has_regions(self) -> bool:
+        return bool(self.regions or self.polygons or self.mask_file is not None)
+
     def region_mask(self, shape: tuple[int, int]) -> np.ndarray:
         """(H, W) bool: the union of the plane's rectangles, polygons and mask image."""
         from gnomon.reference_lines import region_mask
@@ -368,9 +372,6 @@ def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
         mask_file = t.path.resolve().parent / t.string("mask")
         if not mask_file.is_file():
             raise t.error("mask", f"{mask_file} not found")
-    if not regions and not polygons and mask_file is None:
-        raise FieldLogError(f"{t.path}: [{t.name}] needs 'regions' (rectangles or polygons) or a 'mask' image "
-                            f"(where the plane is bare and swept)")
     normal = normal / np.linalg.norm(normal)
     x_axis = None
     if "x_axis" in t.data:

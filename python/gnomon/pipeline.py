@@ -24,7 +24,7 @@ import numpy as np
 from gnomon import __version__, _kernel, atomic, ply
 from gnomon.calibration import camera_to_table
 from gnomon.camera import Pose
-from gnomon.errors import FrameError, GnomonError
+from gnomon.errors import FieldLogError, FrameError, GnomonError
 from gnomon.fieldlog import FieldLog, check_geometry, load_field_log
 from gnomon.frames import FrameSource, sha256_file
 from gnomon.fusion import fuse_depths
@@ -366,6 +366,10 @@ def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | 
     opts = options or ScanOptions()
     t0 = time.perf_counter()
     log = load_field_log(field_log)
+    for plane in log.planes:
+        if not plane.has_regions:
+            raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: no 'regions' or 'mask' (where the plane is "
+                                f"bare and swept); `gnomon regions {log.path}` proposes them")
     source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
     log, planes_report = resolve_reference_planes(log, source)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
@@ -430,7 +434,7 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
     report = []
     placed = {}
     for plane, pp in measured:
-        entry = {"plane": plane.name, **pp.to_report()}
+        entry = {"plane": plane.name, **pp.to_report(), "pixels": pp.pixels.tolist()}
         if declared:
             declared_cam = pose.R @ plane.normal
             cosang = abs(float(declared_cam @ pp.normal_cam))

@@ -22,8 +22,8 @@ line in plane coordinates.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -35,12 +35,15 @@ MIN_POINTS = 10
 
 __all__ = [
     "PlaneInCamera", "ReferenceLines", "fit_line_robust", "isochrone_crossings", "lines_on_plane", "mask_crossings",
-    "measure_reference_lines", "region_mask",
+    "measure_reference_lines", "ransac_line", "region_mask",
 ]
 # A frame's own fit sets the line's direction when its inliers span at least
 # this fraction of the longest lines seen on the plane; shorter lines keep
 # only their offset (their direction comes from the neighbouring frames).
 MIN_EXTENT_FRACTION = 0.5
+# A frame's fit is a line when its inliers extend at least this many times their RMS distance to it
+# (a scatter of wrong shadow times gives ≈ 3.5).
+MIN_EXTENT_TO_RMS = 20.0
 # How many measured frames (at most this far away) set an extrapolated line's direction.
 EXTRAPOLATION_FRAMES = 8
 # Frames between two measured lines at most this far apart interpolate their direction.
@@ -58,7 +61,7 @@ class PlaneInCamera:
     e2: np.ndarray
 
     @classmethod
-    def from_world(cls, point_world: np.ndarray, normal_world: np.ndarray, pose: Pose) -> "PlaneInCamera":
+    def from_world(cls, point_world: np.ndarray, normal_world: np.ndarray, pose: Pose) -> PlaneInCamera:
         n = pose.R @ (normal_world / np.linalg.norm(normal_world))
         o = pose.world_to_camera(point_world)
         helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
@@ -124,13 +127,16 @@ def _typical_step(times: np.ndarray, axis: int) -> float:
     return float(np.median(d)) if d.size else 0.0
 
 
-def isochrone_crossings(times: np.ndarray, n_frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def isochrone_crossings(times: np.ndarray, n_frames: int, unique: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sub-pixel points where a shadow-time patch crosses each integer frame.
 
     ``times``: (h, w) shadow times in frames (NaN = none) of one image region.
     Crossings are searched along the axis where the times change fastest
     (the scan direction). Returns (frame, u, v) arrays in region pixel
-    coordinates, one entry per crossing.
+    coordinates, one entry per crossing. ``unique``: drop a frame's crossings
+    on a row (or column) that crosses it more than once (a wrong time in one
+    pixel adds a second crossing); otherwise keep them all, for a robust line
+    fit to sort out.
     """
     if times.size == 0:
         empty = np.zeros(0)
@@ -159,11 +165,12 @@ def isochrone_crossings(times: np.ndarray, n_frames: int) -> tuple[np.ndarray, n
     cols = np.repeat(cols, reps)
     offsets = np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps)
     frame = first[rows, cols] + offsets
-    # A line (row or column) crossing the same frame twice is ambiguous there.
-    key = rows * n_frames + frame
-    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
-    unique = counts[inverse] == 1
-    rows, cols, frame = rows[unique], cols[unique], frame[unique]
+    if unique:
+        # A line (row or column) crossing the same frame twice is ambiguous there.
+        key = rows * n_frames + frame
+        _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+        single = counts[inverse] == 1
+        rows, cols, frame = rows[single], cols[single], frame[single]
     ta, tb = a[rows, cols], b[rows, cols]
     along = cols + (frame - ta) / (tb - ta)
     if along_rows:
@@ -229,7 +236,8 @@ def region_mask(
     return out
 
 
-def mask_crossings(times: np.ndarray, mask: np.ndarray, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+def mask_crossings(times: np.ndarray, mask: np.ndarray, n_frames: int,
+                   unique: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Isochrone crossings of the shadow-time map inside a region mask.
 
     Pixels outside ``mask`` are ignored (a crossing needs both neighbours
@@ -241,8 +249,47 @@ def mask_crossings(times: np.ndarray, mask: np.ndarray, n_frames: int) -> tuple[
         return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
     v0, v1, u0, u1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
     sub = np.where(mask[v0:v1, u0:u1], times[v0:v1, u0:u1], np.nan)
-    f, u, v = isochrone_crossings(sub, n_frames)
+    f, u, v = isochrone_crossings(sub, n_frames, unique)
     return f, np.stack([u + u0, v + v0], axis=1)
+
+
+def ransac_line(xy: np.ndarray, tolerance: float, trials: int = 300, seed: int = 0, candidates: int = 20) -> np.ndarray:
+    """Inlier mask of the 2-D line through two of the points that covers the most length within ``tolerance``.
+
+    For crossings of which many are not on the line (an object inside the
+    region): an iterative least-squares fit starting from all of them can
+    settle between the line and the object's curve, this cannot. Of the
+    ``candidates`` lines with the most points within ``tolerance``, the one
+    whose points cover the most length (bins of 4 × ``tolerance`` along it)
+    wins: a shadow line runs across the whole plane, an object's crossings
+    that happen to line up cluster on the object.
+    """
+    n = len(xy)
+    if n < 2:
+        return np.ones(n, dtype=bool)
+    rng = np.random.default_rng(seed)
+    a = rng.integers(0, n, trials)
+    b = rng.integers(0, n, trials)
+    d = xy[b] - xy[a]
+    length = np.hypot(d[:, 0], d[:, 1])
+    ok = length > 0
+    a, d, length = a[ok], d[ok], length[ok]
+    if not len(a):
+        return np.ones(n, dtype=bool)
+    direction = d / length[:, None]
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
+    counts = np.zeros(len(a), dtype=np.int64)
+    for start in range(0, len(a), 50):  # (trials, n) residuals in chunks
+        r = np.abs((xy[None, :, :] - xy[a[start:start + 50], None, :]) @ normal[start:start + 50, :, None])[..., 0]
+        counts[start:start + 50] = (r <= tolerance).sum(axis=1)
+    best, best_cover = np.ones(n, dtype=bool), -1
+    for i in np.argsort(counts)[::-1][:candidates]:
+        rel = xy - xy[a[i]]
+        inl = np.abs(rel @ normal[i]) <= tolerance
+        cover = np.unique(np.floor((rel[inl] @ direction[i]) / (4.0 * tolerance))).size
+        if cover > best_cover:
+            best, best_cover = inl, cover
+    return best
 
 
 def measure_reference_lines(
@@ -281,6 +328,7 @@ def lines_on_plane(
     camera: CameraModel,
     name: str = "plane",
     min_extent_fraction: float = MIN_EXTENT_FRACTION,
+    ransac_tolerance: float | None = None,
 ) -> ReferenceLines:
     """The shadow line on one reference plane at every integer frame, from all its regions at once.
 
@@ -293,7 +341,11 @@ def lines_on_plane(
     frames' extents, world units along the line); a shorter line (at the ends
     of the sweep, or mostly hidden) keeps only its offset, with the direction
     interpolated from the measured frames (or extrapolated from the nearest
-    few at the ends).
+    few at the ends). A frame's own fit counts only when it is a line, not
+    a scatter: its inliers' extent at least ``MIN_EXTENT_TO_RMS`` times their
+    RMS distance to it. ``ransac_tolerance`` (world units): start each frame's
+    fit from the RANSAC line (:func:`ransac_line`), for masks that may hold
+    much besides the bare plane (a first guess at the regions).
     """
     frame, pix = mask_crossings(times, mask, n_frames)
 
@@ -335,10 +387,22 @@ def lines_on_plane(
     for t, idx in enumerate(per_frame):
         if len(idx) < MIN_POINTS:
             continue
-        centre, d2, inl = fit_line_robust(xy[idx])
+        if ransac_tolerance is not None:
+            first = ransac_line(xy[idx], ransac_tolerance)
+            if first.sum() < MIN_POINTS:
+                continue
+            centre, d2, sub = fit_line_robust(xy[idx][first])
+            inl = np.zeros(len(idx), dtype=bool)
+            inl[np.flatnonzero(first)[sub]] = True
+        else:
+            centre, d2, inl = fit_line_robust(xy[idx])
         if inl.sum() < MIN_POINTS:
             continue
-        fits[t] = (centre, d2, inl, _extent(xy[idx][inl] @ d2))
+        ext = _extent(xy[idx][inl] @ d2)
+        spread = float(np.sqrt(np.mean(((xy[idx][inl] - centre) @ np.array([-d2[1], d2[0]])) ** 2)))
+        if ext < MIN_EXTENT_TO_RMS * spread:
+            continue
+        fits[t] = (centre, d2, inl, ext)
     if not fits:
         return ReferenceLines(name, plane, point, direction, rms, count, pixels, extrapolated, points3d, extent)
     longest = float(np.percentile([f[3] for f in fits.values()], 90))

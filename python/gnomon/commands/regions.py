@@ -1,0 +1,122 @@
+"""`gnomon regions FIELD_LOG`: propose each plane's bare, swept areas from a first pass.
+
+Tracks the shadow once, measures every plane with markers (or a chessboard),
+and keeps each plane's pixels whose shadow times its own shadow lines predict
+(:mod:`gnomon.regions`). Writes, into ``--out`` (default ``regions/`` beside
+the field log): one mask image per plane (``<plane>_mask.png``), a field-log
+snippet (``regions.toml``: the ``mask`` key of each ``[[planes]]``) and a
+drawing (``regions.png``: the first frame with the regions tinted).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+import numpy as np
+
+# The first lines are fitted inside the hull of a plane's markers grown by this fraction around their centre.
+SEED_GROWTH = -0.25
+PLANE_COLOURS = ((60, 60, 255), (255, 120, 40), (60, 200, 60), (200, 60, 200))  # BGR
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "regions",
+        help="propose each reference plane's bare, swept regions from a first pass",
+        description="Track the shadow once and keep, for each plane, the pixels whose shadow times the "
+        "plane's own shadow lines predict (lines first fitted inside its markers, or inside the regions "
+        "the field log already gives). Writes one mask image per plane, a field-log snippet and a drawing.",
+    )
+    p.add_argument("field_log", type=Path, help="the capture's field log (TOML); planes need markers, a "
+                   "chessboard or rough regions to start from")
+    p.add_argument("--out", type=Path, default=None, help="output folder (default: regions/ beside the field log)")
+    p.add_argument("--tolerance", type=float, default=None, metavar="FRAMES",
+                   help="largest difference between a pixel's shadow time and the plane's prediction "
+                   "(default: 3 robust standard deviations inside the plane, at least 0.25)")
+    p.add_argument("--margin", type=int, default=2, metavar="PX", help="keep this far from anything else")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _png(path: Path, image: np.ndarray) -> None:
+    import cv2
+
+    from gnomon import atomic
+
+    ok, data = cv2.imencode(".png", image)
+    if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
+        raise OSError(f"could not encode {path}")
+    atomic.write_bytes(path, data.tobytes())
+
+
+def draw_regions(first: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
+    """The first frame (BGR) with each plane's mask tinted and outlined in its colour."""
+    import cv2
+
+    if first.dtype == np.uint16:
+        first = (first // 257).astype(np.uint8)
+    img = first.copy() if first.ndim == 3 else cv2.cvtColor(first, cv2.COLOR_GRAY2BGR)
+    for k, mask in enumerate(masks):
+        colour = np.array(PLANE_COLOURS[k % len(PLANE_COLOURS)], dtype=np.float64)
+        img[mask] = (0.55 * img[mask] + 0.45 * colour).astype(np.uint8)
+        contours, _ = cv2.findContours(mask.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        cv2.drawContours(img, contours, -1, tuple(int(c) for c in colour), 1)
+    return img
+
+
+def run(args: argparse.Namespace) -> int:
+    from gnomon import atomic, pipeline
+    from gnomon.errors import FieldLogError
+    from gnomon.fieldlog import load_field_log
+    from gnomon.frames import FrameSource
+    from gnomon.reference_lines import PlaneInCamera
+    from gnomon.regions import hull_mask, propose_regions
+
+    log = load_field_log(args.field_log)
+    source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
+    log, planes_report = pipeline.resolve_reference_planes(log, source)
+    if log.pose is None:
+        raise FieldLogError(f"{log.path}: no [camera.pose] and no plane with markers or a chessboard: "
+                            "the planes cannot be placed")
+    measured = {entry["plane"]: np.array(entry["pixels"]) for entry in planes_report}
+    shape = (log.camera.height, log.camera.width)
+    seeds = []
+    for plane in log.planes:
+        if plane.has_regions:
+            seeds.append(plane.region_mask(shape))
+        elif plane.name in measured and len(measured[plane.name]) >= 3:
+            seeds.append(hull_mask(shape, measured[plane.name], shrink=SEED_GROWTH))
+        else:
+            raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: nothing to start from; give it markers, "
+                                "a chessboard or rough regions")
+    tracked = pipeline._track(log, source, None, not args.quiet)
+    times = tracked.times
+    maps = [times.enter, times.leave] if log.scan.edge == "both" else [
+        times.enter if log.scan.edge == "enter" else times.leave]
+    planes = [PlaneInCamera.from_world(p.point, p.normal, log.pose) for p in log.planes]
+    names = [p.name for p in log.planes]
+    proposals = propose_regions(maps, tracked.n_frames, planes, names, seeds, log.camera,
+                                tolerance=args.tolerance, margin_px=max(args.margin, 0))
+
+    out = args.out if args.out is not None else args.field_log.parent / "regions"
+    out.mkdir(parents=True, exist_ok=True)
+    rel = Path(os.path.relpath(out, args.field_log.parent))
+    snippet = ["# Written by `gnomon regions`: add each plane's `mask` to its [[planes]] table",
+               "# (the scan uses it with any `regions` rectangles or polygons given).", ""]
+    for region in proposals:
+        if not region.mask.any():
+            print(f"warning: plane {region.name!r}: no pixel is consistent with it; check its markers "
+                  "and that the shadow crosses it")
+        _png(out / f"{region.name}_mask.png", region.mask.astype(np.uint8) * 255)
+        snippet += ["[[planes]]", f'name = "{region.name}"', f'mask = "{(rel / f"{region.name}_mask.png").as_posix()}"',
+                    (f"# {int(region.mask.sum())} pixels, shadow-time tolerance {region.tolerance:.2f} frames, "
+                     f"lines in {region.lines_found} frames"), ""]
+        print(f"{region.name}: {int(region.mask.sum())} pixels ({100 * region.mask.mean():.1f} % of the image), "
+              f"tolerance {region.tolerance:.2f} frames, lines in {region.lines_found} frames")
+    atomic.write_text(out / "regions.toml", "\n".join(snippet))
+    first = tracked.first_color if tracked.first_color is not None else tracked.first_grey
+    _png(out / "regions.png", draw_regions(first, [r.mask for r in proposals]))
+    print(f"wrote {out / 'regions.toml'}, {len(proposals)} masks and {out / 'regions.png'}")
+    return 0

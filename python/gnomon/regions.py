@@ -1,0 +1,252 @@
+"""Proposing each reference plane's bare, swept areas from a first pass.
+
+A pixel of a bare reference plane has a shadow time that the plane's own
+shadow lines predict: on the plane, the line of frame t passes through the
+pixel's point exactly when its shadow time is t. A pixel of an object, of its
+cast shadow, of a marker (too little contrast), of another plane or of a
+surface off the plane has no shadow time or another one. So:
+
+1. fit the plane's lines over a *seed* — the area inside its markers (their
+   convex hull in the image), or the regions the field log already gives —
+   with the robust line fit of :mod:`gnomon.reference_lines` (objects inside
+   the seed are outliers of each frame's line);
+2. predict every pixel's shadow time from those lines (the frame at which
+   the line, interpolated between consecutive frames, crosses the pixel's
+   point on the plane), for the entering and the leaving edge;
+3. keep the pixels whose measured times agree with both predictions within
+   ``tolerance`` frames, and that no other plane explains as well; open the
+   mask (drop speckle), drop small pieces and pieces that do not reach into
+   the seed (another surface parallel to the plane: a box's face in front of
+   the wall), and stay ``margin_px`` away from everything else (blur,
+   penumbra);
+4. refit the lines over that mask and repeat once.
+
+Inputs are plain values (shadow-time maps, planes in the camera frame, seeds,
+the camera model); :mod:`gnomon.commands.regions` reads the field log, runs the
+first pass and writes the masks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from gnomon.camera import CameraModel
+from gnomon.reference_lines import PlaneInCamera, ReferenceLines, lines_on_plane
+
+__all__ = ["PlaneRegion", "hull_mask", "nearest_plane", "pixel_footprint", "predicted_times", "propose_regions",
+           "smooth_times"]
+
+# The first lines (over the seed, which may hold objects) are RANSAC lines of this tolerance, in pixels on the plane.
+RANSAC_PIXELS = 2.0
+# Neighbouring shadow times of a smooth swept surface differ by less than this (frames).
+SMOOTH_STEP = 2.0
+
+
+@dataclass
+class PlaneRegion:
+    """A proposed region of one plane.
+
+    ``mask`` (H, W) bool: bare, swept and consistent with the plane;
+    ``residual`` (H, W) float: measured − predicted shadow time (frames, the
+    worse of the two edges; NaN where there is none); ``tolerance`` the
+    frames used; ``lines_found`` frames with a line on the final mask.
+    """
+
+    name: str
+    mask: np.ndarray
+    residual: np.ndarray
+    tolerance: float
+    lines_found: int
+
+
+def predicted_times(lines: ReferenceLines, ray_map: np.ndarray) -> np.ndarray:
+    """(H, W) the frame (sub-frame) at which the plane's shadow line passes each pixel's point.
+
+    The lines must sweep the plane monotonically (each frame's line beyond the
+    previous one). The pair of consecutive frames with a line whose lines
+    bracket the point is found by bisection, and the point's signed distances
+    to them interpolated linearly; pixels the lines never pass (or whose ray
+    misses the plane) are NaN.
+    """
+    h, w = ray_map.shape[:2]
+    plane = lines.plane
+    found = np.flatnonzero(lines.found)
+    out = np.full(h * w, np.nan)
+    if len(found) < 2:
+        return out.reshape(h, w)
+    pts = plane.intersect(ray_map.reshape(-1, 3).astype(np.float64))
+    ok = np.flatnonzero(np.isfinite(pts[:, 0]))
+    xy = plane.to_plane_coords(pts[ok])
+    centres = plane.to_plane_coords(lines.point[found])
+    d3 = lines.direction[found]
+    d2 = np.stack([d3 @ plane.e1, d3 @ plane.e2], axis=1)
+    normals = np.stack([-d2[:, 1], d2[:, 0]], axis=1)
+    # One sense for every normal: the way the line moves.
+    motion = centres[-1] - centres[0]
+    ref = motion if np.linalg.norm(motion) > 0 else normals[0]
+    normals *= np.where(normals @ ref < 0, -1.0, 1.0)[:, None]
+    offsets = np.einsum("ij,ij->i", centres, normals)
+
+    def signed(k: np.ndarray) -> np.ndarray:  # > 0: the point is ahead of line k (not yet reached)
+        return np.einsum("ij,ij->i", xy, normals[k]) - offsets[k]
+
+    s_first, s_last = signed(np.zeros(len(xy), dtype=int)), signed(np.full(len(xy), len(found) - 1))
+    inside = (s_first > 0) & (s_last <= 0)  # ahead of the first line and passed by the last
+    lo = np.zeros(len(xy), dtype=int)
+    hi = np.full(len(xy), len(found) - 1)
+    for _ in range(int(np.ceil(np.log2(len(found)))) + 1):
+        mid = (lo + hi) // 2
+        ahead = signed(mid) > 0
+        lo = np.where(inside & ahead, mid, lo)
+        hi = np.where(inside & ~ahead, mid, hi)
+    s_lo, s_hi = signed(lo), signed(hi)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        frac = s_lo / (s_lo - s_hi)
+    t = found[lo] + (found[hi] - found[lo]) * frac
+    good = inside & (hi == lo + 1) & np.isfinite(t)
+    out[ok[good]] = t[good]
+    return out.reshape(h, w)
+
+
+def pixel_footprint(plane: PlaneInCamera, camera: CameraModel, where: np.ndarray) -> float:
+    """Median size of a pixel on the plane (world units) over the pixels of ``where``: the larger of its two sides."""
+    v, u = np.nonzero(where)
+    if u.size == 0:
+        return float("nan")
+    pick = np.linspace(0, u.size - 1, min(u.size, 2000)).astype(int)
+    base = np.stack([u[pick], v[pick]], axis=1).astype(np.float64)
+    p0 = plane.intersect(camera.rays(base))
+    sides = [np.linalg.norm(plane.intersect(camera.rays(base + step)) - p0, axis=1) for step in ([1.0, 0.0], [0.0, 1.0])]
+    return float(np.nanmedian(np.maximum(*sides)))
+
+
+def smooth_times(times: np.ndarray, max_step: float = SMOOTH_STEP) -> np.ndarray:
+    """The shadow times of pixels whose four neighbours all have one within ``max_step`` frames; NaN elsewhere.
+
+    Wrong times (too little contrast: a marker's black squares, a cast
+    shadow, dark carpet) are scattered at random and leave speckle; a surface
+    swept by the shadow has smooth times.
+    """
+    t = np.asarray(times, dtype=np.float64)
+    ok = np.isfinite(t)
+    padded = np.pad(t, 1, constant_values=np.nan)
+    h, w = t.shape
+    with np.errstate(invalid="ignore"):
+        for dv, du in ((0, 1), (2, 1), (1, 0), (1, 2)):
+            ok &= np.abs(padded[dv:dv + h, du:du + w] - t) <= max_step
+    return np.where(ok, t, np.nan)
+
+
+def _clean(mask: np.ndarray, margin_px: int, min_area_px: int, seed: np.ndarray | None = None) -> np.ndarray:
+    m: np.ndarray = mask.astype(np.uint8)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
+    m = cv2.morphologyEx(m, cv2.MORPH_OPEN, kernel)
+    if margin_px > 0:
+        m = cv2.erode(m, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * margin_px + 1, 2 * margin_px + 1)))
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
+    keep = np.zeros(n, dtype=bool)
+    keep[1:] = stats[1:, cv2.CC_STAT_AREA] >= min_area_px
+    if seed is not None:  # only pieces that reach into the seed (not another surface parallel to the plane)
+        touching = np.zeros(n, dtype=bool)
+        touching[np.unique(labels[seed & (labels > 0)])] = True
+        keep &= touching
+    return keep[labels]
+
+
+def nearest_plane(planes: list[PlaneInCamera], ray_map: np.ndarray) -> np.ndarray:
+    """(H, W) index of the plane each pixel's ray meets first (−1: none in front of the camera).
+
+    Reference planes that meet in a concave corner (a desk and the wall behind
+    it, the ground and a facade) are seen where their ray reaches them first.
+    """
+    rays = ray_map.reshape(-1, 3).astype(np.float64)
+    depth = np.full((len(planes), len(rays)), np.inf)
+    for k, plane in enumerate(planes):
+        hit = plane.intersect(rays.copy())
+        ok = np.isfinite(hit[:, 0])
+        depth[k, ok] = hit[ok, 2]
+    out = np.argmin(depth, axis=0)
+    out[~np.isfinite(depth.min(axis=0))] = -1
+    return out.reshape(ray_map.shape[:2])
+
+
+def propose_regions(
+    time_maps: list[np.ndarray],
+    n_frames: int,
+    planes: list[PlaneInCamera],
+    names: list[str],
+    seeds: list[np.ndarray],
+    camera: CameraModel,
+    *,
+    tolerance: float | None = None,
+    margin_px: int = 2,
+    min_area_px: int = 200,
+    iterations: int = 3,
+) -> list[PlaneRegion]:
+    """Each plane's bare, swept pixels, consistent with its own shadow lines.
+
+    ``time_maps``: the (H, W) shadow-time maps of the edges used (frames, NaN
+    = none); ``planes`` in the camera frame; ``seeds`` (H, W) bool, where to
+    fit the first lines. A pixel is a candidate of the plane its ray meets
+    first (:func:`nearest_plane`). Lines are RANSAC lines (the seed and the
+    candidates hold objects too); each iteration refits them over the last
+    proposal plus the candidates the last lines did not reach (so the region
+    grows to every frame the shadow crosses the plane in).
+    ``tolerance`` (frames): how far a pixel's time may be from the
+    prediction; by default 3 robust standard deviations of the residuals
+    inside the current region (the seed at first), at least 0.25 frame.
+    """
+    ray_map = camera.ray_map()
+    time_maps = [smooth_times(t) for t in time_maps]
+    swept = np.logical_and.reduce([np.isfinite(t) for t in time_maps])
+    nearest = nearest_plane(planes, ray_map)
+    footprint = [pixel_footprint(plane, camera, seed) for plane, seed in zip(planes, seeds)]
+    current = [s & (nearest == k) for k, s in enumerate(seeds)]
+    unreached = [np.zeros_like(s) for s in seeds]
+    found = [0] * len(planes)
+    residuals: list[np.ndarray] = []
+    tolerances: list[float] = []
+    for _ in range(iterations):
+        residuals = []
+        for k, plane in enumerate(planes):
+            candidate = nearest == k
+            fit_on = current[k] | (unreached[k] & candidate & swept)
+            worst: np.ndarray | None = None
+            pred = np.full(ray_map.shape[:2], np.nan)
+            for times in time_maps:
+                lines = lines_on_plane(times, n_frames, plane, fit_on, camera, names[k],
+                                       ransac_tolerance=RANSAC_PIXELS * footprint[k])
+                found[k] = int(lines.found.sum())
+                pred = predicted_times(lines, ray_map)
+                r = np.abs(times - pred)  # NaN where either is missing
+                worst = r if worst is None else np.maximum(worst, r)
+            unreached[k] = ~np.isfinite(pred)
+            assert worst is not None
+            residuals.append(np.where(candidate, worst, np.nan))
+        tolerances = []
+        for k, r in enumerate(residuals):
+            inside = r[current[k] & np.isfinite(r)]
+            if tolerance is not None:
+                tolerances.append(float(tolerance))
+            elif inside.size:
+                tolerances.append(max(0.25, 3.0 * 1.4826 * float(np.median(inside))))
+            else:
+                tolerances.append(0.25)
+        with np.errstate(invalid="ignore"):
+            current = [_clean(np.isfinite(r) & (r <= tolerances[k]), margin_px, min_area_px, seeds[k])
+                       for k, r in enumerate(residuals)]
+    return [PlaneRegion(names[k], current[k], residuals[k], tolerances[k], found[k]) for k in range(len(planes))]
+
+
+def hull_mask(shape: tuple[int, int], pixels: np.ndarray, shrink: float = 0.0) -> np.ndarray:
+    """(H, W) bool: the convex hull of some pixels (e.g. a plane's markers), optionally shrunk towards its centre."""
+    pts = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    c = pts.mean(axis=0)
+    pts = c + (1.0 - shrink) * (pts - c)
+    hull = cv2.convexHull(np.round(pts * 16).astype(np.int32).reshape(-1, 1, 2))
+    canvas = np.zeros(shape, dtype=np.uint8)
+    cv2.fillConvexPoly(canvas, hull, 1, lineType=cv2.LINE_8, shift=4)
+    return canvas.astype(bool)
