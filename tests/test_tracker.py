@@ -37,9 +37,9 @@ def to_frames(values: np.ndarray, shape, dtype) -> list[np.ndarray]:
     return [f.reshape(shape) for f in q]
 
 
-def run_kernel(frames, *, min_contrast=20.0, lut=None, window=4, block=16):
+def run_kernel(frames, *, min_contrast=20.0, lut=None, window=4, max_width=32):
     h, w = frames[0].shape
-    tracker = _kernel.TemporalTracker(h, w, frames[0].dtype.name, window=window, block=block)
+    tracker = _kernel.TemporalTracker(h, w, frames[0].dtype.name, window=window, max_width=max_width)
     for f in frames:
         tracker.update(f)
     return ShadowTimes.from_kernel(tracker.finish(min_contrast, lut))
@@ -72,8 +72,8 @@ def test_ramp_has_the_exact_crossings():
     # Frames 0-9: 200; 180 140 100 60; 10 × 40; 70 110 150 190; 10 × 200.
     profile = [200] * 10 + [180, 140, 100, 60] + [40] * 10 + [70, 110, 150, 190] + [200] * 10
     frames = [np.full((2, 3), v, np.uint8) for v in profile]
-    for block in (1, 7, 16):
-        times = run_kernel(frames, block=block)
+    for max_width in (8, 16, 32):
+        times = run_kernel(frames, max_width=max_width)
         assert np.all(times.enter == 11.5) and np.all(times.leave == 25.25)
         assert np.all(times.threshold == 120) and np.all(times.contrast == 160)
 
@@ -87,10 +87,10 @@ def test_kernel_and_numpy_tracker_agree(dtype):
     values = top * (0.8 - 0.6 * inside) + rng.normal(0, top / 150, inside.shape)
     frames = to_frames(values, shape, dtype)
     for lut in (None, decoding_lut(2.2, dtype), decoding_lut("srgb", dtype)):
-        for window, block in ((4, 16), (2, 1), (6, 5)):
+        for window, max_width in ((4, 32), (2, 2), (6, 7)):
             h, w = shape
-            kernel = _kernel.TemporalTracker(h, w, np.dtype(dtype).name, window=window, block=block)
-            reference = NumpyTracker(h, w, np.dtype(dtype).name, window=window)
+            kernel = _kernel.TemporalTracker(h, w, np.dtype(dtype).name, window=window, max_width=max_width)
+            reference = NumpyTracker(h, w, np.dtype(dtype).name, window=window, max_width=max_width)
             for f in frames:
                 kernel.update(f)
                 reference.update(f)
@@ -112,16 +112,16 @@ def test_finish_is_a_preview():
     shape = (8, 9)
     inside, _, _ = edge_profiles(72, 40, rng)
     frames = to_frames(LIT - (LIT - SHADOW) * inside + rng.normal(0, 1, inside.shape), shape, np.uint8)
-    streaming = _kernel.TemporalTracker(*shape, block=7)
+    streaming = _kernel.TemporalTracker(*shape, max_width=7)
     for i, f in enumerate(frames):
         streaming.update(f)
         if i in (3, 17, 30):
             preview = streaming.finish(20.0)
-            expect = run_kernel(frames[: i + 1])
+            expect = run_kernel(frames[: i + 1], max_width=7)
             np.testing.assert_array_equal(preview["enter"], expect.enter)
             np.testing.assert_array_equal(preview["leave"], expect.leave)
     final = ShadowTimes.from_kernel(streaming.finish(20.0))
-    np.testing.assert_array_equal(final.enter, run_kernel(frames).enter)
+    np.testing.assert_array_equal(final.enter, run_kernel(frames, max_width=7).enter)
 
 
 def test_gamma_lut_puts_the_crossing_at_mid_irradiance():
@@ -229,12 +229,17 @@ def test_kernel_tracker_arguments():
         _kernel.TemporalTracker(4, 5, "float32")
     with pytest.raises(ValueError, match="window"):
         _kernel.TemporalTracker(4, 5, window=0)
-    with pytest.raises(ValueError, match="block"):
-        _kernel.TemporalTracker(4, 5, block=0)
+    with pytest.raises(ValueError, match="max_width"):
+        _kernel.TemporalTracker(4, 5, max_width=1)
+    with pytest.raises(ValueError, match="window"):
+        _kernel.TemporalTracker(4, 5, window=9, max_width=8)
+    with pytest.raises(ValueError, match="ambiguity"):
+        _kernel.TemporalTracker(4, 5, ambiguity=0.0)
     with pytest.raises(ValueError):
         _kernel.TemporalTracker(0, 5)
-    t = _kernel.TemporalTracker(4, 5, "uint16", window=3, block=8)
-    assert (t.shape, t.dtype, t.window, t.block, t.frames_seen) == ((4, 5), "uint16", 3, 8, 0)
+    t = _kernel.TemporalTracker(4, 5, "uint16", window=3, max_width=8, ambiguity=0.5)
+    assert (t.shape, t.dtype, t.window, t.max_width, t.frames_seen) == ((4, 5), "uint16", 3, 8, 0)
+    assert t.ambiguity == 0.5 and t.simd_path == _kernel.simd_path()
     with pytest.raises(ValueError, match="uint16"):
         t.update(np.zeros((4, 5), np.uint8))
     # Non-contiguous frames are accepted (copied).
@@ -249,7 +254,7 @@ _PATH_SCRIPT = """
 import sys, numpy as np
 from gnomon import _kernel
 frames = np.load(sys.argv[1])
-t = _kernel.TemporalTracker(*frames.shape[1:], "uint8", window=3, block=5)
+t = _kernel.TemporalTracker(*frames.shape[1:], "uint8", window=3, max_width=5)
 for f in frames:
     t.update(f)
 r = t.finish(10.0)
@@ -272,7 +277,7 @@ def test_every_simd_path_gives_identical_results(tmp_path):
     inside, _, _ = edge_profiles(shape[0] * shape[1], 45, rng, scale=0.8)
     frames = np.stack(to_frames(200 - 160 * inside + rng.normal(0, 2, inside.shape), shape, np.uint8))
     np.save(tmp_path / "frames.npy", frames)
-    here = run_kernel(list(frames), min_contrast=10.0, window=3, block=5)
+    here = run_kernel(list(frames), min_contrast=10.0, window=3, max_width=5)
     for path in paths:
         out = tmp_path / f"{path}.npz"
         env = {**os.environ, "GNOMON_SIMD": path, "PYTHONPATH": os.pathsep.join(sys.path)}
@@ -280,7 +285,8 @@ def test_every_simd_path_gives_identical_results(tmp_path):
                        check=True, env=env)
         got = np.load(out)
         assert str(got["path"]) == path
-        for key in ("imax", "imin", "threshold", "enter", "leave", "enter_slope", "leave_slope", "valid"):
+        for key in ("imax", "imin", "threshold", "enter", "leave", "enter_slope", "leave_slope", "rival",
+                    "valid", "ambiguous", "clipped"):
             np.testing.assert_array_equal(got[key], getattr(here, key), err_msg=f"{path}: {key}")
 
 
@@ -289,3 +295,117 @@ def test_version_names_the_simd_path():
 
     text = version_text()
     assert text.startswith("gnomon ") and text.endswith(f"SIMD {_kernel.simd_path()})")
+
+
+# ---- One dip per pixel: several darkening events ---------------------------
+
+
+def dips_profile(n_frames: int, dips, *, lit: float = LIT) -> np.ndarray:
+    """A lit level with dips ``(enter, leave, level)``: logistic edges of scale
+    0.6 frame at fractional times (so the mid-level is crossed at ``enter`` and
+    ``leave``), each dip at its own level; overlapping dips take the darker."""
+    t = np.arange(n_frames, dtype=np.float64)
+    value = np.full(n_frames, lit)
+    for enter, leave, level in dips:
+        inside = logistic((t - enter) / 0.6) * logistic((leave - t) / 0.6)
+        value = np.minimum(value, lit - (lit - level) * inside)
+    return value
+
+
+def track_both(values: np.ndarray, *, min_contrast=20.0, max_width=16, ambiguity=0.6):
+    """Kernel and numpy reference on (frames, pixels) values, as one row of pixels;
+    they must agree on every output; returns the kernel's ShadowTimes."""
+    frames = to_frames(values, (1, values.shape[1]), np.uint8)
+    kernel = _kernel.TemporalTracker(1, values.shape[1], max_width=max_width, ambiguity=ambiguity)
+    reference = NumpyTracker(1, values.shape[1], max_width=max_width, ambiguity=ambiguity)
+    for f in frames:
+        kernel.update(f)
+        reference.update(f)
+    got, want = kernel.finish(min_contrast), reference.finish(min_contrast)
+    for key in got:
+        np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+    return ShadowTimes.from_kernel(got)
+
+
+def test_a_wide_cloud_dip_and_the_shadow_dip():
+    """A cloud: a slow dip (raised cosine, 60 frames, 70 DN deep) then the sharp
+    shadow; noise σ = 1 DN. Every pixel's times are the shadow's, sub-frame, with
+    leave after enter; the cloud is a weak rival, not an ambiguity."""
+    rng = np.random.default_rng(11)
+    n, pixels = 200, 400
+    t = np.arange(n)[:, None]
+    cloud = np.where(np.abs(t - 70) < 30, 35 * (1 + np.cos(np.pi * (t - 70) / 30)), 0)
+    enter = rng.uniform(130, 140, pixels)
+    leave = enter + rng.uniform(5, 12, pixels)
+    shadow = np.stack([dips_profile(n, [(e, l, SHADOW)]) for e, l in zip(enter, leave)], axis=1)
+    values = shadow - cloud + rng.normal(0, 1.0, (n, pixels))
+    times = track_both(values)
+    assert times.valid.all() and not times.ambiguous.any()
+    assert np.all(times.leave > times.enter)
+    assert rms(times.enter.ravel() - enter) <= 0.05 and rms(times.leave.ravel() - leave) <= 0.05
+    assert np.all(times.rival < 0.5 * times.contrast)
+
+
+def test_cloud_flanks_steeper_than_the_shadow_edges():
+    """A short cloud (15 frames at 70 % of the lit level, instant 60 DN flanks) and a
+    shadow with soft edges (scale 2 frames, about 30 DN per frame at most): the
+    steepest fall and rise of the capture are the cloud's, the deepest dip is the
+    shadow's (about 140 DN deep, so the cloud is a rival below the ambiguity)."""
+    rng = np.random.default_rng(12)
+    n, pixels = 160, 200
+    t = np.arange(n)[:, None]
+    cloud = np.where((t >= 40) & (t < 55), 0.3 * LIT, 0.0)
+    enter = rng.uniform(100, 110, pixels)
+    leave = enter + 20  # long enough for the soft edges to reach the shadow level
+    inside = logistic((t - enter) / 2.0) * logistic((leave - t) / 2.0)
+    values = LIT - (LIT - SHADOW) * inside - cloud + rng.normal(0, 1.0, (n, pixels))
+    steepest_fall = np.argmax(-np.diff(values, axis=0), axis=0) + 1
+    assert np.mean(steepest_fall == 40) > 0.9  # what the old tracker would have taken
+    times = track_both(values, max_width=32)
+    assert times.valid.all()
+    assert rms(times.enter.ravel() - enter) <= 0.1 and rms(times.leave.ravel() - leave) <= 0.1
+    np.testing.assert_allclose(times.rival, 0.3 * LIT, atol=6)
+
+
+def test_a_second_comparable_sharp_dip_is_ambiguous():
+    """The stick seen directly or an interreflection: a second sharp dip 90 % as deep
+    makes the pixel ambiguous (no times); at 30 % it is only a rival."""
+    rng = np.random.default_rng(13)
+    n, pixels = 150, 100
+    comparable = np.stack([dips_profile(n, [(30.3, 36.8, SHADOW), (100.5, 104.1, LIT - 0.9 * (LIT - SHADOW))])
+                           for _ in range(pixels)], axis=1)
+    times = track_both(comparable + rng.normal(0, 1.0, (n, pixels)))
+    assert times.ambiguous.all() and not times.valid.any()
+    assert np.isnan(times.enter).all() and np.isnan(times.leave).all()
+    weak = np.stack([dips_profile(n, [(30.3, 36.8, SHADOW), (100.5, 104.1, LIT - 0.3 * (LIT - SHADOW))])
+                     for _ in range(pixels)], axis=1)
+    times = track_both(weak + rng.normal(0, 1.0, (n, pixels)))
+    assert times.valid.all() and not times.ambiguous.any()
+    assert rms(times.enter - 30.3) <= 0.05 and rms(times.leave - 36.8) <= 0.05
+
+
+def test_a_dip_whose_fall_comes_late_after_a_rise():
+    """Dawn (dark, then a rise at frame 10 steeper than any edge after), the
+    shadow late in the capture, dusk (a fall that never comes back): enter and
+    leave bound the shadow, leave after enter."""
+    rng = np.random.default_rng(14)
+    n, pixels = 180, 150
+    t = np.arange(n)[:, None]
+    enter = rng.uniform(120, 130, pixels)
+    leave = enter + rng.uniform(4, 9, pixels)
+    light = logistic((t - 10) / 0.3) * logistic((165 - t) / 3.0)  # dawn and dusk
+    inside = logistic((t - enter) / 0.6) * logistic((leave - t) / 0.6)
+    values = 20 + (LIT - 20) * light * (1 - 0.8 * inside) + rng.normal(0, 1.0, (n, pixels))
+    times = track_both(values)
+    assert times.valid.all() and np.all(times.leave > times.enter)
+    assert rms(times.enter.ravel() - enter) <= 0.1 and rms(times.leave.ravel() - leave) <= 0.1
+
+
+def test_saturated_lit_level_flags_the_pixel():
+    rng = np.random.default_rng(15)
+    n, pixels = 60, 50
+    base = np.stack([dips_profile(n, [(20.4, 27.9, SHADOW)]) for _ in range(pixels)], axis=1)
+    times = track_both(base + rng.normal(0, 1.0, (n, pixels)))
+    assert not times.clipped.any()
+    times = track_both(base + 80 + rng.normal(0, 1.0, (n, pixels)))  # lit at 280 DN: clipped to 255
+    assert times.clipped.all()

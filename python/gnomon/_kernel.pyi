@@ -21,11 +21,15 @@ def simd_paths() -> list[Literal["avx2", "sse2", "portable"]]:
     """Every instruction set this CPU can run the hot loops on, best first."""
 
 class TemporalTracker:
-    """Streaming per-pixel shadow tracker; memory independent of the number of frames.
+    """Streaming per-pixel shadow tracker: one shadow event (the deepest dip) per
+    pixel; memory independent of the number of frames (see :mod:`gnomon.tracking`).
 
     ``dtype``: the frames' dtype, ``"uint8"`` or ``"uint16"``. ``window``: half-width
-    ``m`` (1..64) of the sample windows kept around each pixel's steepest fall and
-    rise. ``block``: frames folded per pass (1..128), a speed knob only.
+    ``m`` (1..min(64, max_width)) of the sample windows kept around the enter and
+    leave crossings. ``max_width``: ``W`` (2..128 frames), the widest dip always
+    found and the separation of distinct dips; the ring holds ``3W + 2m`` frames.
+    ``ambiguity``: in (0, 1]; a pixel whose second dip is at least this fraction of
+    the deepest is ambiguous.
     """
 
     def __init__(
@@ -34,7 +38,8 @@ class TemporalTracker:
         width: int,
         dtype: Literal["uint8", "uint16"] = "uint8",
         window: int = 4,
-        block: int = 16,
+        max_width: int = 32,
+        ambiguity: float = 0.6,
     ) -> None: ...
     def update(self, frame: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
         """Add the next frame: a (height, width) array of the tracker's dtype."""
@@ -45,10 +50,13 @@ class TemporalTracker:
 
         ``min_contrast`` in DN. ``lut``: float32 decoding table DN → linear
         irradiance (256 or 65536 finite, non-decreasing entries), identity if None.
-        Keys: ``imax``, ``imin``, ``contrast`` (DN), ``threshold`` (linear),
-        ``enter``, ``leave`` (frames, NaN = none/invalid), ``enter_slope``,
-        ``leave_slope`` (linear units per frame): float32 (H, W); ``valid``:
-        bool (H, W), ``contrast >= min_contrast``.
+        Keys: ``imax``, ``imin``, ``contrast`` (DN: the deepest dip's lit level,
+        darkest sample and depth, 0 = no dip), ``threshold`` (linear), ``enter``,
+        ``leave`` (frames, NaN = none/invalid), ``enter_slope``, ``leave_slope``
+        (linear units per frame), ``rival`` (DN, the deepest other dip): float32
+        (H, W); ``valid`` (a dip, ``contrast >= min_contrast``, not ambiguous),
+        ``ambiguous`` (``rival >= ambiguity * contrast``), ``clipped`` (the dip's
+        levels or an interpolated sample at 0 or the dtype's maximum): bool (H, W).
         """
     @property
     def frames_seen(self) -> int: ...
@@ -59,7 +67,11 @@ class TemporalTracker:
     @property
     def window(self) -> int: ...
     @property
-    def block(self) -> int: ...
+    def max_width(self) -> int: ...
+    @property
+    def ambiguity(self) -> float: ...
+    @property
+    def simd_path(self) -> Literal["avx2", "sse2", "portable"]: ...
 
 def triangulate(
     rays: npt.NDArray[np.float64],

@@ -4,8 +4,10 @@ numpy implementation of the same algorithm (:class:`gnomon.tracking.NumpyTracker
 Frames are synthesised in advance: ``DISTINCT`` grey frames (uint8) of a soft
 shadow band sweeping across the image with Gaussian noise, fed in a cycle, so
 decoding never enters the timing. Both trackers are first warmed up with one
-cycle (every pixel's steepest step moves during the first pass), then timed
-over the requested number of frames; ``finish`` is timed once, separately.
+cycle, then timed over the requested number of frames; ``finish`` is timed
+once, separately. The cycle shows every pixel a new dip every ``DISTINCT``
+frames, so new deepest dips (and their window captures) keep occurring: a
+harder load than a real sweep, where a pixel is shadowed once.
 
 Peak memory (peak RSS: ``VmHWM``, else ``ru_maxrss``) is measured in fresh
 subprocesses, before the parent allocates its frames,
@@ -88,7 +90,7 @@ class BenchResult:
     height: int
     dtype: str
     window: int
-    block: int
+    max_width: int
     cpus: int
     machine: str
     simd_path: str
@@ -116,10 +118,10 @@ class BenchResult:
         return d
 
 
-def peak_memory_mib(frames: int, height: int, width: int, window: int, block: int) -> float:
+def peak_memory_mib(frames: int, height: int, width: int, window: int, max_width: int) -> float:
     """Peak RSS (MiB) of a fresh process that runs the kernel over ``frames`` frames."""
     cmd = [sys.executable, "-m", "gnomon.bench", "--child", str(frames),
-           "--height", str(height), "--width", str(width), "--window", str(window), "--block", str(block)]
+           "--height", str(height), "--width", str(width), "--window", str(window), "--max-width", str(max_width)]
     out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
     return float(json.loads(out.strip().splitlines()[-1])["maxrss_mib"])
 
@@ -130,16 +132,16 @@ def run_bench(
     width: int = 1920,
     height: int = 1080,
     window: int = 4,
-    block: int = 16,
+    max_width: int = 32,
     memory_frames: tuple[int, ...] = (100, 1000),
 ) -> BenchResult:
     """Measure the kernel over ``frames`` frames and the numpy tracker over
     ``numpy_frames`` frames of the same synthetic sequence, and the peak memory
     of a kernel run over each of ``memory_frames`` (empty: skip)."""
-    memory = {n: peak_memory_mib(n, height, width, window, block) for n in memory_frames}
+    memory = {n: peak_memory_mib(n, height, width, window, max_width) for n in memory_frames}
     distinct = synthetic_frames(height, width)
 
-    kernel = _kernel.TemporalTracker(height, width, "uint8", window=window, block=block)
+    kernel = _kernel.TemporalTracker(height, width, "uint8", window=window, max_width=max_width)
     _feed(kernel, distinct, len(distinct))
     kernel_t = _feed(kernel, distinct, frames, start=len(distinct))
     t0 = time.perf_counter()
@@ -147,7 +149,7 @@ def run_bench(
     kernel_finish = time.perf_counter() - t0
     del kernel
 
-    reference = NumpyTracker(height, width, "uint8", window=window)
+    reference = NumpyTracker(height, width, "uint8", window=window, max_width=max_width)
     _feed(reference, distinct, len(distinct))
     numpy_t = _feed(reference, distinct, numpy_frames, start=len(distinct))
     t0 = time.perf_counter()
@@ -159,7 +161,7 @@ def run_bench(
         height=height,
         dtype="uint8",
         window=window,
-        block=block,
+        max_width=max_width,
         cpus=os.cpu_count() or 1,
         machine=f"{platform.machine()} {platform.processor() or platform.system()}".strip(),
         simd_path=_kernel.simd_path(),
@@ -183,7 +185,7 @@ def format_table(r: BenchResult) -> str:
     """A compact plain-text table of the figures."""
     lines = [
         (
-            f"gnomon bench: {r.width}x{r.height} {r.dtype}, window {r.window}, block {r.block}, {r.cpus} CPUs, "
+            f"gnomon bench: {r.width}x{r.height} {r.dtype}, window {r.window}, max width {r.max_width}, {r.cpus} CPUs, "
             f"kernel SIMD path {r.simd_path} (GNOMON_SIMD forces a lower one), load average {r.load_average:.1f}"
         ),
         f"  {'tracker':<8} {'frames':>7} {'seconds':>9} {'frames/s':>10} {'CPU ms/frame':>13} {'finish':>10}",
@@ -207,9 +209,9 @@ def format_table(r: BenchResult) -> str:
     return "\n".join(lines)
 
 
-def _child(frames: int, height: int, width: int, window: int, block: int) -> dict:
+def _child(frames: int, height: int, width: int, window: int, max_width: int) -> dict:
     distinct = synthetic_frames(height, width)
-    tracker = _kernel.TemporalTracker(height, width, "uint8", window=window, block=block)
+    tracker = _kernel.TemporalTracker(height, width, "uint8", window=window, max_width=max_width)
     _feed(tracker, distinct, frames)
     tracker.finish(MIN_CONTRAST)
     return {"frames": frames, "maxrss_mib": _peak_rss_kib() / 1024}
@@ -239,9 +241,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--height", type=int, default=1080)
     p.add_argument("--width", type=int, default=1920)
     p.add_argument("--window", type=int, default=4)
-    p.add_argument("--block", type=int, default=16)
+    p.add_argument("--max-width", type=int, default=32)
     args = p.parse_args(argv)
-    print(json.dumps(_child(args.child, args.height, args.width, args.window, args.block)))
+    print(json.dumps(_child(args.child, args.height, args.width, args.window, args.max_width)))
     return 0
 
 

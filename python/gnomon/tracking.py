@@ -1,28 +1,43 @@
-"""Per-pixel shadow times from a stream of grey frames (METHOD.md §3).
+"""Per-pixel shadow times from a stream of grey frames: one shadow event (dip) per pixel.
 
-For every pixel, over the whole sequence: the brightest and darkest value
-(``imax``, ``imin``, in DN of the input), the contrast ``imax − imin`` (DN),
-the threshold at mid-level in *linear irradiance*
-``(L(imax) + L(imin)) / 2`` where ``L`` decodes DN to irradiance (see
-:func:`decoding_lut`), and two shadow times in frames (frame ``i`` is time
-``i``) at sub-frame precision:
+For every pixel the tracker finds the deepest *dip* of the sequence: dark
+samples with brighter ones on both sides within the dip width ``W``
+(``max_width``, frames). Frames are grouped in blocks of ``W``; for frame
+``k`` of block ``b`` the left context is the brightest sample from the start of
+block ``b − 1`` to ``k − 1``, the right context the brightest from ``k + 1`` to
+the end of block ``b + 1`` (clamped to the sequence; empty = 0), and the depth
+is ``max(0, min(left, right) − I[k])`` (DN). A slow wide darkening (a cloud,
+dusk) or a step that never returns (night, dawn) has no depth beyond the noise.
 
-* ``enter``: the intensity falls through the threshold,
-* ``leave``: it rises back through it.
+Depths are folded in time order into events: a frame within ``W`` frames
+after the best event's frame belongs to it; a farther one counts for another
+event, so ``rival`` is the depth of the deepest *other* dip. A pixel is
+``ambiguous`` (no times) when ``rival ≥ ambiguity · contrast``.
 
-How: per pixel, the frame ``j`` of the steepest fall (largest
-``I[j-1] − I[j] > 0``, first occurrence) and of the steepest rise are kept with
-the ``2m`` raw samples of frames ``j−m … j+m−1`` around each (clamped to the
-sequence); at the end the threshold crossing nearest the window centre is
-interpolated linearly between the two decoded samples around it:
-``t = k + (v_k − thr) / (v_k − v_{k+1})``. The slope ``|v_k − v_{k+1}|``
-(linear units per frame) at the crossing is kept for the noise model
-``σ_t = σ_I / slope``.
+Reported per pixel: the dip's lit level ``imax = min(left, right)`` and
+darkest sample ``imin`` (DN of the input), ``contrast = imax − imin``, the
+threshold at mid-level in *linear irradiance* ``(L(imax) + L(imin)) / 2``
+where ``L`` decodes DN to irradiance (see :func:`decoding_lut`), and two
+shadow times in frames (frame ``i`` is time ``i``) at sub-frame precision:
+
+* ``enter``: the intensity falls through the threshold into the dip,
+* ``leave``: it rises back through it, after ``enter``.
+
+How: the enter and leave crossings are located in DN (the last fall through
+``(imax + imin)/2`` before the dip's darkest frame, the first rise after it)
+and the ``2m`` raw samples around each are kept (frames ``j−m … j+m−1``,
+clamped to the sequence); at the end the crossing of the linear threshold
+nearest each window's centre is interpolated linearly between the two decoded
+samples around it: ``t = k + (v_k − thr) / (v_k − v_{k+1})``. The slope
+``|v_k − v_{k+1}|`` (linear units per frame) at the crossing is kept for the
+noise model ``σ_t = σ_I / slope``. ``clipped`` flags a dip whose levels or
+interpolated samples are 0 or the type's maximum (times may be biased).
 
 The work is done by the Rust kernel (:class:`gnomon._kernel.TemporalTracker`,
-streaming, memory independent of the number of frames). :class:`NumpyTracker`
-is the same algorithm in numpy, frame by frame: the tests cross-check the two
-and ``gnomon bench`` uses it as the baseline.
+streaming, explicit SIMD, memory independent of the number of frames).
+:class:`NumpyTracker` is an independent numpy implementation of the same
+definitions: the tests cross-check the two and ``gnomon bench`` uses it as the
+baseline.
 """
 
 from __future__ import annotations
@@ -42,12 +57,17 @@ SUPPORTED_DTYPES = (np.dtype(np.uint8), np.dtype(np.uint16))
 class ShadowTimes:
     """The tracker's per-pixel results; every array is (H, W).
 
-    ``imax``, ``imin``, ``contrast``: float32, DN of the input.
+    ``imax``, ``imin``, ``contrast``: float32, DN of the input: the deepest
+    dip's lit level, darkest sample and depth (0 where there is no dip).
     ``threshold``: float32, linear irradiance units of the decoding LUT.
     ``enter``, ``leave``: float32 shadow times in frames, NaN = no crossing or
     invalid pixel. ``enter_slope``, ``leave_slope``: float32
     ``|ΔL|`` per frame at the crossing (linear units), NaN likewise.
-    ``valid``: bool, ``contrast ≥ min_contrast``.
+    ``rival``: float32 DN, depth of the deepest other dip (0 = none).
+    ``valid``: bool, a dip with ``contrast ≥ min_contrast`` that is not ambiguous.
+    ``ambiguous``: bool, ``contrast ≥ min_contrast`` but ``rival ≥ ambiguity · contrast``.
+    ``clipped``: bool, the dip's levels or a sample interpolated at a crossing
+    is 0 or the dtype's maximum.
     """
 
     imax: np.ndarray
@@ -58,7 +78,10 @@ class ShadowTimes:
     leave: np.ndarray
     enter_slope: np.ndarray
     leave_slope: np.ndarray
+    rival: np.ndarray
     valid: np.ndarray
+    ambiguous: np.ndarray
+    clipped: np.ndarray
 
     @classmethod
     def from_kernel(cls, result: Mapping[str, np.ndarray]) -> "ShadowTimes":
@@ -105,13 +128,17 @@ def track(
     min_contrast: float,
     gamma: float | str,
     window: int = 4,
+    max_width: int = 32,
+    ambiguity: float = 0.6,
     progress: Callable[[int], None] | None = None,
 ) -> ShadowTimes:
     """Track a sequence of grey frames with the kernel and return the shadow times.
 
     ``frames``: 2-D uint8 or uint16 arrays, all of the first one's shape and
     dtype. ``min_contrast`` in DN; ``gamma`` as in :func:`decoding_lut`;
-    ``window`` the half-width ``m`` of the kept windows. ``progress(i)`` is
+    ``window`` the half-width ``m`` of the kept windows; ``max_width`` (frames)
+    the widest dip always found; ``ambiguity`` the rival/contrast ratio from
+    which a pixel is ambiguous. ``progress(i)`` is
     called after frame ``i`` (0-based) has been fed.
 
     Raises :class:`gnomon.errors.FrameError` for a frame of another shape or
@@ -129,7 +156,8 @@ def track(
                 )
             dtype = frame.dtype
             tracker = _kernel.TemporalTracker(
-                frame.shape[0], frame.shape[1], dtype=dtype.name, window=window
+                frame.shape[0], frame.shape[1], dtype=dtype.name, window=window,
+                max_width=max_width, ambiguity=ambiguity,
             )
         try:
             tracker.update(frame)
@@ -145,63 +173,55 @@ def track(
 
 @dataclass
 class _State:
-    """NumpyTracker's folded state: frames ``0 … next_j − 1`` of the steepest
-    steps (statistics ``imax``/``imin`` cover every frame seen)."""
+    """NumpyTracker's per-pixel state for the frames of the blocks evaluated so far."""
 
-    best_fall: np.ndarray  # (H*W,) wide int, max(0, steepest fall)
-    best_rise: np.ndarray
-    fall_at: np.ndarray  # (H*W,) int64 frame of the steepest fall, -1 = none
-    rise_at: np.ndarray
-    fall_window: np.ndarray  # (H*W, 2m) raw samples around fall_at
-    rise_window: np.ndarray
-    next_j: int
-    prev: np.ndarray | None  # frame next_j − 1, widened (cache)
+    d1: np.ndarray  # (N,) int32, deepest depth (0 = no dip)
+    d2: np.ndarray  # (N,) int32, deepest other event's depth
+    k1: np.ndarray  # (N,) int64, frame of d1, -1 = none
+    hi: np.ndarray  # (N,) int32, lit level of the best dip
+    lo: np.ndarray  # (N,) int32, its darkest sample
+    enter_at: np.ndarray  # (N,) int64, window centres, -1 = none
+    leave_at: np.ndarray
+    enter_window: np.ndarray  # (N, 2m) raw samples
+    leave_window: np.ndarray
+    evaluated: int  # frames evaluated (a multiple of W)
 
     def copy(self) -> "_State":
-        return _State(
-            self.best_fall.copy(),
-            self.best_rise.copy(),
-            self.fall_at.copy(),
-            self.rise_at.copy(),
-            self.fall_window.copy(),
-            self.rise_window.copy(),
-            self.next_j,
-            self.prev,
-        )
+        return _State(*(getattr(self, f.name).copy() if f.name != "evaluated" else self.evaluated
+                        for f in fields(self)))
 
 
 class NumpyTracker:
-    """The kernel tracker's algorithm, vectorised with numpy frame by frame.
+    """The kernel tracker's definitions, implemented independently with numpy.
 
     Same constructor, ``update``, ``frames_seen`` and ``finish`` as
-    :class:`gnomon._kernel.TemporalTracker` and the same results. The steepest
-    steps are updated ``m`` frames late, from a ring of the last ``2m + 1``
-    frames, so each new best's window (frames ``j−m … j+m−1``) is complete
-    when it is captured; ``finish`` processes the last ``m`` frames on a copy
-    of the state, clamping the windows to the last frame.
+    :class:`gnomon._kernel.TemporalTracker` and the same results. Frames are kept
+    in a ring of the last ``3W + 2m``; block ``b`` (frames ``bW … bW+W−1``) is
+    evaluated as a whole once frame ``(b+2)W + m − 2`` has arrived: its right
+    contexts by a backward running maximum, its left contexts, depths and events
+    frame by frame, and the windows of the pixels whose best dip moved by
+    boolean searches over the stacked frames. ``finish`` evaluates the pending
+    blocks on a copy of the state, clamped to the last frame.
     """
 
-    def __init__(self, height: int, width: int, dtype: str = "uint8", window: int = 4):
+    def __init__(self, height: int, width: int, dtype: str = "uint8", window: int = 4,
+                 max_width: int = 32, ambiguity: float = 0.6):
         self._dtype = _check_dtype(dtype)
-        if window < 1:
-            raise ValueError(f"window: must be ≥ 1, got {window}")
+        if not 2 <= max_width <= 128:
+            raise ValueError(f"max_width: must be in 2..=128, got {max_width}")
+        if not 1 <= window <= min(64, max_width):
+            raise ValueError(f"window: must be in 1..={min(64, max_width)}, got {window}")
+        if not 0 < ambiguity <= 1:
+            raise ValueError(f"ambiguity: must be in (0, 1], got {ambiguity}")
         self._shape = (int(height), int(width))
-        self._m = int(window)
-        self._wide = np.int16 if self._dtype == np.uint8 else np.int32
+        self._m, self._w, self._ambiguity = int(window), int(max_width), float(ambiguity)
         n = self._shape[0] * self._shape[1]
-        self._ring = np.zeros((2 * self._m + 1, n), self._dtype)
-        self._imax = np.zeros(n, self._dtype)
-        self._imin = np.full(n, np.iinfo(self._dtype).max, self._dtype)
-        self._state = _State(
-            np.zeros(n, self._wide),
-            np.zeros(n, self._wide),
-            np.full(n, -1, np.int64),
-            np.full(n, -1, np.int64),
-            np.zeros((n, 2 * self._m), self._dtype),
-            np.zeros((n, 2 * self._m), self._dtype),
-            0,
-            None,
-        )
+        self._ring = np.zeros((3 * self._w + 2 * self._m, n), self._dtype)
+        i32 = lambda v: np.full(n, v, np.int32)  # noqa: E731
+        i64 = lambda: np.full(n, -1, np.int64)  # noqa: E731
+        self._state = _State(i32(0), i32(0), i64(), i32(0), i32(0), i64(), i64(),
+                             np.zeros((n, 2 * self._m), self._dtype),
+                             np.zeros((n, 2 * self._m), self._dtype), 0)
         self.frames_seen = 0
 
     def update(self, frame: np.ndarray) -> None:
@@ -212,37 +232,70 @@ class NumpyTracker:
                 f"frame: expected a {self._dtype} array of shape {self._shape}, "
                 f"got a {frame.dtype} array of shape {frame.shape}"
             )
-        flat = frame.reshape(-1)
-        self._ring[self.frames_seen % len(self._ring)] = flat
-        np.maximum(self._imax, flat, out=self._imax)
-        np.minimum(self._imin, flat, out=self._imin)
+        self._ring[self.frames_seen % len(self._ring)] = frame.reshape(-1)
         self.frames_seen += 1
-        # Frame j = F − 1 − m: its window reaches frame F − 2 ≤ last.
-        while self._state.next_j <= self.frames_seen - 1 - self._m:
-            self._step(self._state, self.frames_seen - 1)
+        s = self._state
+        if self.frames_seen == s.evaluated + 2 * self._w + self._m - 1:
+            self._evaluate(s, self.frames_seen - 1)
 
-    def _step(self, s: _State, last: int) -> None:
-        """Fold the step into frame ``s.next_j`` (windows clamped to ``last``)."""
-        j = s.next_j
-        ring = self._ring
-        cur = ring[j % len(ring)].astype(self._wide)
-        if j > 0:
-            prev = s.prev if s.prev is not None else ring[(j - 1) % len(ring)].astype(self._wide)
-            fall = prev - cur
-            self._fold(j, last, s.best_fall, s.fall_at, s.fall_window, fall)
-            rise = np.negative(fall, out=fall)
-            self._fold(j, last, s.best_rise, s.rise_at, s.rise_window, rise)
-        s.prev = cur
-        s.next_j = j + 1
+    def _frame(self, f: int) -> np.ndarray:
+        return self._ring[f % len(self._ring)]
 
-    def _fold(self, j, last, best, at, window, step) -> None:
-        """Where ``step`` beats ``best`` strictly: new best at frame ``j``, window captured."""
-        steeper = np.flatnonzero(step > best)
-        if steeper.size:
-            best[steeper] = step[steeper]
-            at[steeper] = j
-            frames = np.clip(np.arange(j - self._m, j + self._m), 0, last) % len(self._ring)
-            window[steeper] = self._ring[frames[:, None], steeper[None, :]].T
+    def _evaluate(self, s: _State, last: int) -> None:
+        """Evaluate the block of frames ``s.evaluated …`` (contexts clamped to ``last``)."""
+        w, m = self._w, self._m
+        start = s.evaluated
+        end = min(start + w, last + 1)
+        outer = min(start + 2 * w, last + 1)  # end of the right contexts (block b + 1)
+        n = s.d1.shape[0]
+        # Right contexts, backward: max of frames k+1 … outer−1 (0 when empty).
+        acc = np.zeros(n, self._dtype)
+        for f in range(outer - 1, end - 1, -1):
+            np.maximum(acc, self._frame(f), out=acc)
+        right = np.empty((end - start, n), self._dtype)
+        for k in range(end - 1, start - 1, -1):
+            right[k - start] = acc
+            np.maximum(acc, self._frame(k), out=acc)
+        # Left contexts, forward from the start of block b − 1.
+        left = np.zeros(n, self._dtype)
+        for f in range(max(0, start - w), start):
+            np.maximum(left, self._frame(f), out=left)
+        for k in range(start, end):
+            cur = self._frame(k)
+            lit = np.minimum(left, right[k - start]).astype(np.int32)
+            depth = np.maximum(lit - cur, 0)
+            same_event = (s.k1 >= 0) & (k - s.k1 <= w)
+            better = depth > s.d1
+            np.copyto(s.d2, np.maximum(s.d2, np.minimum(depth, s.d1)), where=~same_event)
+            np.maximum(s.d1, depth, out=s.d1)
+            s.k1[better] = k
+            np.copyto(s.hi, lit, where=better)
+            np.copyto(s.lo, cur, where=better, casting="unsafe")
+            np.maximum(left, cur, out=left)
+        s.evaluated = start + w
+        moved = np.flatnonzero(s.k1 >= start)
+        if moved.size:
+            self._capture(s, moved, start, outer, last)
+
+    def _capture(self, s: _State, px: np.ndarray, start: int, outer: int, last: int) -> None:
+        """Enter/leave window centres and windows of the pixels ``px`` whose best dip
+        (at ``s.k1``) lies in the block from ``start``."""
+        w, m = self._w, self._m
+        f0 = max(0, start - w - m)
+        f1 = min(last + 1, outer + m - 1)
+        frames = np.arange(f0, f1)[:, None]
+        stack = np.stack([self._frame(f)[px] for f in range(f0, f1)])  # (F, P)
+        k1 = s.k1[px][None, :]
+        bright = 2 * stack.astype(np.int64) >= (s.hi[px] + s.lo[px])[None, :]
+        before = bright & (frames >= max(0, start - w)) & (frames < k1)
+        after = bright & (frames > k1) & (frames < outer)
+        enter = f0 + (len(frames) - 1 - np.argmax(before[::-1], axis=0)) + 1
+        leave = f0 + np.argmax(after, axis=0)
+        s.enter_at[px], s.leave_at[px] = enter, leave
+        cols = np.arange(px.size)[None, :]
+        offsets = np.arange(-m, m)[:, None]
+        s.enter_window[px] = stack[np.clip(enter[None, :] + offsets, 0, last) - f0, cols].T
+        s.leave_window[px] = stack[np.clip(leave[None, :] + offsets, 0, last) - f0, cols].T
 
     def finish(self, min_contrast: float, lut: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Per-pixel results for the frames seen so far, as the kernel's ``finish``."""
@@ -261,37 +314,49 @@ class NumpyTracker:
             raise ValueError("invalid decoding LUT: must be finite and non-decreasing")
         s = self._state.copy()
         last = self.frames_seen - 1
-        while s.next_j <= last:
-            self._step(s, last)
+        while s.evaluated <= last:
+            self._evaluate(s, last)
 
-        imax, imin = self._imax, self._imin
-        contrast = imax.astype(np.float32) - imin.astype(np.float32)
-        threshold = (lut[imax] + lut[imin]) * np.float32(0.5)
-        valid = contrast >= np.float32(min_contrast)
-        enter, enter_slope = self._solve(s.fall_at, s.fall_window, threshold, valid, lut, True)
-        leave, leave_slope = self._solve(s.rise_at, s.rise_window, threshold, valid, lut, False)
+        has_dip = s.enter_at >= 0
+        hi = np.where(has_dip, s.hi, 0)
+        lo = np.where(has_dip, s.lo, 0)
+        contrast = (hi - lo).astype(np.float32)
+        threshold = (lut[hi] + lut[lo]) * np.float32(0.5)
+        rival = s.d2.astype(np.float32)
+        deep = has_dip & (contrast >= np.float32(min_contrast))
+        ambiguous = deep & (rival >= np.float32(self._ambiguity) * contrast)
+        valid = deep & ~ambiguous
+        enter, enter_slope, enter_clip = self._solve(s.enter_at, s.enter_window, threshold, valid, lut, True)
+        leave, leave_slope, leave_clip = self._solve(s.leave_at, s.leave_window, threshold, valid, lut, False)
+        clipped = has_dip & ((hi == top) | (lo == 0)) | enter_clip | leave_clip
         image = lambda a: a.reshape(self._shape)  # noqa: E731
         return {
-            "imax": image(imax.astype(np.float32)),
-            "imin": image(imin.astype(np.float32)),
+            "imax": image(hi.astype(np.float32)),
+            "imin": image(lo.astype(np.float32)),
             "contrast": image(contrast),
             "threshold": image(threshold),
             "enter": image(enter),
             "leave": image(leave),
             "enter_slope": image(enter_slope),
             "leave_slope": image(leave_slope),
+            "rival": image(rival),
             "valid": image(valid),
+            "ambiguous": image(ambiguous),
+            "clipped": image(clipped),
         }
 
     def _solve(self, at, window, threshold, valid, lut, falling: bool):
-        """Crossing nearest the window centre: time (frames) and slope, NaN if none."""
+        """Crossing nearest the window centre: time (frames), slope (NaN if none) and
+        whether a sample interpolated is clipped."""
         n = at.shape[0]
         time = np.full(n, np.nan, np.float32)
         slope = np.full(n, np.nan, np.float32)
-        idx = np.flatnonzero(valid & (at >= 0))
+        clipped = np.zeros(n, bool)
+        idx = np.flatnonzero(valid)
         if idx.size == 0:
-            return time, slope
-        v = lut[window[idx]]  # (n, 2m) float32
+            return time, slope, clipped
+        raw = window[idx]
+        v = lut[raw]  # (n, 2m) float32
         thr = threshold[idx][:, None]
         a, b = v[:, :-1], v[:, 1:]
         cross = (a >= thr) & (thr > b) if falling else (a < thr) & (thr <= b)
@@ -308,4 +373,7 @@ class NumpyTracker:
         frame = at[idx][found] - self._m + k
         time[idx[found]] = (frame.astype(np.float64) + fraction.astype(np.float64)).astype(np.float32)
         slope[idx[found]] = np.abs(a_k - b_k)
-        return time, slope
+        top = np.iinfo(self._dtype).max
+        pair = np.stack([raw[rows, k], raw[rows, k + 1]])
+        clipped[idx[found]] = ((pair == 0) | (pair == top)).any(axis=0)
+        return time, slope, clipped

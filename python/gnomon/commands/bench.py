@@ -29,14 +29,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--width", type=int, default=1920, help="frame width, pixels (default 1920)")
     p.add_argument("--height", type=int, default=1080, help="frame height, pixels (default 1080)")
     p.add_argument("--window", type=int, default=4, help="tracker window half-width m (default 4)")
-    p.add_argument("--block", type=int, default=16, help="kernel temporal block K (default 16)")
+    p.add_argument("--max-width", type=int, default=32, help="tracker dip width W, frames (default 32)")
     p.add_argument("--no-memory", action="store_true", help="skip the peak-memory subprocesses")
     p.add_argument("--json", metavar="PATH", help="also write the figures as JSON to PATH")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    for name in ("frames", "numpy_frames", "width", "height", "window", "block"):
+    for name in ("frames", "numpy_frames", "width", "height", "window", "max_width"):
         if getattr(args, name) < 1:
             raise GnomonError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(args, name)}")
     memory_frames = () if args.no_memory else tuple(sorted({100, args.frames}))
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
             width=args.width,
             height=args.height,
             window=args.window,
-            block=args.block,
+            max_width=args.max_width,
             memory_frames=memory_frames,
         )
     except ValueError as exc:  # the kernel's parameter checks

@@ -1,5 +1,5 @@
 //! Tracker throughput on synthetic u8 frames (1080p by default):
-//! `cargo run -p gnomon-core --release --example throughput [frames] [block] [window] [height] [width]`.
+//! `cargo run -p gnomon-core --release --example throughput [frames] [max_width] [window] [height] [width]`.
 //!
 //! Prints wall-clock frames/s and the process CPU time per frame (all
 //! threads), which is less sensitive to other load on the machine.
@@ -13,7 +13,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut next = |default: usize| -> Result<usize, std::num::ParseIntError> {
         args.next().map_or(Ok(default), |s| s.parse())
     };
-    let (frames, block, window) = (next(1000)?, next(16)?, next(4)?);
+    let (frames, max_width, window) = (next(1000)?, next(32)?, next(4)?);
     let (h, w) = (next(1080)?, next(1920)?);
     // 32 distinct frames: a soft shadow edge sweeping left to right, plus a
     // cheap deterministic noise.
@@ -34,7 +34,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .collect()
         })
         .collect();
-    let mut tracker = TemporalTracker::<u8>::new(h, w, TrackerParams { window, block })?;
+    let mut tracker = TemporalTracker::<u8>::new(
+        h,
+        w,
+        TrackerParams {
+            window,
+            max_width,
+            ..TrackerParams::default()
+        },
+    )?;
     let cpu0 = cpu_seconds();
     let start = Instant::now();
     for i in 0..frames {

@@ -1,15 +1,11 @@
 //! Grey-level sample types the tracker accepts: `u8` and `u16`.
 //!
-//! The tracker's inner loop runs entirely in the sample's own lane width, so
-//! it vectorises at the widest lane count (64 `u8` lanes per AVX-512
-//! register, 32 with AVX2; half that for `u16`):
-//! * a fall `I_{j−1} − I_j` and a rise `I_j − I_{j−1}` are computed with
-//!   saturating subtraction: exact when positive, 0 otherwise, and only
-//!   positive steps can become the steepest (the running best starts at 0 and
-//!   must be beaten strictly);
-//! * the block-local frame offset of the steepest step is stored in the same
-//!   type (offsets stay below [`Sample::NO_OFFSET`] = `MAX`; the tracker
-//!   bounds the block length accordingly).
+//! The tracker's hot loop runs entirely in the sample's own lane width (32
+//! `u8` lanes per AVX2 register, 16 with SSE2; half that for `u16`): dip
+//! depths `min(L, R) − I` with saturating subtraction (0 when the sample is
+//! not below both contexts), running maxima, and the block-local frame offset
+//! of a new deepest dip, stored in the same type (offsets stay below
+//! [`Sample::NO_OFFSET`] = `MAX`; the tracker bounds the block accordingly).
 
 use std::fmt::Debug;
 
@@ -34,6 +30,8 @@ pub trait Sample: Copy + Ord + Debug + Default + Send + Sync + 'static + sealed:
     const DTYPE: &'static str;
     /// `self − other`, or 0 if negative.
     fn saturating_sub(self, other: Self) -> Self;
+    /// `self + other`, or `MAX` if larger.
+    fn saturating_add(self, other: Self) -> Self;
     /// A block-local frame offset `k < NO_OFFSET` (checked by the caller).
     fn from_offset(k: usize) -> Self;
     /// The value as an offset or a LUT index.
@@ -66,6 +64,10 @@ macro_rules! impl_sample {
             #[inline(always)]
             fn saturating_sub(self, other: Self) -> Self {
                 <$t>::saturating_sub(self, other)
+            }
+            #[inline(always)]
+            fn saturating_add(self, other: Self) -> Self {
+                <$t>::saturating_add(self, other)
             }
             #[inline(always)]
             fn from_offset(k: usize) -> Self {

@@ -118,6 +118,8 @@ pub trait Vector<T: Sample>: Copy {
     fn min(self, o: Self) -> Self;
     /// `max(self − o, 0)` lane by lane.
     fn sub_sat(self, o: Self) -> Self;
+    /// `min(self + o, MAX)` lane by lane.
+    fn add_sat(self, o: Self) -> Self;
     /// Mask of `self > o` (unsigned).
     fn gt(self, o: Self) -> Self;
     /// `if mask { a } else { b }` lane by lane (mask lanes all-ones or zero).
@@ -173,6 +175,10 @@ impl<T: Sample, const N: usize> Vector<T> for Portable<T, N> {
     #[inline(always)]
     fn sub_sat(self, o: Self) -> Self {
         self.map2(o, |a, b| a.saturating_sub(b))
+    }
+    #[inline(always)]
+    fn add_sat(self, o: Self) -> Self {
+        self.map2(o, |a, b| a.saturating_add(b))
     }
     #[inline(always)]
     fn gt(self, o: Self) -> Self {
@@ -284,6 +290,10 @@ mod x86 {
         fn sub_sat(self, o: Self) -> Self {
             unsafe { Self(_mm_subs_epu8(self.0, o.0)) }
         }
+        #[inline(always)]
+        fn add_sat(self, o: Self) -> Self {
+            unsafe { Self(_mm_adds_epu8(self.0, o.0)) }
+        }
         common!(
             _mm_setzero_si128,
             _mm_cmpeq_epi8,
@@ -320,6 +330,10 @@ mod x86 {
         #[inline(always)]
         fn sub_sat(self, o: Self) -> Self {
             unsafe { Self(_mm_subs_epu16(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn add_sat(self, o: Self) -> Self {
+            unsafe { Self(_mm_adds_epu16(self.0, o.0)) }
         }
         common!(
             _mm_setzero_si128,
@@ -358,6 +372,10 @@ mod x86 {
         fn sub_sat(self, o: Self) -> Self {
             unsafe { Self(_mm256_subs_epu8(self.0, o.0)) }
         }
+        #[inline(always)]
+        fn add_sat(self, o: Self) -> Self {
+            unsafe { Self(_mm256_adds_epu8(self.0, o.0)) }
+        }
         common!(
             _mm256_setzero_si256,
             _mm256_cmpeq_epi8,
@@ -394,6 +412,10 @@ mod x86 {
         #[inline(always)]
         fn sub_sat(self, o: Self) -> Self {
             unsafe { Self(_mm256_subs_epu16(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn add_sat(self, o: Self) -> Self {
+            unsafe { Self(_mm256_adds_epu16(self.0, o.0)) }
         }
         common!(
             _mm256_setzero_si256,

@@ -1,41 +1,58 @@
-//! Streaming temporal shadow tracker (Bouguet & Perona 1998, §3 of METHOD.md).
+//! Streaming temporal shadow tracker: one shadow event (dip) per pixel.
 //!
-//! Per pixel, over a stream of grey frames `I_0 … I_{N-1}`, the tracker ends
-//! with `Imax`, `Imin`, the contrast `Imax − Imin` (DN) and two shadow times
-//! at sub-frame precision:
+//! Per pixel, over a stream of grey frames `I_0 … I_{N−1}`, the tracker finds
+//! the deepest *dip*: a run of dark samples with brighter samples on both
+//! sides within the dip width `W` ([`TrackerParams::max_width`]), and reports
+//! the dip's levels, its contrast and two shadow times at sub-frame precision:
 //!
-//! * **enter**: the intensity falls through the threshold,
-//! * **leave**: the intensity rises back through it,
+//! * **enter**: the intensity falls through the threshold into the dip,
+//! * **leave**: it rises back through it, after enter,
 //!
 //! with the threshold at mid-level in *linear irradiance*,
-//! `thr = (L(Imax) + L(Imin)) / 2`, `L` a decoding LUT (identity if absent).
+//! `thr = (L(hi) + L(lo)) / 2`, `L` a decoding LUT (identity if absent).
 //!
-//! # Algorithm
-//! The threshold is known only at the end of the stream, so the tracker keeps,
-//! per pixel, the frame `j` of the steepest fall (the largest
-//! `I_{j−1} − I_j > 0`, first occurrence) and of the steepest rise (largest
-//! `I_j − I_{j−1} > 0`, first occurrence), and the `2m` raw samples around each,
-//! frames `j−m … j+m−1` (`m` = [`TrackerParams::window`]), clamped to the first
-//! and last frame. [`TemporalTracker::finish`] decodes the two windows with `L`,
-//! looks for the threshold crossing nearest the window centre (see
-//! [`find_crossing`]) and interpolates linearly between the two samples around
-//! it. Memory is `O(pixels)`, independent of the number of frames.
+//! # The dip
+//! Frames are grouped in blocks of `W` (block `b` = frames `bW … bW+W−1`).
+//! For frame `k` of block `b`, the left context is the brightest sample from
+//! the start of block `b − 1` to `k − 1`, the right context the brightest
+//! from `k + 1` to the end of block `b + 1` (both clamped to the frames that
+//! exist; an empty context is 0), and the **depth** of frame `k` is
+//! `d_k = max(0, min(left, right) − I_k)` (DN): how far the sample lies below
+//! the lit level on both sides within `W` to `2W − 1` frames. A dip up to `W`
+//! frames wide always has a frame whose two contexts reach out of it; a slow
+//! wide darkening (a cloud, dusk) or a step that never comes back (night) has
+//! no depth beyond the noise.
+//!
+//! Depths are folded frame by frame into *events*: the best event
+//! (`d1`, at frame `k1`) and the best other event (`d2`): a frame within `W`
+//! frames after `k1` belongs to the best event (it may deepen it); a frame
+//! farther away counts for another one. So `d2` is the deepest dip apart from
+//! the best one. A pixel is **ambiguous** when `d2 ≥ ambiguity · d1`
+//! ([`TrackerParams::ambiguity`]): two comparable dips (the stick seen
+//! directly, an interreflection, a cloud), no times.
+//!
+//! The best dip's levels are `hi = min(left, right)` and `lo = I_{k1}`. Its
+//! enter is the last fall through the DN mid-level `(hi + lo)/2` before `k1`
+//! (within the left context), its leave the first rise through it after `k1`
+//! (within the right context): so enter < leave, and both bound the same dip.
+//! The `2m` raw samples around each (`m` = [`TrackerParams::window`]) are kept;
+//! [`TemporalTracker::finish`] decodes them with `L`, finds the crossing of
+//! the linear threshold nearest each window's centre ([`find_crossing`]) and
+//! interpolates linearly. Memory is `O(pixels)`, independent of the number of
+//! frames.
 //!
 //! # Speed
-//! Frames are copied into a ring and folded into the per-pixel state in
-//! temporal blocks of `K` frames ([`TrackerParams::block`]), as soon as the
-//! block is complete (its frames still in the last-level cache). A block is
-//! folded row by row (rayon over rows), 64 pixels at a time whose state stays
-//! in SIMD registers across the `K` frames: per pixel and frame, one load and
-//! a few branch-free vector operations in the sample's own lane width (see
-//! [`crate::sample`]); the state goes to memory once per block.
-//! Windows are copied only for pixels whose best fall or rise moved inside a
-//! block, and only once every frame of the window is in the ring: with a lag,
-//! just before the next block is folded (or by [`TemporalTracker::finish`],
-//! which clamps to the last frame).
+//! Each frame is copied into a ring of the last `3W + 2m` frames (in
+//! parallel pieces). When block `b + 1` is complete (and `m − 1` frames
+//! more), block `b` is evaluated row by row (rayon over rows), one SIMD
+//! vector of pixels at a time ([`crate::simd`], chosen at run time): block
+//! `b + 1`'s maximum, a backward pass for the right contexts (and block `b`'s
+//! maximum, kept for the next block's left contexts), a forward pass for the
+//! left contexts, the depths and the events, all in the sample's lane width
+//! and in registers. Windows are captured (a scalar look into the ring) only for
+//! pixels whose best dip moved, which is rare once the sweep is under way.
 
 use std::borrow::Cow;
-use std::ops::Range;
 
 use rayon::prelude::*;
 
@@ -43,72 +60,84 @@ use crate::error::KernelError;
 use crate::sample::Sample;
 use crate::simd::{Portable, SimdPath, Vector};
 
-/// Pixels tested together for "any window to capture" before a scalar scan.
-const GROUP: usize = 64;
-
-/// Samples per parallel piece of a frame copied into the ring.
+/// Samples copied into the ring per parallel task.
 const STORE_PIECE: usize = 1 << 18;
 
-/// Marks "no steepest fall/rise yet" in the per-pixel frame indices.
+/// Marks "no dip" in the per-pixel frame indices.
 const NO_FRAME: u32 = u32::MAX;
 
-/// Bits of [`RowState::moved`]: the fall/rise window is not yet captured.
-const FELL: u8 = 1;
-const ROSE: u8 = 2;
+/// The most lanes of any [`Vector`].
+const MAX_LANES: usize = 64;
+
+/// Samples ahead of the current vector to prefetch in each of a block's rows.
+const PREFETCH_AHEAD: usize = 256;
 
 /// Tuning of [`TemporalTracker`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrackerParams {
-    /// `m`: half-width of the window kept around the steepest fall and rise
-    /// (`2m` samples, frames `j−m … j+m−1`). `1 ≤ m ≤ 64`.
+    /// `m`: half-width of the windows kept around the enter and leave
+    /// crossings (`2m` samples). `1 ≤ m ≤ min(64, W)`.
     pub window: usize,
-    /// `K`: frames folded together per pass over the state. `1 ≤ K ≤ 128`.
-    /// Results do not depend on it; speed and the ring's size (`2K + m` frames
-    /// and a little more) do.
-    pub block: usize,
+    /// `W` (frames): the widest dip always found, and the separation beyond
+    /// which two dips are distinct events. `2 ≤ W ≤ 128`. The ring holds
+    /// `3W + 2m` frames.
+    pub max_width: usize,
+    /// A pixel whose second-deepest dip is at least this fraction of the
+    /// deepest is ambiguous (no times). `0 < ambiguity ≤ 1`.
+    pub ambiguity: f32,
 }
 
 impl Default for TrackerParams {
     fn default() -> Self {
         TrackerParams {
             window: 4,
-            block: 16,
+            max_width: 32,
+            ambiguity: 0.6,
         }
     }
 }
 
 impl TrackerParams {
     const MAX_WINDOW: usize = 64;
-    /// Keeps every block-local offset (`< K + lag ≤ 191`) below `u8::MAX`.
-    const MAX_BLOCK: usize = 128;
+    /// Keeps block-local offsets (`< W`) below `u8::MAX` and the event age
+    /// (saturating at `MAX`) able to exceed `W`.
+    const MAX_WIDTH: usize = 128;
 
     fn validate(&self) -> Result<(), KernelError> {
-        if !(1..=Self::MAX_WINDOW).contains(&self.window) {
+        if !(2..=Self::MAX_WIDTH).contains(&self.max_width) {
             return Err(KernelError::parameter(
-                "window",
-                format!("must be in 1..={}, got {}", Self::MAX_WINDOW, self.window),
+                "max_width",
+                format!("must be in 2..={}, got {}", Self::MAX_WIDTH, self.max_width),
             ));
         }
-        if !(1..=Self::MAX_BLOCK).contains(&self.block) {
+        let top = Self::MAX_WINDOW.min(self.max_width);
+        if !(1..=top).contains(&self.window) {
             return Err(KernelError::parameter(
-                "block",
-                format!("must be in 1..={}, got {}", Self::MAX_BLOCK, self.block),
+                "window",
+                format!(
+                    "must be in 1..={top} (at most 64 and max_width), got {}",
+                    self.window
+                ),
+            ));
+        }
+        if !(self.ambiguity > 0.0 && self.ambiguity <= 1.0) {
+            return Err(KernelError::parameter(
+                "ambiguity",
+                format!("must be in (0, 1], got {}", self.ambiguity),
             ));
         }
         Ok(())
     }
 
-    /// Frames a block is folded late, so that the previous block's windows
-    /// (reaching `m − 1` frames past it) are complete when it is folded:
-    /// `max(0, m − 1 − K)`.
-    fn lag(&self) -> usize {
-        (self.window - 1).saturating_sub(self.block)
+    /// Ring slots: evaluating the block from frame `d` happens when the newest
+    /// frame is `d + 2W + m − 2` and needs frames back to `d − W − m + 1`.
+    fn ring_slots(&self) -> usize {
+        3 * self.max_width + 2 * self.window
     }
 
-    /// Ring slots: the previous block's windows reach back `K + m` frames
-    /// from the block being folded, which ends `lag` frames before the newest.
-    fn ring_slots(&self) -> usize {
-        2 * self.block + self.lag() + self.window
+    /// Frames seen when the block from frame `d` is evaluated.
+    fn evaluate_at(&self, d: usize) -> usize {
+        d + 2 * self.max_width + self.window - 1
     }
 }
 
@@ -120,11 +149,11 @@ impl TrackerParams {
 pub struct ShadowTimes {
     pub height: usize,
     pub width: usize,
-    /// Brightest sample (DN).
+    /// `hi`: the lit level around the deepest dip (DN); 0 where there is no dip.
     pub imax: Vec<f32>,
-    /// Darkest sample (DN).
+    /// `lo`: the darkest sample of the deepest dip (DN); 0 where there is no dip.
     pub imin: Vec<f32>,
-    /// `imax − imin` (DN).
+    /// `imax − imin`: the depth of the deepest dip (DN).
     pub contrast: Vec<f32>,
     /// `(L(imax) + L(imin)) / 2` (linear units).
     pub threshold: Vec<f32>,
@@ -136,8 +165,15 @@ pub struct ShadowTimes {
     pub enter_slope: Vec<f32>,
     /// Same at the leave crossing.
     pub leave_slope: Vec<f32>,
-    /// 1 where `contrast ≥ min_contrast`, else 0.
+    /// Depth of the deepest dip apart from the best one (DN), 0 if none.
+    pub rival: Vec<f32>,
+    /// 1 where a dip exists, `contrast ≥ min_contrast` and it is not ambiguous, else 0.
     pub valid: Vec<u8>,
+    /// 1 where `contrast ≥ min_contrast` but `rival ≥ ambiguity · contrast`.
+    pub ambiguous: Vec<u8>,
+    /// 1 where the dip's levels or a sample interpolated at a crossing is
+    /// clipped (`0` or the type's maximum): the times may be biased.
+    pub clipped: Vec<u8>,
 }
 
 /// One threshold crossing in a window of samples.
@@ -214,14 +250,10 @@ impl<T: Sample> FrameRing<T> {
         }
     }
 
-    /// Copy `frame` into the slot of frame `index`, in parallel pieces (a
-    /// single core does not saturate the memory bus).
-    fn store(&mut self, index: usize, frame: &[T]) {
+    /// The slot of frame `index` (overwriting frame `index − slots`).
+    fn slot_mut(&mut self, index: usize) -> &mut [T] {
         let start = (index % self.slots) * self.frame_len;
-        self.samples[start..start + self.frame_len]
-            .par_chunks_mut(STORE_PIECE)
-            .zip(frame.par_chunks(STORE_PIECE))
-            .for_each(|(dst, src)| dst.copy_from_slice(src));
+        &mut self.samples[start..start + self.frame_len]
     }
 
     #[inline(always)]
@@ -231,51 +263,51 @@ impl<T: Sample> FrameRing<T> {
     }
 }
 
-/// The folded state of one image row.
+/// The state of one image row.
 ///
-/// Invariants, for the frames `0 … D−1` folded so far:
-/// * `imax`/`imin`: max/min sample (`T::MIN`/`T::MAX` before any frame);
-/// * `best_fall[x]`: `max(0, max_{1≤j<D} I_{j−1} − I_j)`; `fall_at[x]` the first
-///   `j` reaching it, `NO_FRAME` while it is 0 (so only real falls count);
-///   likewise `best_rise`/`rise_at` for `I_j − I_{j−1}`;
-/// * `fall_window[x·2m .. x·2m+2m]`: the samples of frames `j−m … j+m−1`
-///   around `j = fall_at[x]`, clamped to `[0, last]` with `last` the newest
-///   frame when they were captured (while streaming, the whole window is in
-///   the ring when it is captured, so only the clamp at 0 applies) — unless
-///   `moved[x]` has the bit `FELL`: then `fall_at` moved in the last folded
-///   block and its window is still to be captured. Likewise `rise_window`,
-///   `ROSE`.
+/// Invariants, for the frames `0 … D−1` evaluated so far (`D` a multiple of `W`):
+/// * `prev_max[x]`: the brightest sample of the last evaluated block
+///   (frames `D−W … D−1`; 0 before any);
+/// * `d1[x]`: the deepest depth of frames `< D` (0 = none), reached first at
+///   frame `k1`; `age[x] = min(D − 1 − k1, MAX)` (`MAX` before any dip);
+///   `d2[x]`: the deepest depth among the frames that were farther than `W`
+///   after the best event when folded, and of the best events they replaced;
+/// * `hi`, `lo`: the levels of the dip at `k1` (`min(left, right)` and
+///   `I_{k1}`; 0 while `d1 = 0`); `enter_at`/`leave_at`: the
+///   centres `j` of its windows (`NO_FRAME` while `d1 = 0`);
+///   `enter_window[x·2m .. x·2m+2m]`: the samples of frames `j−m … j+m−1`
+///   around `j = enter_at[x]`, clamped to `[0, last]` (`last` the newest frame
+///   when captured); likewise `leave_window`.
 #[derive(Debug, Clone)]
 struct RowState<T: Sample> {
-    imax: Vec<T>,
-    imin: Vec<T>,
-    best_fall: Vec<T>,
-    best_rise: Vec<T>,
-    fall_at: Vec<u32>,
-    rise_at: Vec<u32>,
-    moved: Vec<u8>,
-    fall_window: Vec<T>,
-    rise_window: Vec<T>,
+    prev_max: Vec<T>,
+    d1: Vec<T>,
+    d2: Vec<T>,
+    age: Vec<T>,
+    hi: Vec<T>,
+    lo: Vec<T>,
+    enter_at: Vec<u32>,
+    leave_at: Vec<u32>,
+    enter_window: Vec<T>,
+    leave_window: Vec<T>,
 }
 
 impl<T: Sample> RowState<T> {
     fn new(width: usize, half: usize) -> Self {
         RowState {
-            imax: vec![T::MIN; width],
-            imin: vec![T::MAX; width],
-            best_fall: vec![T::MIN; width],
-            best_rise: vec![T::MIN; width],
-            fall_at: vec![NO_FRAME; width],
-            rise_at: vec![NO_FRAME; width],
-            moved: vec![0; width],
-            fall_window: vec![T::MIN; width * 2 * half],
-            rise_window: vec![T::MIN; width * 2 * half],
+            prev_max: vec![T::MIN; width],
+            d1: vec![T::MIN; width],
+            d2: vec![T::MIN; width],
+            age: vec![T::MAX; width],
+            hi: vec![T::MIN; width],
+            lo: vec![T::MIN; width],
+            enter_at: vec![NO_FRAME; width],
+            leave_at: vec![NO_FRAME; width],
+            enter_window: vec![T::MIN; width * 2 * half],
+            leave_window: vec![T::MIN; width * 2 * half],
         }
     }
 }
-
-/// Samples ahead of the current vector to prefetch in each of a block's rows.
-const PREFETCH_AHEAD: usize = 256;
 
 /// Hint the cache to fetch `slice[at]` (no effect past the end).
 #[inline(always)]
@@ -309,190 +341,254 @@ fn store<T: Sample, V: Vector<T>>(v: V, slice: &mut [T], x0: usize) {
     unsafe { v.store(slice.as_mut_ptr().add(x0)) }
 }
 
-/// Fold the block `rows` (one row of each frame, `prev` the row of the
-/// frame before the first) into the `V::LANES` pixels from `x0` of a row's
-/// state. The pixels' state stays in registers across the block's frames:
-/// per pixel and frame one load and a few branch-free vector operations.
+/// What evaluating one block of one row needs besides the row's state.
+#[derive(Clone, Copy)]
+struct BlockJob {
+    /// First frame of the block (a multiple of `W`).
+    start: usize,
+    /// Newest frame available (the contexts and windows are clamped to it).
+    last: usize,
+    max_width: usize,
+    half: usize,
+}
+
+impl BlockJob {
+    /// One past the block's last available frame.
+    fn end(&self) -> usize {
+        (self.start + self.max_width).min(self.last + 1)
+    }
+    /// The frames of block `b + 1` that exist.
+    fn next(&self) -> std::ops::Range<usize> {
+        self.end()..(self.start + 2 * self.max_width).min(self.last + 1)
+    }
+}
+
+/// Evaluate the block of `job` for the `V::LANES` pixels from `x0`: depths,
+/// events, and the windows of pixels whose best dip moved.
 #[inline(always)]
-fn fold_span<T: Sample, V: Vector<T>>(
+#[allow(clippy::too_many_arguments)]
+fn evaluate_span<'a, T: Sample, V: Vector<T>>(
     state: &mut RowState<T>,
-    prev: &[T],
+    ring: &'a FrameRing<T>,
+    row: usize,
+    ctx: &mut Option<Context<'a, T>>,
     rows: &[&[T]],
-    first: usize,
+    next: &[&[T]],
+    right: &mut [V],
+    job: BlockJob,
     x0: usize,
 ) {
-    let mut imax: V = load(&state.imax, x0);
-    let mut imin: V = load(&state.imin, x0);
-    let mut best_fall: V = load(&state.best_fall, x0);
-    let mut best_rise: V = load(&state.best_rise, x0);
-    let none = V::splat(T::NO_OFFSET);
-    let (mut fall_offset, mut rise_offset) = (none, none);
-    let mut before: V = load(prev, x0);
-    for (k, row) in rows.iter().enumerate() {
-        prefetch(row, x0 + PREFETCH_AHEAD);
-        let cur: V = load(row, x0);
-        imax = imax.max(cur);
-        imin = imin.min(cur);
-        // Saturated to 0 when not a fall (rise): never beats the best (≥ 0).
-        let fall = before.sub_sat(cur);
-        let rise = cur.sub_sat(before);
-        let offset = V::splat(T::from_offset(k));
-        fall_offset = V::select(fall.gt(best_fall), offset, fall_offset);
-        rise_offset = V::select(rise.gt(best_rise), offset, rise_offset);
-        best_fall = best_fall.max(fall);
-        best_rise = best_rise.max(rise);
-        before = cur;
+    let zero = V::splat(T::MIN);
+    // Block b − 1's maximum (0 for block 0) and block b + 1's (0 if absent).
+    let mprev: V = load(&state.prev_max, x0);
+    let mut mnext = zero;
+    for r in next {
+        prefetch(r, x0 + PREFETCH_AHEAD);
+        mnext = mnext.max(load(r, x0));
     }
-    store(imax, &mut state.imax, x0);
-    store(imin, &mut state.imin, x0);
-    store(best_fall, &mut state.best_fall, x0);
-    store(best_rise, &mut state.best_rise, x0);
-    // Moves are rare once the sweep is under way: a vectorised test first.
-    if !fall_offset.ne(none).or(rise_offset.ne(none)).any() {
+    // Backward: right[i] = max(I[i+1 .. end), block b + 1); block b's maximum.
+    let mut acc = mnext;
+    let mut block_max = zero;
+    for (i, r) in rows.iter().enumerate().rev() {
+        right[i] = acc;
+        let cur: V = load(r, x0);
+        acc = acc.max(cur);
+        block_max = block_max.max(cur);
+    }
+    store(block_max, &mut state.prev_max, x0);
+    // Forward: left = max(block b − 1, I[start .. k−1]); depths; events.
+    let mut left = mprev;
+    let mut d1: V = load(&state.d1, x0);
+    let mut d2: V = load(&state.d2, x0);
+    let mut age: V = load(&state.age, x0);
+    let none = V::splat(T::NO_OFFSET);
+    let one = V::splat(T::from_offset(1));
+    let far_after = V::splat(T::from_offset(job.max_width));
+    let mut hi: V = load(&state.hi, x0);
+    let mut lo: V = load(&state.lo, x0);
+    let mut moved = none;
+    for (i, r) in rows.iter().enumerate() {
+        let cur: V = load(r, x0);
+        let lit = left.min(right[i]);
+        let depth = lit.sub_sat(cur);
+        age = age.add_sat(one);
+        let better = depth.gt(d1);
+        let far = age.gt(far_after);
+        d2 = V::select(far, d2.max(depth.min(d1)), d2);
+        d1 = d1.max(depth);
+        age = V::select(better, zero, age);
+        hi = V::select(better, lit, hi);
+        lo = V::select(better, cur, lo);
+        moved = V::select(better, V::splat(T::from_offset(i)), moved);
+        left = left.max(cur);
+    }
+    store(d1, &mut state.d1, x0);
+    store(d2, &mut state.d2, x0);
+    store(age, &mut state.age, x0);
+    store(hi, &mut state.hi, x0);
+    store(lo, &mut state.lo, x0);
+    if !moved.ne(none).any() {
         return;
     }
-    let mut offsets = [T::NO_OFFSET; 2 * MAX_LANES];
-    store(fall_offset, &mut offsets, 0);
-    store(rise_offset, &mut offsets, MAX_LANES);
-    for i in 0..V::LANES {
-        let x = x0 + i;
-        let (f, r) = (offsets[i], offsets[MAX_LANES + i]);
-        if f != T::NO_OFFSET {
-            state.fall_at[x] = (first + f.index()) as u32;
-            state.moved[x] |= FELL;
-        }
-        if r != T::NO_OFFSET {
-            state.rise_at[x] = (first + r.index()) as u32;
-            state.moved[x] |= ROSE;
+    let mut offsets = [T::NO_OFFSET; MAX_LANES];
+    store(moved, &mut offsets, 0);
+    let ctx = ctx.get_or_insert_with(|| Context::new(ring, row, job.context()));
+    for (i, &offset) in offsets[..V::LANES].iter().enumerate() {
+        if offset != T::NO_OFFSET {
+            capture_dip(state, ctx, x0 + i, job.start + offset.index(), job);
         }
     }
 }
 
-/// The most lanes of any [`Vector`].
-const MAX_LANES: usize = 64;
+/// The rows of one image row in every frame a capture may read: frames
+/// `first … end−1`, [`BlockJob::context`].
+struct Context<'a, T> {
+    first: usize,
+    rows: Vec<&'a [T]>,
+}
 
-/// Fold the frames `frames` (present in `ring` with their predecessors) into
-/// one row's state with vectors `V`: statistics, `fall_at`/`rise_at` and the
-/// `moved` bits. Windows are not captured here.
+impl<'a, T: Sample> Context<'a, T> {
+    fn new(ring: &'a FrameRing<T>, row: usize, frames: std::ops::Range<usize>) -> Self {
+        Context {
+            first: frames.start,
+            rows: frames.map(|f| ring.row(f, row)).collect(),
+        }
+    }
+
+    #[inline(always)]
+    fn at(&self, frame: usize, x: usize) -> T {
+        self.rows[frame - self.first][x]
+    }
+}
+
+impl BlockJob {
+    /// Frames a capture in this block may read: the left context's start
+    /// (block `b − 1`) less `m`, to the right context's end (block `b + 1`)
+    /// plus `m − 1`, clamped to the frames that exist.
+    fn context(&self) -> std::ops::Range<usize> {
+        let first = self.start.saturating_sub(self.max_width + self.half);
+        let end = (self.start + 2 * self.max_width + self.half).min(self.last + 1);
+        first..end
+    }
+}
+
+/// Record the new best dip of pixel `x` at frame `k1` of `job`'s block: its
+/// levels, the centres of its enter and leave crossings in DN and the
+/// windows around them (every frame needed is in `ctx`).
+fn capture_dip<T: Sample>(
+    state: &mut RowState<T>,
+    ctx: &Context<'_, T>,
+    x: usize,
+    k1: usize,
+    job: BlockJob,
+) {
+    let at = |frame: usize| ctx.at(frame, x);
+    // Set by the vector pass: the lit level min(left, right) and I_{k1}.
+    let (hi, lo) = (state.hi[x], state.lo[x]);
+    debug_assert!(hi > lo);
+    // Mid-level in DN, exactly: 2·v ≥ hi + lo.
+    let sum = hi.index() + lo.index();
+    let bright = |frame: usize| 2 * at(frame).index() >= sum;
+    // The left context holds a sample ≥ hi, so a bright frame exists back to
+    // the start of block b − 1; likewise forward to the end of block b + 1.
+    let first = job.start.saturating_sub(job.max_width);
+    let enter = (first..k1)
+        .rev()
+        .find(|&c| bright(c))
+        .map_or(first, |c| c + 1);
+    let stop = (job.start + 2 * job.max_width).min(job.last + 1);
+    let leave = (k1 + 1..stop).find(|&c| bright(c)).unwrap_or(stop - 1);
+    let span = 2 * job.half;
+    let window = |dst: &mut [T], j: usize| {
+        for (i, d) in dst.iter_mut().enumerate() {
+            *d = at((j + i).saturating_sub(job.half).min(job.last));
+        }
+    };
+    window(&mut state.enter_window[x * span..(x + 1) * span], enter);
+    window(&mut state.leave_window[x * span..(x + 1) * span], leave);
+    state.enter_at[x] = enter as u32;
+    state.leave_at[x] = leave as u32;
+}
+
+/// Evaluate `job`'s block of one row with vectors `V`.
 #[inline(always)]
-fn fold_row_with<T: Sample, V: Vector<T>>(
+fn evaluate_row_with<T: Sample, V: Vector<T>>(
     state: &mut RowState<T>,
     ring: &FrameRing<T>,
     row: usize,
-    frames: Range<usize>,
+    job: BlockJob,
 ) {
-    debug_assert!(frames.len() < T::NO_OFFSET.index());
     debug_assert!(V::LANES <= MAX_LANES);
-    let width = state.imax.len();
-    let prev = ring.row(frames.start.saturating_sub(1), row);
-    let rows: Vec<&[T]> = frames.clone().map(|j| ring.row(j, row)).collect();
+    let width = state.d1.len();
+    let rows: Vec<&[T]> = (job.start..job.end()).map(|j| ring.row(j, row)).collect();
+    let next: Vec<&[T]> = job.next().map(|j| ring.row(j, row)).collect();
+    let mut right = vec![V::splat(T::MIN); rows.len()];
+    // The rows a capture reads, gathered on the first capture in this row.
+    let mut ctx = None;
     let split = width - width % V::LANES;
     for x0 in (0..split).step_by(V::LANES) {
-        fold_span::<T, V>(state, prev, &rows, frames.start, x0);
+        evaluate_span::<T, V>(
+            state, ring, row, &mut ctx, &rows, &next, &mut right, job, x0,
+        );
     }
+    let mut right = vec![Portable::<T, 1>::splat(T::MIN); rows.len()];
     for x0 in split..width {
-        fold_span::<T, Portable<T, 1>>(state, prev, &rows, frames.start, x0);
+        evaluate_span::<T, Portable<T, 1>>(
+            state, ring, row, &mut ctx, &rows, &next, &mut right, job, x0,
+        );
     }
 }
 
-/// [`fold_row_with`] compiled for AVX2.
+/// [`evaluate_row_with`] compiled for AVX2.
 ///
 /// # Safety
 /// The CPU must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn fold_row_avx2<T: Sample>(
+unsafe fn evaluate_row_avx2<T: Sample>(
     state: &mut RowState<T>,
     ring: &FrameRing<T>,
     row: usize,
-    frames: Range<usize>,
+    job: BlockJob,
 ) {
-    fold_row_with::<T, T::Avx2>(state, ring, row, frames)
+    evaluate_row_with::<T, T::Avx2>(state, ring, row, job)
 }
 
-/// Fold `frames` into one row's state on the instruction set `path`
-/// (which the CPU must support: checked when the tracker is made).
-fn fold_row<T: Sample>(
+/// Evaluate `job`'s block of one row on the instruction set `path` (which
+/// the CPU must support: checked when it is set).
+fn evaluate_row<T: Sample>(
     path: SimdPath,
     state: &mut RowState<T>,
     ring: &FrameRing<T>,
     row: usize,
-    frames: Range<usize>,
+    job: BlockJob,
 ) {
     match path {
         #[cfg(target_arch = "x86_64")]
         SimdPath::Avx2 => {
             debug_assert!(path.is_supported());
             // SAFETY: the tracker only holds a path the CPU supports.
-            unsafe { fold_row_avx2(state, ring, row, frames) }
+            unsafe { evaluate_row_avx2(state, ring, row, job) }
         }
         #[cfg(target_arch = "x86_64")]
-        SimdPath::Sse2 => fold_row_with::<T, T::Sse2>(state, ring, row, frames),
-        _ => fold_row_with::<T, T::Portable>(state, ring, row, frames),
-    }
-}
-/// Copy the `2m` samples of frames `j−m … j+m−1` (clamped to `[0, last]`) of
-/// pixel `(row, col)` into `dst`.
-fn capture_window<T: Sample>(
-    dst: &mut [T],
-    ring: &FrameRing<T>,
-    row: usize,
-    col: usize,
-    j: usize,
-    last: usize,
-) {
-    let half = dst.len() / 2;
-    for (i, d) in dst.iter_mut().enumerate() {
-        let frame = (j + i).saturating_sub(half).min(last);
-        *d = ring.row(frame, row)[col];
-    }
-}
-
-/// Capture the windows of one row's `moved` pixels (frames up to `last`,
-/// back to the window starts, all in `ring`) and clear the bits.
-fn capture_row<T: Sample>(
-    state: &mut RowState<T>,
-    ring: &FrameRing<T>,
-    row: usize,
-    last: usize,
-    half: usize,
-) {
-    let span = 2 * half;
-    for g0 in (0..state.moved.len()).step_by(GROUP) {
-        let g1 = (g0 + GROUP).min(state.moved.len());
-        if state.moved[g0..g1].iter().fold(0, |any, &m| any | m) == 0 {
-            continue;
-        }
-        for x in g0..g1 {
-            let moved = std::mem::take(&mut state.moved[x]);
-            if moved & FELL != 0 {
-                let dst = &mut state.fall_window[x * span..(x + 1) * span];
-                capture_window(dst, ring, row, x, state.fall_at[x] as usize, last);
-            }
-            if moved & ROSE != 0 {
-                let dst = &mut state.rise_window[x * span..(x + 1) * span];
-                capture_window(dst, ring, row, x, state.rise_at[x] as usize, last);
-            }
-        }
+        SimdPath::Sse2 => evaluate_row_with::<T, T::Sse2>(state, ring, row, job),
+        _ => evaluate_row_with::<T, T::Portable>(state, ring, row, job),
     }
 }
 
 /// Streaming per-pixel shadow tracker over frames of `T` (`u8` or `u16`).
 ///
-/// Invariants between calls (`F` = frames seen, `D` = frames folded,
-/// `K` = block, `m` = window, `L` = lag `= max(0, m − 1 − K)`):
-/// * the ring has `S = 2K + L + m` slots and holds frames `max(0, F−S) … F−1`;
-/// * `D` is a multiple of `K` and `0 ≤ F − D < K + L`: block `D … D+K−1` is
-///   folded as soon as `F = D + K + L`, right after the windows of the
-///   previous block `D−K … D−1` are captured. Those reach from `D − K − m =
-///   F − S` to `D + m − 2 ≤ F − 1`: all in the ring, none clamped at the end;
-///   the block itself needs frames `D − 1 … D + K − 1`;
-/// * every row state satisfies [`RowState`]'s invariants for frames `0 … D−1`,
-///   with `moved` bits only for moves in block `D−K … D−1`.
+/// Invariants between calls (`F` = frames seen, `D` = frames evaluated,
+/// `W` = max width, `m` = window):
+/// * the ring has `S = 3W + 2m` slots and holds frames `max(0, F−S) … F−1`;
+/// * `D` is a multiple of `W` and `F < D + 2W + m − 1`: the block from `D` is
+///   evaluated as soon as `F = D + 2W + m − 1`, when its right contexts and
+///   windows (to frame `D + 2W + m − 2`) are in the ring, and its left ones
+///   (back to `D − W − m + 1`) still are;
+/// * every row state satisfies [`RowState`]'s invariants for frames `0 … D−1`.
 ///
-/// [`finish`](Self::finish) works on a copy of each row's state: captures the
-/// pending windows, folds the pending frames `D … F−1` and captures theirs
-/// (everything back to `D − K − m` is in the ring), clamping at `F − 1`. So it
+/// [`finish`](Self::finish) works on a copy of each row's state and evaluates
+/// the pending blocks with the contexts and windows clamped to `F − 1`, so it
 /// can be called at any time for a preview.
 #[derive(Debug, Clone)]
 pub struct TemporalTracker<T: Sample> {
@@ -502,7 +598,7 @@ pub struct TemporalTracker<T: Sample> {
     ring: FrameRing<T>,
     rows: Vec<RowState<T>>,
     frames_seen: usize,
-    frames_folded: usize,
+    frames_evaluated: usize,
     path: SimdPath,
 }
 
@@ -525,7 +621,7 @@ impl<T: Sample> TemporalTracker<T> {
                 .map(|_| RowState::new(width, params.window))
                 .collect(),
             frames_seen: 0,
-            frames_folded: 0,
+            frames_evaluated: 0,
             path: SimdPath::active(),
         })
     }
@@ -576,21 +672,27 @@ impl<T: Sample> TemporalTracker<T> {
         if self.frames_seen >= (NO_FRAME - 1) as usize {
             return Err(KernelError::TooManyFrames);
         }
-        self.ring.store(self.frames_seen, frame);
+        let (index, max_width) = (self.frames_seen, self.params.max_width);
+        // In parallel pieces: one core does not saturate the memory bus.
+        self.ring
+            .slot_mut(index)
+            .par_chunks_mut(STORE_PIECE)
+            .zip(frame.par_chunks(STORE_PIECE))
+            .for_each(|(dst, src)| dst.copy_from_slice(src));
         self.frames_seen += 1;
-        let (block, half) = (self.params.block, self.params.window);
-        if self.frames_seen == self.frames_folded + block + self.params.lag() {
-            let frames = self.frames_folded..self.frames_folded + block;
-            let last = self.frames_seen - 1;
+        if self.frames_seen == self.params.evaluate_at(self.frames_evaluated) {
+            let job = BlockJob {
+                start: self.frames_evaluated,
+                last: self.frames_seen - 1,
+                max_width,
+                half: self.params.window,
+            };
             let (ring, path) = (&self.ring, self.path);
             self.rows
                 .par_iter_mut()
                 .enumerate()
-                .for_each(|(row, state)| {
-                    capture_row(state, ring, row, last, half);
-                    fold_row(path, state, ring, row, frames.clone());
-                });
-            self.frames_folded += block;
+                .for_each(|(row, state)| evaluate_row(path, state, ring, row, job));
+            self.frames_evaluated += max_width;
         }
         Ok(())
     }
@@ -598,10 +700,10 @@ impl<T: Sample> TemporalTracker<T> {
     /// The per-pixel results for the frames seen so far; does not change the
     /// tracker.
     ///
-    /// `min_contrast` (DN): pixels with `imax − imin < min_contrast` are
-    /// invalid (times NaN). `lut`: decoding table from DN to linear
-    /// irradiance, `T::LUT_LEN` finite non-decreasing values (`None` =
-    /// identity); thresholds, interpolation and slopes use decoded values.
+    /// `min_contrast` (DN): pixels whose deepest dip is shallower are invalid
+    /// (times NaN). `lut`: decoding table from DN to linear irradiance,
+    /// `T::LUT_LEN` finite non-decreasing values (`None` = identity);
+    /// thresholds, interpolation and slopes use decoded values.
     pub fn finish(
         &self,
         min_contrast: f32,
@@ -617,22 +719,29 @@ impl<T: Sample> TemporalTracker<T> {
             ));
         }
         let lut = decoding_lut::<T>(lut)?;
-        let (half, last) = (self.params.window, self.frames_seen - 1);
-        let pending = self.frames_folded..self.frames_seen;
+        let last = self.frames_seen - 1;
+        let params = self.params;
+        let pending: Vec<BlockJob> = (self.frames_evaluated..=last)
+            .step_by(params.max_width)
+            .map(|start| BlockJob {
+                start,
+                last,
+                max_width: params.max_width,
+                half: params.window,
+            })
+            .collect();
         let mut times = ShadowTimes::empty(self.height, self.width);
         let out_rows = times.rows_mut();
         out_rows
             .into_par_iter()
             .zip(self.rows.par_iter())
             .enumerate()
-            .for_each(|(row, (mut out, folded))| {
-                let mut state = folded.clone();
-                capture_row(&mut state, &self.ring, row, last, half);
-                if !pending.is_empty() {
-                    fold_row(self.path, &mut state, &self.ring, row, pending.clone());
-                    capture_row(&mut state, &self.ring, row, last, half);
+            .for_each(|(row, (mut out, evaluated))| {
+                let mut state = evaluated.clone();
+                for &job in &pending {
+                    evaluate_row(self.path, &mut state, &self.ring, row, job);
                 }
-                resolve_row(&state, &lut, min_contrast, half, &mut out);
+                resolve_row(&state, &lut, min_contrast, &params, &mut out);
             });
         Ok(times)
     }
@@ -671,49 +780,65 @@ fn decoding_lut<T: Sample>(lut: Option<&[f32]>) -> Result<Cow<'_, [f32]>, Kernel
     Ok(Cow::Borrowed(lut))
 }
 
-/// Turn one row's folded state into results.
+/// Turn one row's state into results.
 fn resolve_row<T: Sample>(
     state: &RowState<T>,
     lut: &[f32],
     min_contrast: f32,
-    half: usize,
+    params: &TrackerParams,
     out: &mut RowTimesMut<'_>,
 ) {
+    let half = params.window;
     let span = 2 * half;
     let mut linear = vec![0.0f32; span];
-    let mut solve = |at: u32, window: &[T], threshold: f32, edge: Edge| -> (f32, f32) {
-        if at == NO_FRAME {
-            return (f32::NAN, f32::NAN);
-        }
+    let clipped_sample = |v: T| v == T::MIN || v == T::MAX;
+    // (time, slope, a sample interpolated is clipped)
+    let mut solve = |at: u32, window: &[T], threshold: f32, edge: Edge| -> (f32, f32, bool) {
         for (l, v) in linear.iter_mut().zip(window) {
             *l = lut[v.index()];
         }
         match find_crossing(&linear, threshold, edge) {
             Some(c) => {
                 let frame = at as i64 - half as i64 + c.index as i64;
-                ((frame as f64 + f64::from(c.fraction)) as f32, c.slope)
+                let clipped =
+                    clipped_sample(window[c.index]) || clipped_sample(window[c.index + 1]);
+                (
+                    (frame as f64 + f64::from(c.fraction)) as f32,
+                    c.slope,
+                    clipped,
+                )
             }
-            None => (f32::NAN, f32::NAN),
+            None => (f32::NAN, f32::NAN, false),
         }
     };
-    for x in 0..state.imax.len() {
-        let (hi, lo) = (state.imax[x], state.imin[x]);
+    for x in 0..state.d1.len() {
+        let has_dip = state.enter_at[x] != NO_FRAME;
+        let (hi, lo) = (state.hi[x], state.lo[x]);
         let contrast = hi.to_f32() - lo.to_f32();
         let threshold = (lut[hi.index()] + lut[lo.index()]) * 0.5;
-        let valid = contrast >= min_contrast;
+        let rival = state.d2[x].to_f32();
+        let deep = has_dip && contrast >= min_contrast;
+        let ambiguous = deep && rival >= params.ambiguity * contrast;
+        let valid = deep && !ambiguous;
         out.imax[x] = hi.to_f32();
         out.imin[x] = lo.to_f32();
         out.contrast[x] = contrast;
         out.threshold[x] = threshold;
+        out.rival[x] = rival;
         out.valid[x] = u8::from(valid);
+        out.ambiguous[x] = u8::from(ambiguous);
+        let mut clipped = has_dip && (clipped_sample(hi) || clipped_sample(lo));
         if valid {
-            let window = &state.fall_window[x * span..(x + 1) * span];
-            (out.enter[x], out.enter_slope[x]) =
-                solve(state.fall_at[x], window, threshold, Edge::Enter);
-            let window = &state.rise_window[x * span..(x + 1) * span];
-            (out.leave[x], out.leave_slope[x]) =
-                solve(state.rise_at[x], window, threshold, Edge::Leave);
+            let window = &state.enter_window[x * span..(x + 1) * span];
+            let (t, s, c) = solve(state.enter_at[x], window, threshold, Edge::Enter);
+            (out.enter[x], out.enter_slope[x]) = (t, s);
+            clipped |= c;
+            let window = &state.leave_window[x * span..(x + 1) * span];
+            let (t, s, c) = solve(state.leave_at[x], window, threshold, Edge::Leave);
+            (out.leave[x], out.leave_slope[x]) = (t, s);
+            clipped |= c;
         }
+        out.clipped[x] = u8::from(clipped);
     }
 }
 
@@ -727,43 +852,39 @@ struct RowTimesMut<'a> {
     leave: &'a mut [f32],
     enter_slope: &'a mut [f32],
     leave_slope: &'a mut [f32],
+    rival: &'a mut [f32],
     valid: &'a mut [u8],
+    ambiguous: &'a mut [u8],
+    clipped: &'a mut [u8],
+}
+
+macro_rules! split_fields {
+    ($self:ident, $mid:ident, $($f:ident),*) => {{
+        $(let $f = $self.$f.split_at_mut($mid);)*
+        (
+            RowTimesMut { $($f: $f.0,)* },
+            RowTimesMut { $($f: $f.1,)* },
+        )
+    }};
 }
 
 impl<'a> RowTimesMut<'a> {
     fn split_at(self, mid: usize) -> (Self, Self) {
-        let (imax, imax_rest) = self.imax.split_at_mut(mid);
-        let (imin, imin_rest) = self.imin.split_at_mut(mid);
-        let (contrast, contrast_rest) = self.contrast.split_at_mut(mid);
-        let (threshold, threshold_rest) = self.threshold.split_at_mut(mid);
-        let (enter, enter_rest) = self.enter.split_at_mut(mid);
-        let (leave, leave_rest) = self.leave.split_at_mut(mid);
-        let (enter_slope, enter_slope_rest) = self.enter_slope.split_at_mut(mid);
-        let (leave_slope, leave_slope_rest) = self.leave_slope.split_at_mut(mid);
-        let (valid, valid_rest) = self.valid.split_at_mut(mid);
-        (
-            RowTimesMut {
-                imax,
-                imin,
-                contrast,
-                threshold,
-                enter,
-                leave,
-                enter_slope,
-                leave_slope,
-                valid,
-            },
-            RowTimesMut {
-                imax: imax_rest,
-                imin: imin_rest,
-                contrast: contrast_rest,
-                threshold: threshold_rest,
-                enter: enter_rest,
-                leave: leave_rest,
-                enter_slope: enter_slope_rest,
-                leave_slope: leave_slope_rest,
-                valid: valid_rest,
-            },
+        split_fields!(
+            self,
+            mid,
+            imax,
+            imin,
+            contrast,
+            threshold,
+            enter,
+            leave,
+            enter_slope,
+            leave_slope,
+            rival,
+            valid,
+            ambiguous,
+            clipped
         )
     }
 }
@@ -783,7 +904,10 @@ impl ShadowTimes {
             leave: vec![f32::NAN; n],
             enter_slope: vec![f32::NAN; n],
             leave_slope: vec![f32::NAN; n],
+            rival: vec![0.0; n],
             valid: vec![0; n],
+            ambiguous: vec![0; n],
+            clipped: vec![0; n],
         }
     }
 
@@ -797,7 +921,10 @@ impl ShadowTimes {
             leave: &mut self.leave,
             enter_slope: &mut self.enter_slope,
             leave_slope: &mut self.leave_slope,
+            rival: &mut self.rival,
             valid: &mut self.valid,
+            ambiguous: &mut self.ambiguous,
+            clipped: &mut self.clipped,
         };
         let mut rows = Vec::with_capacity(self.height);
         for _ in 0..self.height {

@@ -76,8 +76,12 @@ fn the_paths_this_cpu_supports() {
     }
 }
 
-fn params(window: usize, block: usize) -> TrackerParams {
-    TrackerParams { window, block }
+fn params(window: usize, max_width: usize) -> TrackerParams {
+    TrackerParams {
+        window,
+        max_width,
+        ..TrackerParams::default()
+    }
 }
 
 fn to_u8(p: &[u16]) -> Vec<u8> {
@@ -87,13 +91,21 @@ fn to_u8(p: &[u16]) -> Vec<u8> {
 #[test]
 fn ramp_has_the_known_crossings() {
     let p = to_u8(&ramp_profile());
-    for block in [1, 7, 16] {
-        let t = track(std::slice::from_ref(&p), 1, 1, params(4, block), 70.0, None);
+    for max_width in [8, 16, 32] {
+        let t = track(
+            std::slice::from_ref(&p),
+            1,
+            1,
+            params(4, max_width),
+            70.0,
+            None,
+        );
         assert_eq!((t.imax[0], t.imin[0], t.contrast[0]), (200.0, 40.0, 160.0));
         assert_eq!(t.threshold[0], 120.0);
-        assert_eq!(t.valid[0], 1);
-        assert_eq!(t.enter[0], 11.5, "block {block}");
-        assert_eq!(t.leave[0], 25.25, "block {block}");
+        assert_eq!((t.valid[0], t.ambiguous[0], t.clipped[0]), (1, 0, 0));
+        assert_eq!(t.rival[0], 0.0);
+        assert_eq!(t.enter[0], 11.5, "max_width {max_width}");
+        assert_eq!(t.leave[0], 25.25, "max_width {max_width}");
         assert_eq!(t.enter_slope[0], 40.0);
         assert_eq!(t.leave_slope[0], 40.0);
     }
@@ -111,15 +123,22 @@ fn u16_ramp_matches_u8() {
 
 #[test]
 fn windows_are_clamped_at_the_sequence_ends() {
-    // Falls at j = 1 (window frames -3..4 clamped to 0), rises at the last frame.
+    // Falls at frame 1 (window frames -3..4 clamped to 0), rises at the last frame.
     let mut p: Vec<u8> = vec![200, 60];
     p.extend([40; 6]);
     p.push(200);
     let n = p.len() as f32;
-    for block in [1, 2, 16] {
-        let t = track(std::slice::from_ref(&p), 1, 1, params(4, block), 10.0, None);
-        assert_eq!(t.enter[0], 80.0f32 / 140.0, "block {block}");
-        assert_eq!(t.leave[0], n - 2.0 + 0.5, "block {block}");
+    for max_width in [4, 8, 16] {
+        let t = track(
+            std::slice::from_ref(&p),
+            1,
+            1,
+            params(4, max_width),
+            10.0,
+            None,
+        );
+        assert_eq!(t.enter[0], 80.0f32 / 140.0, "max_width {max_width}");
+        assert_eq!(t.leave[0], n - 2.0 + 0.5, "max_width {max_width}");
     }
 }
 
@@ -170,8 +189,9 @@ fn low_contrast_and_flat_pixels_are_invalid() {
         .chain(&t.leave_slope)
         .all(|v| v.is_nan()));
     assert_eq!(t.contrast, vec![160.0, 0.0]);
+    // A flat pixel has no dip at all: invalid whatever the minimum contrast.
     let t = track(&[vec![90u8; 40]], 1, 1, params(4, 16), 0.0, None);
-    assert_eq!(t.valid, vec![1]);
+    assert_eq!((t.valid[0], t.contrast[0]), (0, 0.0));
     assert!(t.enter[0].is_nan() && t.leave[0].is_nan());
 }
 
@@ -179,8 +199,16 @@ fn low_contrast_and_flat_pixels_are_invalid() {
 fn errors_name_the_problem() {
     assert!(TemporalTracker::<u8>::new(0, 4, params(4, 16)).is_err());
     assert!(TemporalTracker::<u8>::new(4, 4, params(0, 16)).is_err());
-    assert!(TemporalTracker::<u8>::new(4, 4, params(4, 0)).is_err());
+    assert!(TemporalTracker::<u8>::new(4, 4, params(4, 1)).is_err());
     assert!(TemporalTracker::<u8>::new(4, 4, params(4, 1000)).is_err());
+    assert!(TemporalTracker::<u8>::new(4, 4, params(9, 8)).is_err());
+    for ambiguity in [0.0, -0.5, 1.5, f32::NAN] {
+        let p = TrackerParams {
+            ambiguity,
+            ..TrackerParams::default()
+        };
+        assert!(TemporalTracker::<u8>::new(4, 4, p).is_err(), "{ambiguity}");
+    }
     let mut t = TemporalTracker::<u8>::new(2, 3, params(4, 16)).unwrap();
     assert_eq!(t.finish(0.0, None), Err(KernelError::NoFrames));
     let err = t.update(&[0; 5]).unwrap_err();
@@ -246,43 +274,102 @@ impl XorShift {
     }
 }
 
-/// A profile with a shadow passing at a random time, noise, and coarse
-/// quantisation so that ties between steps are common.
+/// A profile with one or two shadows passing at random times, noise, and
+/// coarse quantisation so that ties are common.
 fn random_profile(rng: &mut XorShift, len: usize, hi: u64) -> Vec<u16> {
-    let enter = rng.below(len as u64) as usize;
-    let leave = enter + rng.below(len as u64 / 2 + 1) as usize;
+    let dips = 1 + rng.below(2) as usize;
+    let spans: Vec<(usize, usize, u64)> = (0..dips)
+        .map(|_| {
+            let enter = rng.below(len as u64) as usize;
+            let leave = enter + rng.below(len as u64 / 3 + 1) as usize;
+            (enter, leave, hi / 5 + rng.below(hi / 3))
+        })
+        .collect();
     (0..len)
         .map(|f| {
-            let lit = f < enter || f >= leave;
-            let base = if lit { hi * 3 / 4 } else { hi / 5 };
+            let base = spans
+                .iter()
+                .filter(|&&(e, l, _)| e <= f && f < l)
+                .map(|&(_, _, level)| level)
+                .min()
+                .unwrap_or(hi * 3 / 4);
             let noise = rng.below(hi / 8 + 1);
             (((base + noise) / 4) * 4).min(hi) as u16
         })
         .collect()
 }
 
-/// The algorithm on a whole stored profile, for one pixel.
-fn reference(profile: &[u16], half: usize, lut: &[f32]) -> (f32, f32, f32, f32) {
-    let n = profile.len();
-    let (hi, lo) = (
-        *profile.iter().max().unwrap(),
-        *profile.iter().min().unwrap(),
-    );
-    let thr = (lut[hi as usize] + lut[lo as usize]) * 0.5;
-    let steepest = |sign: i32| -> Option<usize> {
-        let mut best = (0i32, None);
-        for j in 1..n {
-            let step = sign * (profile[j - 1] as i32 - profile[j] as i32);
-            if step > best.0 {
-                best = (step, Some(j));
+/// What the tracker reports for one pixel.
+#[derive(Debug, Clone, Copy)]
+struct Pixel {
+    imax: f32,
+    imin: f32,
+    rival: f32,
+    valid: u8,
+    ambiguous: u8,
+    enter: f32,
+    leave: f32,
+    enter_slope: f32,
+    leave_slope: f32,
+}
+
+/// The dip of the module documentation on a whole stored profile, straight
+/// from the definitions (no streaming, no blocks of work, no SIMD).
+fn reference(profile: &[u16], p: TrackerParams, lut: &[f32], min_contrast: f32) -> Pixel {
+    let (n, w, half) = (profile.len(), p.max_width, p.window);
+    let max_of = |r: std::ops::Range<usize>| profile[r].iter().copied().max().unwrap_or(0);
+    // (depth, lit level) of every frame.
+    let depth: Vec<(u16, u16)> = (0..n)
+        .map(|k| {
+            let b = k / w;
+            let left = max_of(b.saturating_sub(1) * w..k);
+            let right = max_of((k + 1).min(n)..((b + 2) * w).min(n));
+            let lit = left.min(right);
+            (lit.saturating_sub(profile[k]), lit)
+        })
+        .collect();
+    let (mut d1, mut d2, mut k1) = (0u16, 0u16, None::<usize>);
+    for (k, &(d, _)) in depth.iter().enumerate() {
+        let same_event = k1.is_some_and(|k1| k - k1 <= w);
+        if same_event {
+            if d > d1 {
+                (d1, k1) = (d, Some(k));
             }
+        } else if d > d1 {
+            d2 = d2.max(d1);
+            (d1, k1) = (d, Some(k));
+        } else {
+            d2 = d2.max(d);
         }
-        best.1
-    };
-    let solve = |j: Option<usize>, edge: Edge| -> (f32, f32) {
-        let Some(j) = j else {
-            return (f32::NAN, f32::NAN);
+    }
+    let Some(k1) = k1 else {
+        return Pixel {
+            imax: 0.0,
+            imin: 0.0,
+            rival: 0.0,
+            valid: 0,
+            ambiguous: 0,
+            enter: f32::NAN,
+            leave: f32::NAN,
+            enter_slope: f32::NAN,
+            leave_slope: f32::NAN,
         };
+    };
+    let (hi, lo) = (depth[k1].1, profile[k1]);
+    let contrast = f32::from(hi) - f32::from(lo);
+    let deep = contrast >= min_contrast;
+    let ambiguous = deep && f32::from(d2) >= p.ambiguity * contrast;
+    let valid = deep && !ambiguous;
+    let thr = (lut[hi as usize] + lut[lo as usize]) * 0.5;
+    let bright = |c: usize| 2 * u32::from(profile[c]) >= u32::from(hi) + u32::from(lo);
+    let b = k1 / w;
+    let enter_at = (b.saturating_sub(1) * w..k1)
+        .rev()
+        .find(|&c| bright(c))
+        .unwrap()
+        + 1;
+    let leave_at = (k1 + 1..n).find(|&c| bright(c)).unwrap();
+    let solve = |j: usize, edge: Edge| -> (f32, f32) {
         let window: Vec<f32> = (0..2 * half)
             .map(|i| {
                 let f = (j as i64 - half as i64 + i as i64).clamp(0, n as i64 - 1);
@@ -297,20 +384,58 @@ fn reference(profile: &[u16], half: usize, lut: &[f32]) -> (f32, f32, f32, f32) 
             None => (f32::NAN, f32::NAN),
         }
     };
-    let (enter, enter_slope) = solve(steepest(1), Edge::Enter);
-    let (leave, leave_slope) = solve(steepest(-1), Edge::Leave);
-    (enter, leave, enter_slope, leave_slope)
+    let ((enter, enter_slope), (leave, leave_slope)) = if valid {
+        (solve(enter_at, Edge::Enter), solve(leave_at, Edge::Leave))
+    } else {
+        ((f32::NAN, f32::NAN), (f32::NAN, f32::NAN))
+    };
+    Pixel {
+        imax: f32::from(hi),
+        imin: f32::from(lo),
+        rival: f32::from(d2),
+        valid: u8::from(valid),
+        ambiguous: u8::from(ambiguous),
+        enter,
+        leave,
+        enter_slope,
+        leave_slope,
+    }
 }
 
 fn same(a: f32, b: f32) -> bool {
     a == b || (a.is_nan() && b.is_nan())
 }
 
+fn pixel(t: &ShadowTimes, i: usize) -> Pixel {
+    Pixel {
+        imax: t.imax[i],
+        imin: t.imin[i],
+        rival: t.rival[i],
+        valid: t.valid[i],
+        ambiguous: t.ambiguous[i],
+        enter: t.enter[i],
+        leave: t.leave[i],
+        enter_slope: t.enter_slope[i],
+        leave_slope: t.leave_slope[i],
+    }
+}
+
+fn same_pixel(a: &Pixel, b: &Pixel) -> bool {
+    same(a.imax, b.imax)
+        && same(a.imin, b.imin)
+        && same(a.rival, b.rival)
+        && a.valid == b.valid
+        && a.ambiguous == b.ambiguous
+        && same(a.enter, b.enter)
+        && same(a.leave, b.leave)
+        && same(a.enter_slope, b.enter_slope)
+        && same(a.leave_slope, b.leave_slope)
+}
+
 fn check_against_reference<T: Sample>(
     profiles16: &[Vec<u16>],
     convert: impl Fn(u16) -> T,
-    half: usize,
-    block: usize,
+    p: TrackerParams,
     lut: &[f32],
     lut_arg: Option<&[f32]>,
 ) {
@@ -319,33 +444,44 @@ fn check_against_reference<T: Sample>(
         .iter()
         .map(|p| p.iter().map(|&v| convert(v)).collect())
         .collect();
-    let t = track(&profiles, height, width, params(half, block), 0.0, lut_arg);
-    for (i, p) in profiles16.iter().enumerate() {
-        let (enter, leave, es, ls) = reference(p, half, lut);
-        let got = (t.enter[i], t.leave[i], t.enter_slope[i], t.leave_slope[i]);
+    let min_contrast = 8.0;
+    let t = track(&profiles, height, width, p, min_contrast, lut_arg);
+    for (i, profile) in profiles16.iter().enumerate() {
+        let want = reference(profile, p, lut, min_contrast);
+        let got = pixel(&t, i);
         assert!(
-            same(got.0, enter) && same(got.1, leave) && same(got.2, es) && same(got.3, ls),
-            "pixel {i}, window {half}, block {block}: got {got:?}, expected {:?}\n{p:?}",
-            (enter, leave, es, ls)
+            same_pixel(&got, &want),
+            "pixel {i}, {p:?}:\n got {got:?}\nwant {want:?}\n{profile:?}"
         );
+        if got.valid == 1 && got.enter.is_finite() && got.leave.is_finite() {
+            assert!(got.enter < got.leave, "pixel {i}: enter after leave");
+        }
     }
 }
 
 #[test]
-fn random_sequences_match_the_reference_for_any_block() {
+fn random_sequences_match_the_reference() {
     let mut rng = XorShift(0x2545_f491_4f6c_dd1d);
     let identity8: Vec<f32> = (0..256).map(|v| v as f32).collect();
     let gamma8: Vec<f32> = (0..256).map(|v| (v as f32 / 255.0).powf(2.2)).collect();
-    for len in [1, 2, 3, 5, 17, 40, 75] {
+    for len in [1, 2, 3, 5, 17, 40, 75, 130] {
         let profiles: Vec<Vec<u16>> = (0..3 * 70)
             .map(|_| random_profile(&mut rng, len, 255))
             .collect();
-        for half in [1, 2, 4, 7] {
-            for block in [1, 2, 7, 16, 33] {
-                check_against_reference(&profiles, |v| v as u8, half, block, &identity8, None);
+        for half in [1, 2, 4] {
+            for max_width in [4, 5, 8, 16, 33] {
+                for ambiguity in [0.6, 1.0] {
+                    let p = TrackerParams {
+                        window: half,
+                        max_width,
+                        ambiguity,
+                    };
+                    check_against_reference(&profiles, |v| v as u8, p, &identity8, None);
+                }
             }
         }
-        check_against_reference(&profiles, |v| v as u8, 4, 16, &gamma8, Some(&gamma8));
+        let p = params(4, 16);
+        check_against_reference(&profiles, |v| v as u8, p, &gamma8, Some(&gamma8));
     }
 }
 
@@ -353,14 +489,120 @@ fn random_sequences_match_the_reference_for_any_block() {
 fn random_u16_sequences_match_the_reference() {
     let mut rng = XorShift(0x9e37_79b9_7f4a_7c15);
     let identity16: Vec<f32> = (0..65536).map(|v| v as f32).collect();
-    for len in [4, 31, 64] {
+    for len in [4, 31, 64, 100] {
         let profiles: Vec<Vec<u16>> = (0..3 * 80)
             .map(|_| random_profile(&mut rng, len, 4095))
             .collect();
-        for block in [1, 7, 16] {
-            check_against_reference(&profiles, |v| v, 4, block, &identity16, None);
+        for max_width in [4, 7, 16] {
+            check_against_reference(&profiles, |v| v, params(4, max_width), &identity16, None);
         }
     }
+}
+
+// ---- Several darkening events: one dip per pixel ------------------------
+
+/// Lit 200 DN for `len` frames; `dips` are `(first dark frame, frames, level)`
+/// with instantaneous edges.
+fn with_dips(len: usize, dips: &[(usize, usize, u8)]) -> Vec<u8> {
+    let mut p = vec![200u8; len];
+    for &(start, width, level) in dips {
+        p[start..start + width].fill(level);
+    }
+    p
+}
+
+#[test]
+fn a_wide_cloud_dip_does_not_take_the_shadow_s_place() {
+    // A slow cloud (raised cosine over 100 frames, 60 DN deep) and, later,
+    // the sharp shadow (frames 150..157 at 40 DN): the steepest fall and rise
+    // of the whole capture are the shadow's, but a cloud with sharper flanks
+    // than the shadow's edges must not win either.
+    let mut p = with_dips(200, &[(150, 8, 40)]);
+    for (t, v) in p.iter_mut().enumerate().take(120).skip(20) {
+        let phase = 2.0 * std::f64::consts::PI * (t as f64 - 70.0) / 100.0;
+        *v = (200.0 - 30.0 * (1.0 + phase.cos())).round() as u8;
+    }
+    let t = track(&[p], 1, 1, params(4, 16), 20.0, None);
+    assert_eq!((t.imax[0], t.imin[0], t.valid[0]), (200.0, 40.0, 1));
+    assert_eq!(t.enter[0], 149.5);
+    assert_eq!(t.leave[0], 157.5);
+    // The cloud is shallow within any 2W frames: a far weaker rival.
+    assert!(
+        t.rival[0] > 0.0 && t.rival[0] < 0.3 * t.contrast[0],
+        "{}",
+        t.rival[0]
+    );
+    // A cloud with sharper flanks (frames 60..63 at 120 DN: 80 DN steps)
+    // than the shadow's edges (40 DN steps): the steepest fall and rise of the
+    // capture are the cloud's, the deepest dip is the shadow's.
+    let mut p = with_dips(200, &[(60, 4, 120), (153, 6, 40)]);
+    p[150..153].copy_from_slice(&[160, 120, 80]);
+    p[159..162].copy_from_slice(&[80, 120, 160]);
+    let t = track(&[p], 1, 1, params(4, 16), 20.0, None);
+    assert_eq!((t.valid[0], t.ambiguous[0], t.rival[0]), (1, 0, 80.0));
+    assert_eq!((t.enter[0], t.leave[0]), (151.0, 160.0));
+    assert_eq!((t.enter_slope[0], t.leave_slope[0]), (40.0, 40.0));
+}
+
+#[test]
+fn a_second_comparable_dip_makes_the_pixel_ambiguous() {
+    let two = with_dips(160, &[(30, 6, 40), (110, 6, 55)]);
+    let t = track(&[two], 1, 1, params(4, 16), 20.0, None);
+    assert_eq!((t.valid[0], t.ambiguous[0]), (0, 1));
+    assert_eq!((t.contrast[0], t.rival[0]), (160.0, 145.0));
+    assert!(t.enter[0].is_nan() && t.leave[0].is_nan());
+    // The same second dip, shallower than `ambiguity` × the first: not ambiguous.
+    let weak = with_dips(160, &[(30, 6, 40), (110, 6, 120)]);
+    let t = track(&[weak], 1, 1, params(4, 16), 20.0, None);
+    assert_eq!((t.valid[0], t.ambiguous[0], t.rival[0]), (1, 0, 80.0));
+    assert_eq!((t.enter[0], t.leave[0]), (29.5, 35.5));
+    // The deeper dip second in time wins just the same.
+    let later = with_dips(160, &[(30, 6, 120), (110, 6, 40)]);
+    let t = track(&[later], 1, 1, params(4, 16), 20.0, None);
+    assert_eq!((t.enter[0], t.leave[0], t.rival[0]), (109.5, 115.5, 80.0));
+}
+
+#[test]
+fn a_rise_before_the_fall_is_not_the_leave() {
+    // Dark until frame 10 (dawn: the capture starts with a rise steeper than
+    // anything after), the shadow at frames 60..67, dusk from frame 110 on
+    // (a fall that never comes back).
+    let mut p = with_dips(140, &[(0, 10, 40), (60, 8, 40)]);
+    p[110..].fill(30);
+    for max_width in [8, 16, 32] {
+        let t = track(
+            std::slice::from_ref(&p),
+            1,
+            1,
+            params(4, max_width),
+            20.0,
+            None,
+        );
+        assert_eq!(
+            (t.valid[0], t.ambiguous[0]),
+            (1, 0),
+            "max_width {max_width}"
+        );
+        assert_eq!(
+            (t.enter[0], t.leave[0]),
+            (59.5, 67.5),
+            "max_width {max_width}"
+        );
+        assert_eq!(t.rival[0], 0.0, "max_width {max_width}");
+    }
+}
+
+#[test]
+fn clipped_levels_flag_the_pixel() {
+    let mut p = with_dips(60, &[(20, 8, 40)]);
+    let t = track(std::slice::from_ref(&p), 1, 1, params(4, 16), 20.0, None);
+    assert_eq!(t.clipped[0], 0);
+    p.iter_mut().filter(|v| **v == 200).for_each(|v| *v = 255);
+    let t = track(std::slice::from_ref(&p), 1, 1, params(4, 16), 20.0, None);
+    assert_eq!((t.clipped[0], t.valid[0]), (1, 1));
+    let p = with_dips(60, &[(20, 8, 0)]);
+    let t = track(&[p], 1, 1, params(4, 16), 20.0, None);
+    assert_eq!(t.clipped[0], 1);
 }
 
 #[test]
@@ -376,7 +618,7 @@ fn finish_is_a_preview_that_does_not_disturb_the_stream() {
         assert_eq!(streaming.frames_seen(), f + 1);
         if f % 9 == 4 {
             let preview = streaming.finish(10.0, None).unwrap();
-            let mut fresh = TemporalTracker::<u8>::new(3, 40, params(4, 16)).unwrap();
+            let mut fresh = TemporalTracker::<u8>::new(3, 40, params(4, 7)).unwrap();
             for g in 0..=f {
                 fresh.update(&frame(g)).unwrap();
             }
@@ -392,7 +634,7 @@ fn finish_is_a_preview_that_does_not_disturb_the_stream() {
         }
     }
     let prefix: Vec<Vec<u8>> = profiles.clone();
-    let full = track(&prefix, 3, 40, params(4, 1), 10.0, None);
+    let full = track(&prefix, 3, 40, params(4, 7), 10.0, None);
     let end = streaming.finish(10.0, None).unwrap();
     for (a, b) in end
         .enter

@@ -187,15 +187,20 @@ fn finish_any<T: Sample>(
 #[pymethods]
 impl TemporalTracker {
     #[new]
-    #[pyo3(signature = (height, width, dtype = "uint8", window = 4, block = 16))]
+    #[pyo3(signature = (height, width, dtype = "uint8", window = 4, max_width = 32, ambiguity = 0.6))]
     fn new(
         height: usize,
         width: usize,
         dtype: &str,
         window: usize,
-        block: usize,
+        max_width: usize,
+        ambiguity: f32,
     ) -> PyResult<Self> {
-        let params = TrackerParams { window, block };
+        let params = TrackerParams {
+            window,
+            max_width,
+            ambiguity,
+        };
         let inner = match dtype {
             "uint8" => AnyTracker::U8(Tracker::new(height, width, params).map_err(value_error)?),
             "uint16" => AnyTracker::U16(Tracker::new(height, width, params).map_err(value_error)?),
@@ -238,7 +243,10 @@ impl TemporalTracker {
         dict.set_item("leave", image(py, times.leave, h, w)?)?;
         dict.set_item("enter_slope", image(py, times.enter_slope, h, w)?)?;
         dict.set_item("leave_slope", image(py, times.leave_slope, h, w)?)?;
+        dict.set_item("rival", image(py, times.rival, h, w)?)?;
         dict.set_item("valid", mask(py, times.valid, h, w)?)?;
+        dict.set_item("ambiguous", mask(py, times.ambiguous, h, w)?)?;
+        dict.set_item("clipped", mask(py, times.clipped, h, w)?)?;
         Ok(dict)
     }
 
@@ -273,18 +281,33 @@ impl TemporalTracker {
     }
 
     #[getter]
-    fn block(&self) -> usize {
-        self.params().block
+    fn max_width(&self) -> usize {
+        self.params().max_width
+    }
+
+    #[getter]
+    fn ambiguity(&self) -> f32 {
+        self.params().ambiguity
+    }
+
+    /// The instruction set this tracker's hot loops run on.
+    #[getter]
+    fn simd_path(&self) -> &'static str {
+        match &self.inner {
+            AnyTracker::U8(t) => t.simd_path().name(),
+            AnyTracker::U16(t) => t.simd_path().name(),
+        }
     }
 
     fn __repr__(&self) -> String {
         let (h, w) = self.shape();
         let p = self.params();
         format!(
-            "TemporalTracker(height={h}, width={w}, dtype={:?}, window={}, block={}, frames_seen={})",
+            "TemporalTracker(height={h}, width={w}, dtype={:?}, window={}, max_width={}, ambiguity={}, frames_seen={})",
             self.dtype(),
             p.window,
-            p.block,
+            p.max_width,
+            p.ambiguity,
             self.frames_seen()
         )
     }
