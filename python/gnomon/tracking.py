@@ -186,7 +186,7 @@ class _State:
     leave_window: np.ndarray
     evaluated: int  # frames evaluated (a multiple of W)
 
-    def copy(self) -> "_State":
+    def copy(self) -> _State:
         return _State(*(getattr(self, f.name).copy() if f.name != "evaluated" else self.evaluated
                         for f in fields(self)))
 
@@ -217,8 +217,8 @@ class NumpyTracker:
         self._m, self._w, self._ambiguity = int(window), int(max_width), float(ambiguity)
         n = self._shape[0] * self._shape[1]
         self._ring = np.zeros((3 * self._w + 2 * self._m, n), self._dtype)
-        i32 = lambda v: np.full(n, v, np.int32)  # noqa: E731
-        i64 = lambda: np.full(n, -1, np.int64)  # noqa: E731
+        i32 = lambda v: np.full(n, v, np.int32)
+        i64 = lambda: np.full(n, -1, np.int64)
         self._state = _State(i32(0), i32(0), i64(), i32(0), i32(0), i64(), i64(),
                              np.zeros((n, 2 * self._m), self._dtype),
                              np.zeros((n, 2 * self._m), self._dtype), 0)
@@ -243,7 +243,7 @@ class NumpyTracker:
 
     def _evaluate(self, s: _State, last: int) -> None:
         """Evaluate the block of frames ``s.evaluated …`` (contexts clamped to ``last``)."""
-        w, m = self._w, self._m
+        w = self._w
         start = s.evaluated
         end = min(start + w, last + 1)
         outer = min(start + 2 * w, last + 1)  # end of the right contexts (block b + 1)
@@ -329,7 +329,7 @@ class NumpyTracker:
         enter, enter_slope, enter_clip = self._solve(s.enter_at, s.enter_window, threshold, valid, lut, True)
         leave, leave_slope, leave_clip = self._solve(s.leave_at, s.leave_window, threshold, valid, lut, False)
         clipped = has_dip & ((hi == top) | (lo == 0)) | enter_clip | leave_clip
-        image = lambda a: a.reshape(self._shape)  # noqa: E731
+        image = lambda a: a.reshape(self._shape)
         return {
             "imax": image(hi.astype(np.float32)),
             "imin": image(lo.astype(np.float32)),
