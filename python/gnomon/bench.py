@@ -209,6 +209,69 @@ def format_table(r: BenchResult) -> str:
     return "\n".join(lines)
 
 
+@dataclass
+class ScanBench:
+    """One ``gnomon bench --scan`` run: decoding a capture's frames alone, then
+    the whole scan of it, in the same process (seconds; the scan's stage
+    timings as its ``report.json`` gives them)."""
+
+    field_log: str
+    frames: int
+    width: int
+    height: int
+    decode: Throughput
+    scan_seconds: float
+    scan_cpu_seconds: float
+    stages: dict[str, float]
+    load_average: float
+
+    @property
+    def ratio(self) -> float:
+        """Whole-scan wall time over decode-alone wall time."""
+        return self.scan_seconds / self.decode.seconds if self.decode.seconds > 0 else float("inf")
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["ratio"] = self.ratio
+        return d
+
+
+def run_scan_bench(field_log: str, out_dir: str) -> ScanBench:
+    """Time decoding the frames of ``field_log``'s capture alone (the scan's own
+    reader: background thread, grey conversion), then the whole default scan
+    into ``out_dir`` (outputs and recording included)."""
+    from gnomon.fieldlog import load_field_log
+    from gnomon.frames import FrameSource
+    from gnomon.pipeline import run_scan
+
+    log = load_field_log(field_log)
+    source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
+    t0, c0 = time.perf_counter(), time.process_time()
+    count, shape = 0, (0, 0)
+    for frame in source:
+        count, shape = count + 1, frame.grey.shape
+    decode = Throughput(count, time.perf_counter() - t0, time.process_time() - c0)
+    t0, c0 = time.perf_counter(), time.process_time()
+    result = run_scan(field_log, out_dir)
+    scan_s, scan_cpu = time.perf_counter() - t0, time.process_time() - c0
+    stages = {k: float(v) for k, v in result.report.get("timings_s", {}).items()}
+    return ScanBench(str(field_log), count, int(shape[1]), int(shape[0]), decode, scan_s, scan_cpu,
+                     stages, _load_average())
+
+
+def format_scan_table(r: ScanBench) -> str:
+    lines = [
+        f"gnomon bench --scan {r.field_log}: {r.frames} frames {r.width}x{r.height}, "
+        f"kernel SIMD path {_kernel.simd_path()}, load average {r.load_average:.1f}",
+        f"  decode alone  {r.decode.seconds:8.2f} s wall {r.decode.cpu_seconds:8.2f} s CPU "
+        f"({r.decode.fps:.0f} frames/s)",
+        f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
+        f"{r.ratio:.2f}x the decode-alone wall time",
+        *(f"    {name:<28} {sec:8.2f} s" for name, sec in r.stages.items()),
+    ]
+    return "\n".join(lines)
+
+
 def _child(frames: int, height: int, width: int, window: int, max_width: int) -> dict:
     distinct = synthetic_frames(height, width)
     tracker = _kernel.TemporalTracker(height, width, "uint8", window=window, max_width=max_width)

@@ -30,12 +30,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--height", type=int, default=1080, help="frame height, pixels (default 1080)")
     p.add_argument("--window", type=int, default=4, help="tracker window half-width m (default 4)")
     p.add_argument("--max-width", type=int, default=32, help="tracker dip width W, frames (default 32)")
+    p.add_argument("--scan", metavar="FIELD_LOG",
+                   help="instead: time decoding this capture's frames alone, then its whole scan")
+    p.add_argument("--scan-out", metavar="DIR", help="output folder of the --scan run (default: a temporary one)")
     p.add_argument("--no-memory", action="store_true", help="skip the peak-memory subprocesses")
     p.add_argument("--json", metavar="PATH", help="also write the figures as JSON to PATH")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.scan:
+        return _run_scan(args)
     for name in ("frames", "numpy_frames", "width", "height", "window", "max_width"):
         if getattr(args, name) < 1:
             raise GnomonError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(args, name)}")
@@ -53,6 +58,19 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:  # the kernel's parameter checks
         raise GnomonError(str(exc)) from None
     print(format_table(result))
+    if args.json:
+        write_text(args.json, json.dumps(result.to_dict(), indent=2) + "\n")
+    return 0
+
+
+def _run_scan(args: argparse.Namespace) -> int:
+    import tempfile
+
+    from gnomon.bench import format_scan_table, run_scan_bench
+
+    with tempfile.TemporaryDirectory(prefix="gnomon-bench-") as tmp:
+        result = run_scan_bench(args.scan, args.scan_out or tmp)
+    print(format_scan_table(result))
     if args.json:
         write_text(args.json, json.dumps(result.to_dict(), indent=2) + "\n")
     return 0
