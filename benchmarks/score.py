@@ -1,0 +1,155 @@
+"""Scoring a scan of a real two-plane capture against its own reference planes.
+
+Used by ``benchmarks/real_captures.py``; not part of the package (it needs
+hand-drawn outlines of the object, which only a benchmark has).
+
+Frames: the scan's world frame, i.e. the first plane's markers' frame (the
+desk's). Each pixel sees the plane its ray meets first (desk and wall form a
+concave corner). "Bare" pixels are those pixels inside the planes' marker
+rectangles grown by ``margin`` (world units), away from the object's and its
+cast shadow's outlines (grown by ``keep_out_px``) and from the markers.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from gnomon.calibration import load_camera_file
+from gnomon.camera import Pose
+
+
+@dataclass
+class PlaneScore:
+    name: str
+    swept: int  # bare pixels with a shadow time
+    points: int  # of those, with a point
+    median_abs: float  # median |distance| to the markers' plane
+    rms: float  # RMS distance to the markers' plane
+    fit_median_abs: float  # median |distance| to the points' own best plane (flatness alone)
+    fit_rms: float
+
+    @property
+    def coverage(self) -> float:
+        return self.points / max(self.swept, 1)
+
+
+@dataclass
+class CaptureScore:
+    name: str
+    planes: list[PlaneScore]
+    object_pixels: int = 0
+    object_points: int = 0
+    object_swept: int = 0
+    object_swept_points: int = 0
+    false_points: int = 0
+    all_points: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    def lines(self) -> list[str]:
+        out = [f"{self.name}"]
+        for p in self.planes:
+            out.append(f"  {p.name:5s} planarity median {p.median_abs:.3f} mm, RMS {p.rms:.3f} mm "
+                       f"(to its own best plane: median {p.fit_median_abs:.3f}, RMS {p.fit_rms:.3f}); "
+                       f"coverage {100 * p.coverage:.1f} % of {p.swept} swept bare pixels")
+        if self.object_pixels:
+            out.append(f"  object coverage {100 * self.object_points / self.object_pixels:.1f} % of its "
+                       f"{self.object_pixels} pixels ({100 * self.object_swept_points / max(self.object_swept, 1):.1f} % "
+                       f"of the {self.object_swept} with a shadow time)")
+        what = "outside the object" if self.object_pixels else "object included: no outline"
+        out.append(f"  points off both planes by > 5 mm ({what}) "
+                   f"{100 * self.false_points / max(self.all_points, 1):.2f} % of {self.all_points}")
+        out.extend(f"  note: {n}" for n in self.notes)
+        return out
+
+
+def _polygon_mask(shape, polygons, grow_px: int = 0) -> np.ndarray:
+    m = np.zeros(shape, dtype=np.uint8)
+    for poly in polygons:
+        cv2.fillPoly(m, [np.asarray(poly, dtype=np.int32).reshape(-1, 1, 2)], 1)
+    if grow_px > 0:
+        m = cv2.dilate(m, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow_px + 1, 2 * grow_px + 1)))
+    elif grow_px < 0:
+        m = cv2.erode(m, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (-2 * grow_px + 1, -2 * grow_px + 1)))
+    return m.astype(bool)
+
+
+def score_scan(name: str, scan_dir: Path, camera_file: Path, extents: dict[str, tuple[float, float, float, float]] | None,
+               object_outline: list | None = None, shadow_outlines: list | None = None,
+               keep_out_px: int = 12, marker_keep_out_px: int = 40, false_mm: float = 5.0,
+               region_masks: dict[str, np.ndarray] | None = None) -> CaptureScore:
+    """Score one scan.
+
+    ``extents``: per plane, (x0, x1, y0, y1) in the plane's own 2-D frame
+    (world units) where it is bare paper; ``object_outline``: the object's
+    outline (pixels) in the first frame; ``shadow_outlines``: its cast
+    shadows' outlines (pixels).
+    """
+    report = json.loads((scan_dir / "report.json").read_text())
+    depth = np.load(scan_dir / "depth.npy")
+    shadow_time = np.load(scan_dir / "shadow_time.npy")
+    cam = load_camera_file(camera_file)
+    rays = cam.ray_map().astype(np.float64)
+    h, w = depth.shape
+    planes = report["reference_planes"]
+    # Each plane in the camera frame (from its own markers' pose): origin, axes, normal.
+    frames = {}
+    for p in planes:
+        R = Pose.from_rvec_tvec(np.array(p["rvec"]), np.array(p["tvec"])).R
+        frames[p["name"] if "name" in p else p["plane"]] = (np.array(p["tvec"]), R)
+    hits = {}
+    for pname, (t, R) in frames.items():
+        n = R[:, 2]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = (n @ t) / (rays @ n)
+        s[s <= 0] = np.inf
+        hits[pname] = s
+    names = list(frames)
+    nearest = np.argmin(np.stack([hits[k] for k in names]), axis=0)
+    pts_cam = rays * (depth / rays[..., 2])[..., None]
+    markers = np.zeros((h, w), dtype=bool)
+    for p in planes:
+        for u, v in p["pixels"]:
+            markers[max(int(v) - marker_keep_out_px, 0):int(v) + marker_keep_out_px,
+                    max(int(u) - marker_keep_out_px, 0):int(u) + marker_keep_out_px] = True
+    obj = _polygon_mask((h, w), [object_outline], keep_out_px) if object_outline else np.zeros((h, w), bool)
+    shadow = _polygon_mask((h, w), shadow_outlines or [], keep_out_px)
+    swept = np.isfinite(shadow_time)
+    has = np.isfinite(depth)
+    result = CaptureScore(name, [])
+    dist_any = np.full((h, w), np.inf)
+    for k, pname in enumerate(names):
+        t, R = frames[pname]
+        on = rays * hits[pname][..., None]
+        local = np.einsum("hwi,ij->hwj", on - t, R)  # plane coordinates (x, y, ~0)
+        if region_masks is not None:
+            inside = region_masks[pname] & (nearest == k)
+        else:
+            assert extents is not None
+            x0, x1, y0, y1 = extents[pname]
+            inside = (nearest == k) & np.isfinite(hits[pname]) & (local[..., 0] >= x0) & (local[..., 0] <= x1) \
+                & (local[..., 1] >= y0) & (local[..., 1] <= y1)
+        bare = inside & ~obj & ~shadow & ~markers
+        d = (pts_cam - t) @ R[:, 2]  # signed distance to the markers' plane
+        dist_any = np.minimum(dist_any, np.where(np.isfinite(d), np.abs(d), np.inf))
+        sel = bare & swept & has
+        dd = d[sel]
+        P = pts_cam[sel]
+        c = P.mean(axis=0)
+        normal = np.linalg.svd(P - c, full_matrices=False)[2][2]
+        fit = (P - c) @ normal
+        result.planes.append(PlaneScore(pname, int((bare & swept).sum()), int(sel.sum()),
+                                        float(np.median(np.abs(dd))), float(np.sqrt(np.mean(dd ** 2))),
+                                        float(np.median(np.abs(fit))), float(np.sqrt(np.mean(fit ** 2)))))
+    if object_outline:
+        tight = _polygon_mask((h, w), [object_outline], -3)
+        result.object_pixels = int(tight.sum())
+        result.object_points = int((tight & has).sum())
+        result.object_swept = int((tight & swept).sum())
+        result.object_swept_points = int((tight & swept & has).sum())
+    result.all_points = int(has.sum())
+    result.false_points = int((has & ~obj & (dist_any > false_mm)).sum())
+    return result
