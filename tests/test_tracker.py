@@ -409,3 +409,19 @@ def test_saturated_lit_level_flags_the_pixel():
     assert not times.clipped.any()
     times = track_both(base + 80 + rng.normal(0, 1.0, (n, pixels)))  # lit at 280 DN: clipped to 255
     assert times.clipped.all()
+
+
+def test_numpy_tracker_captures_in_chunks(monkeypatch):
+    """The numpy reference captures windows a chunk of pixels at a time: the
+    result does not depend on the chunk."""
+    import gnomon.tracking as tracking
+
+    rng = np.random.default_rng(16)
+    n, pixels = 120, 90
+    enter = rng.uniform(10, 100, pixels)
+    values = np.stack([dips_profile(n, [(e, e + rng.uniform(3, 12), SHADOW)]) for e in enter], axis=1)
+    values[:, ::3] = np.stack([dips_profile(n, [(20.5, 27.25, SHADOW), (70.25, 75.5, 60.0)])
+                               for _ in range(pixels // 3)], axis=1)
+    monkeypatch.setattr(tracking, "_CAPTURE_CHUNK", 7)
+    times = track_both(values + rng.normal(0, 1.0, (n, pixels)))
+    assert times.ambiguous[0, ::3].all() and times.valid.sum() > pixels // 2

@@ -191,6 +191,10 @@ class _State:
                         for f in fields(self)))
 
 
+_CAPTURE_CHUNK = 1 << 16
+"""Pixels whose windows NumpyTracker captures at once (bounds its temporary arrays)."""
+
+
 class NumpyTracker:
     """The kernel tracker's definitions, implemented independently with numpy.
 
@@ -279,23 +283,26 @@ class NumpyTracker:
 
     def _capture(self, s: _State, px: np.ndarray, start: int, outer: int, last: int) -> None:
         """Enter/leave window centres and windows of the pixels ``px`` whose best dip
-        (at ``s.k1``) lies in the block from ``start``."""
+        (at ``s.k1``) lies in the block from ``start``, in chunks of pixels."""
         w, m = self._w, self._m
         f0 = max(0, start - w - m)
         f1 = min(last + 1, outer + m - 1)
         frames = np.arange(f0, f1)[:, None]
-        stack = np.stack([self._frame(f)[px] for f in range(f0, f1)])  # (F, P)
-        k1 = s.k1[px][None, :]
-        bright = 2 * stack.astype(np.int64) >= (s.hi[px] + s.lo[px])[None, :]
-        before = bright & (frames >= max(0, start - w)) & (frames < k1)
-        after = bright & (frames > k1) & (frames < outer)
-        enter = f0 + (len(frames) - 1 - np.argmax(before[::-1], axis=0)) + 1
-        leave = f0 + np.argmax(after, axis=0)
-        s.enter_at[px], s.leave_at[px] = enter, leave
-        cols = np.arange(px.size)[None, :]
         offsets = np.arange(-m, m)[:, None]
-        s.enter_window[px] = stack[np.clip(enter[None, :] + offsets, 0, last) - f0, cols].T
-        s.leave_window[px] = stack[np.clip(leave[None, :] + offsets, 0, last) - f0, cols].T
+        for lo in range(0, px.size, _CAPTURE_CHUNK):
+            p = px[lo:lo + _CAPTURE_CHUNK]
+            stack = np.stack([self._frame(f)[p] for f in range(f0, f1)])  # (F, P)
+            k1 = s.k1[p][None, :]
+            # 2·v ≥ hi + lo  ⇔  v ≥ ⌈(hi + lo) / 2⌉ (integers)
+            bright = stack >= ((s.hi[p] + s.lo[p] + 1) // 2).astype(self._dtype)[None, :]
+            before = bright & (frames >= max(0, start - w)) & (frames < k1)
+            after = bright & (frames > k1) & (frames < outer)
+            enter = f0 + (len(frames) - 1 - np.argmax(before[::-1], axis=0)) + 1
+            leave = f0 + np.argmax(after, axis=0)
+            s.enter_at[p], s.leave_at[p] = enter, leave
+            cols = np.arange(p.size)[None, :]
+            s.enter_window[p] = stack[np.clip(enter[None, :] + offsets, 0, last) - f0, cols].T
+            s.leave_window[p] = stack[np.clip(leave[None, :] + offsets, 0, last) - f0, cols].T
 
     def finish(self, min_contrast: float, lut: np.ndarray | None = None) -> dict[str, np.ndarray]:
         """Per-pixel results for the frames seen so far, as the kernel's ``finish``."""
