@@ -266,12 +266,12 @@ def run_scan_bench(field_log: str, out_dir: str) -> ScanBench:
 
 def format_scan_table(r: ScanBench) -> str:
     lines = [
-        f"gnomon bench --scan {r.field_log}: {r.frames} frames {r.width}x{r.height}, "
-        f"kernel SIMD path {_kernel.simd_path()}, load average {r.load_average:.1f}",
-        f"  decode alone  {r.decode.seconds:8.2f} s wall {r.decode.cpu_seconds:8.2f} s CPU "
-        f"({r.decode.fps:.0f} frames/s)",
-        f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
-        f"{r.ratio:.2f}x the decode-alone wall time",
+        (f"gnomon bench --scan {r.field_log}: {r.frames} frames {r.width}x{r.height}, "
+         f"kernel SIMD path {_kernel.simd_path()}, load average {r.load_average:.1f}"),
+        (f"  decode alone  {r.decode.seconds:8.2f} s wall {r.decode.cpu_seconds:8.2f} s CPU "
+         f"({r.decode.fps:.0f} frames/s)"),
+        (f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
+         f"{r.ratio:.2f}x the decode-alone wall time"),
         *(f"    {name:<28} {sec:8.2f} s" for name, sec in r.stages.items()),
     ]
     return "\n".join(lines)
