@@ -126,6 +126,36 @@ class MarkerSpec:
 
 
 @dataclass(frozen=True)
+class ArucoSpec:
+    """ArUco markers printed on a plane (``[planes.aruco]``): found by their IDs, no pixels.
+
+    ``dictionary``: OpenCV's predefined dictionary name; ``size``: a marker's
+    side, black border included (world units); ``markers``: (id, (a, b)) the
+    centres in the plane's 2-D frame. Orientation: see :mod:`gnomon.aruco`.
+    """
+
+    dictionary: str
+    size: float
+    markers: tuple[tuple[int, tuple[float, float]], ...]
+
+
+@dataclass(frozen=True)
+class CharucoSpec:
+    """A ChArUco board lying on a plane (``[planes.charuco]``).
+
+    ``squares``: (cols, rows) squares; ``square``, ``marker``: their sides
+    (world units); ``origin``: the board's top-left corner in the plane's 2-D
+    frame (its x along the plane's x, its rows down along −y; see :mod:`gnomon.aruco`).
+    """
+
+    dictionary: str
+    squares: tuple[int, int]
+    square: float
+    marker: float
+    origin: tuple[float, float] = (0.0, 0.0)
+
+
+@dataclass(frozen=True)
 class PlaneSpec:
     """A reference plane in world coordinates, with the image regions where it is bare.
 
@@ -144,6 +174,8 @@ class PlaneSpec:
     image: Path | None = None  # the photo with the markers or board (default: the first frame)
     polygons: tuple[np.ndarray, ...] = ()  # (K, 2) pixel vertices each
     mask_file: Path | None = None  # an image: non-zero where the plane is bare and swept
+    aruco: ArucoSpec | None = None  # ArUco markers on the plane (found by ID)
+    charuco: CharucoSpec | None = None  # a ChArUco board on the plane
 
     @property
     def has_regions(self) -> bool:
@@ -164,6 +196,13 @@ class PlaneSpec:
                 raise FieldLogError(f"{self.mask_file}: mask is {mask.shape[1]}x{mask.shape[0]}, "
                                     f"the frames {shape[1]}x{shape[0]} (plane {self.name!r})")
         return region_mask(shape, self.regions, self.polygons, mask)
+
+    def plane_to_world(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) coordinates in the plane's 2-D frame → (N, 3) world coordinates (needs ``x_axis``)."""
+        assert self.x_axis is not None
+        y_axis = np.cross(self.normal, self.x_axis)
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+        return self.point + xy[:, :1] * self.x_axis + xy[:, 1:] * y_axis
 
     def marker_world(self) -> np.ndarray:
         """(N, 3) world coordinates of the markers' centres."""
@@ -408,9 +447,60 @@ def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
     image = t.path.resolve().parent / t.string("image") if "image" in t.data else None
     if image is not None and not image.is_file():
         raise t.error("image", f"{image} not found")
+    aruco = _parse_aruco(t.subtable("aruco")) if "aruco" in t.data else None
+    charuco = _parse_charuco(t.subtable("charuco")) if "charuco" in t.data else None
+    if (aruco or charuco) and x_axis is None:
+        raise FieldLogError(f"{t.path}: [{t.name}] ArUco markers or a ChArUco board need 'x_axis' (the plane's 2-D frame)")
+    if sum(bool(x) for x in (markers, chessboard, aruco, charuco)) > 1:
+        raise FieldLogError(f"{t.path}: [{t.name}] give one of markers, chessboard, aruco or charuco per plane")
     t.done()
     return PlaneSpec(name, point, normal, tuple(regions), x_axis, tuple(markers), chessboard, square, image,
-                     tuple(polygons), mask_file)
+                     tuple(polygons), mask_file, aruco, charuco)
+
+
+def _dictionary_name(t: _Table) -> str:
+    import cv2
+
+    name = t.string("dictionary", "DICT_4X4_50")
+    if not name.upper().startswith("DICT_") or not hasattr(cv2.aruco, name.upper()):
+        raise t.error("dictionary", f"unknown ArUco dictionary {name!r} (e.g. DICT_4X4_50, DICT_5X5_100, DICT_6X6_250)")
+    return name.upper()
+
+
+def _parse_aruco(t: _Table | None) -> ArucoSpec:
+    assert t is not None
+    dictionary = _dictionary_name(t)
+    size = t.number("size", positive=True)
+    raw = t.take("markers")
+    if not isinstance(raw, list) or len(raw) < 2:
+        raise t.error("markers", "expected a list of at least 2 { id = N, plane_xy = [x, y] } tables")
+    markers, seen = [], set()
+    for k, m in enumerate(raw):
+        mt = _Table(t.path, f"{t.name}.markers.{k}", m)
+        mid = mt.integer("id", minimum=0)
+        if mid in seen:
+            raise mt.error("id", f"ArUco id {mid} is listed twice on this plane")
+        seen.add(mid)
+        xy = mt.vector("plane_xy", 2)
+        mt.done()
+        markers.append((mid, (float(xy[0]), float(xy[1]))))
+    t.done()
+    return ArucoSpec(dictionary, float(size), tuple(markers))
+
+
+def _parse_charuco(t: _Table | None) -> CharucoSpec:
+    assert t is not None
+    dictionary = _dictionary_name(t)
+    raw = t.take("squares")
+    if not (isinstance(raw, list) and len(raw) == 2 and all(isinstance(x, int) and not isinstance(x, bool) and x >= 2 for x in raw)):
+        raise t.error("squares", f"expected [cols, rows] squares of the board, each >= 2, got {raw!r}")
+    square = t.number("square", positive=True)
+    marker = t.number("marker", positive=True)
+    if not marker < square:
+        raise t.error("marker", f"the marker ({marker}) must be smaller than the square ({square})")
+    origin = t.vector("origin", 2, [0.0, 0.0])
+    t.done()
+    return CharucoSpec(dictionary, (int(raw[0]), int(raw[1])), float(square), float(marker), (float(origin[0]), float(origin[1])))
 
 
 def _parse_light(t: _Table, base: Path) -> LightSpec:
@@ -563,7 +653,7 @@ def load_field_log(path: str | Path) -> FieldLog:
     if light.kind == "two-plane" and len(planes) < 2:
         raise FieldLogError(f"{p}: [light] kind 'two-plane' needs two [[planes]] (e.g. desk and wall)")
 
-    if pose is None and not any(pl.markers or pl.chessboard for pl in planes):
+    if pose is None and not any(pl.markers or pl.chessboard or pl.aruco or pl.charuco for pl in planes):
         raise FieldLogError(
             f"{p}: missing required table [camera.pose] (the world → camera transform), "
             "or markers or a chessboard on a [[planes]] entry to measure it"

@@ -47,6 +47,8 @@ def register(subparsers) -> None:
                         "(default 2026-11-12T11:40:00; the capture lasts 3 h 19 min)")
     p.add_argument("--pole-radius", type=float, default=0.05, metavar="M", help="facade_sun: pole radius, m")
     p.add_argument("--clouds", type=int, default=3, help="facade_sun: number of cloud dips (0-10)")
+    p.add_argument("--markers", choices=("checker", "aruco"), default="checker",
+                   help="two_plane: printed 2x2 checkers (pixel hints in the field log) or ArUco markers (ids only)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -85,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
                                 pencil_photos=args.pencil_photos)
         simulate = simulate_desk_lamp
     elif args.scene == "two_plane":
-        config = TwoPlaneConfig(**common)
+        config = TwoPlaneConfig(**common, markers=args.markers)
         simulate = simulate_two_plane
     elif args.scene == "facade_sun":
         from gnomon.simulate.facade_sun import FacadeSunConfig, simulate_facade_sun

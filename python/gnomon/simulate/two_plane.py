@@ -23,7 +23,12 @@ Scene (world frame = the desk, millimetres, z up out of the desk)
   function, which carries its own plane texture and albedos. Their
   albedo is box-filtered over the pixel (4 × 4 sub-samples) before the blur,
   so the X-junction is rendered at sub-pixel precision. Markers sit
-  on bare plane outside the field log's regions, away from objects;
+  on bare plane outside the field log's regions, away from objects. With
+  ``markers = "aruco"`` (``--markers aruco``) each checker is replaced by the
+  ArUco marker of id 0–7 (``ARUCO_DICTIONARY``, 40 mm wide border included,
+  on the same paper; see :mod:`gnomon.simulate.markers` for its
+  orientation), and the field log gives each plane's ``[planes.aruco]``:
+  dictionary, size and ``markers`` (ids and centres), no pixels;
 * a camera 650 mm from ``SCENE_CENTRE`` (on the corner's side of the desk),
   looking 32° down, turned −5° about z, rolled 1°; the same lens, sizes and
   nuisance as ``desk_lamp`` (fx = 900 px at 800 × 600, distortion, blur,
@@ -86,7 +91,9 @@ counting printed albedo edges (marker borders) as boundaries; plus
 ``plane_x_axes`` (2, 3) in field-log order (desk, wall), and for the markers
 (arrays (2, 4, …), plane-major in the same order): ``marker_ids``,
 ``marker_plane_xy``, ``marker_world``, ``marker_pixels`` (the true
-projections of the centres) and ``marker_hints`` (as written in the log).
+projections of the centres) and ``marker_hints`` (as written in the log);
+with ArUco markers also ``marker_corner_pixels`` (2, 4, 4, 2), the true
+projections of each marker's corners in OpenCV's order.
 """
 
 from __future__ import annotations
@@ -104,6 +111,7 @@ import numpy as np
 from gnomon import toml_io
 from gnomon.errors import GnomonError
 from gnomon.simulate import geometry as geo
+from gnomon.simulate.markers import aruco_bits, aruco_class, aruco_corners
 from gnomon.simulate.desk_lamp import (
     AMBIENT,
     BOX,
@@ -147,15 +155,30 @@ MARKER_WHITE, MARKER_BLACK = 0.80, 0.06
 MARKER_SUBSAMPLES = 4         # per pixel side, for the printed albedo
 MARKER_KEEP_OUT_PX = 3        # regions stay this far from any marker paper
 HINT_OFFSET_PX = (3.0, 8.0)
+ARUCO_DICTIONARY = "DICT_4X4_50"
+MARKER_KINDS = ("checker", "aruco")
 
 
 @dataclass(frozen=True)
 class TwoPlaneConfig(SweepConfig):
-    """Parameters of ``gnomon simulate two_plane`` (the same as desk_lamp's sweep)."""
+    """Parameters of ``gnomon simulate two_plane`` (desk_lamp's sweep, plus the kind of markers).
+
+    ``markers``: ``"checker"`` (2×2 checkers, pixel hints in the field log) or
+    ``"aruco"`` (ArUco markers of ``ARUCO_DICTIONARY``, ids 0–7, each
+    ``MARKER_CHECKER`` wide on the same white paper; the field log gives their
+    ids and plane coordinates only, no pixels).
+    """
+
+    markers: str = "checker"
 
     @property
     def scene_name(self) -> str:
         return "two_plane"
+
+    def validate(self) -> None:
+        super().validate()
+        if self.markers not in MARKER_KINDS:
+            raise self.error(f"--markers {self.markers!r}: expected one of {', '.join(MARKER_KINDS)}")
 
 
 def plane_y_axis(normal, x_axis) -> np.ndarray:
@@ -238,8 +261,12 @@ class TwoPlaneScene(DeskLampScene):
         ab = world_to_plane(oid, X)
         albedo = self._texture(ab, 1 if oid == DESK else 5)
         cls = np.zeros(ab.shape[:-1], dtype=np.int8)
-        for centre in MARKERS[oid]:
-            cls = np.maximum(cls, marker_class(ab - np.asarray(centre)))
+        for k, centre in enumerate(MARKERS[oid]):
+            if self.config.markers == "aruco":
+                bits = aruco_bits(ARUCO_DICTIONARY, 4 * PLANE_ORDER.index(oid) + k)
+                cls = np.maximum(cls, aruco_class(ab - np.asarray(centre), bits, MARKER_CHECKER, MARKER_PAPER))
+            else:
+                cls = np.maximum(cls, marker_class(ab - np.asarray(centre)))
         albedo = np.where(cls == 1, MARKER_WHITE, np.where(cls == 2, MARKER_BLACK, albedo))
         return albedo, cls
 
@@ -408,7 +435,7 @@ class TwoPlaneScene(DeskLampScene):
     # ------------------------------------------------------------- markers
     def _setup_markers(self) -> None:
         rng = np.random.default_rng([self.config.seed, 6])
-        ids, xy, world, pix, hints = [], [], [], [], []
+        ids, xy, world, pix, hints, corner_pix = [], [], [], [], [], []
         for p_i, oid in enumerate(PLANE_ORDER):
             centres = np.array(MARKERS[oid], dtype=np.float64)
             X = plane_to_world(oid, centres)
@@ -428,6 +455,7 @@ class TwoPlaneScene(DeskLampScene):
                 box = (slice(v0, v1), slice(u0, u1))
                 if not (self.object_id[box][paper[box]] == oid).all():
                     raise GnomonError(f"simulate {self.name}: marker {p_i * 4 + k} is hidden")
+            corner_pix.append(np.array([self.project(plane_to_world(oid, aruco_corners(c, MARKER_CHECKER))) for c in centres]))
             ids.append(np.arange(len(X)) + 4 * p_i)
             xy.append(centres)
             world.append(X)
@@ -438,6 +466,7 @@ class TwoPlaneScene(DeskLampScene):
         self.marker_world = np.array(world)
         self.marker_pixels = np.array(pix)
         self.marker_hints = np.array(hints)
+        self.marker_corner_pixels = np.array(corner_pix)  # (2, 4, 4, 2): an ArUco marker's corners (markers = "aruco")
 
     # ------------------------------------------------------------- outputs
     def ground_truth_arrays(self) -> dict[str, np.ndarray]:
@@ -455,6 +484,8 @@ class TwoPlaneScene(DeskLampScene):
             "marker_pixels": self.marker_pixels.copy(),
             "marker_hints": self.marker_hints.copy(),
         })
+        if self.config.markers == "aruco":
+            arrays["marker_corner_pixels"] = self.marker_corner_pixels.copy()
         return arrays
 
     def field_log(self) -> dict:
@@ -467,11 +498,23 @@ class TwoPlaneScene(DeskLampScene):
                 "normal": [float(x) for x in normal],
                 "x_axis": [float(x) for x in x_axis],
                 "regions": [list(map(int, r)) for r in self.regions[oid]],
-                "markers": [{"id": int(self.marker_ids[p_i, k]),
-                             "plane_xy": [float(x) for x in self.marker_plane_xy[p_i, k]],
-                             "pixel_hint": [float(x) for x in self.marker_hints[p_i, k]]}
-                            for k in range(self.marker_ids.shape[1])],
             })
+            if self.config.markers == "aruco":
+                planes[-1]["aruco"] = {
+                    "dictionary": ARUCO_DICTIONARY,
+                    "size": MARKER_CHECKER,
+                    "markers": [
+                        {"id": int(self.marker_ids[p_i, k]), "plane_xy": [float(x) for x in self.marker_plane_xy[p_i, k]]}
+                        for k in range(self.marker_ids.shape[1])
+                    ],
+                }
+            else:
+                planes[-1]["markers"] = [
+                    {"id": int(self.marker_ids[p_i, k]),
+                     "plane_xy": [float(x) for x in self.marker_plane_xy[p_i, k]],
+                     "pixel_hint": [float(x) for x in self.marker_hints[p_i, k]]}
+                    for k in range(self.marker_ids.shape[1])
+                ]
         return {
             "capture": self.capture_table(),
             "camera": self.camera_table(),
