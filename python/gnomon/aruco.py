@@ -31,7 +31,7 @@ lengths in the plane's units.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import cv2
 import numpy as np
@@ -208,6 +208,7 @@ def plane_pose_from_aruco(
     size: float,
     *,
     linear: np.ndarray | None = None,
+    to_world: Callable[[np.ndarray], np.ndarray] | None = None,
     source: str = "image",
     min_markers: int = 2,
 ) -> PlanePose:
@@ -221,6 +222,9 @@ def plane_pose_from_aruco(
     named in a warning. An ID seen twice is an error (two prints of one marker).
     ``linear``: the image in linear intensity, for the corners' refinement
     (see :func:`detect_aruco`; give it whenever the input's gamma is known).
+    ``to_world``: maps (N, 2) plane coordinates to (N, 3) world coordinates;
+    then the pose is the world frame's (as for markers given in world
+    coordinates), else the plane frame's.
     """
     if not size > 0:
         raise GnomonError(f"{source}: ArUco marker size must be positive, got {size!r}")
@@ -238,6 +242,8 @@ def plane_pose_from_aruco(
             f"need at least {min_markers}"
         )
     obj = np.concatenate([aruco_corner_points(markers[i], size) for i in ids])
+    if to_world is not None:
+        obj = to_world(obj)
     pix = np.concatenate([found.corners[i] for i in ids])
     names = [f"id {i} corner {k}" for i in ids for k in range(4)]
     res = fit_plane_pose(camera, obj, pix, names=names, method="aruco", source=source)
@@ -256,6 +262,7 @@ def plane_pose_from_charuco(
     marker: float,
     *,
     origin: Sequence[float] = (0.0, 0.0),
+    to_world: Callable[[np.ndarray], np.ndarray] | None = None,
     source: str = "image",
     min_corners: int = 6,
 ) -> PlanePose:
@@ -266,7 +273,7 @@ def plane_pose_from_charuco(
     board's top-left corner lies on the plane. The board's inner corners that
     OpenCV interpolates from the markers it sees are the points: a board
     partly covered by an object still gives a plane while ``min_corners``
-    corners remain. A corner whose residual is over 4× the median (and 1 px)
+    corners remain. ``to_world`` as for :func:`plane_pose_from_aruco`. A corner whose residual is over 4× the median (and 1 px)
     — pulled off by an occluding edge — is left out once, with a warning.
     """
     cols, rows = (int(x) for x in squares)
@@ -291,6 +298,8 @@ def plane_pose_from_charuco(
     pix = np.asarray(ch_corners, dtype=np.float64).reshape(-1, 2)
     bxy = np.asarray(board.getChessboardCorners(), dtype=np.float64)[ids, :2]
     obj = np.asarray(origin, dtype=np.float64) + bxy * np.array([1.0, -1.0])
+    if to_world is not None:
+        obj = to_world(obj)
     names = [f"charuco corner {i}" for i in ids]
     res = fit_plane_pose(camera, obj, pix, names=names, method="charuco", source=source)
     # A corner at the edge of an object standing on the board can be pulled off
