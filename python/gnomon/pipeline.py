@@ -384,6 +384,24 @@ def _first_frame(source: FrameSource) -> np.ndarray:
     raise FrameError(f"{source.name}: no frames")
 
 
+def _plane_pose_from_aruco(log: FieldLog, plane, image: np.ndarray, camera, where: str):
+    """A plane's pose from its ArUco markers or ChArUco board, in the world frame (no pixel hints)."""
+    from gnomon.aruco import plane_pose_from_aruco, plane_pose_from_charuco
+    from gnomon.frames import to_grey
+
+    grey = to_grey(image)
+    if plane.aruco is not None:
+        linear = decoding_lut(log.capture.gamma, grey.dtype)[grey] if grey.dtype in (np.uint8, np.uint16) else None
+        return plane_pose_from_aruco(
+            grey, camera, dict(plane.aruco.markers), plane.aruco.dictionary, plane.aruco.size,
+            linear=linear, to_world=plane.plane_to_world, source=where,
+        )
+    c = plane.charuco
+    return plane_pose_from_charuco(
+        grey, camera, c.dictionary, c.squares, c.square, c.marker, origin=c.origin, to_world=plane.plane_to_world, source=where,
+    )
+
+
 def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldLog, list[dict]]:
     """Measure the planes that carry markers or a chessboard, each from its own.
 
@@ -401,7 +419,7 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
     from gnomon.calibration import fit_camera_to_frames, read_grey
     from gnomon.markers import fit_plane_pose, plane_pose_from_chessboard, plane_pose_from_markers
 
-    measured_planes = [p for p in log.planes if p.markers or p.chessboard]
+    measured_planes = [p for p in log.planes if p.markers or p.chessboard or p.aruco or p.charuco]
     if not measured_planes:
         return log, []
     first = None
@@ -416,7 +434,9 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
         where = f"{log.path}: [[planes]] {plane.name}: {name}"
         # A plane's own photo may be a still at another resolution of the same sensor.
         camera, _ = fit_camera_to_frames(log.camera, image.shape[1], image.shape[0], f"{log.path}: [camera]", name)
-        if plane.markers:
+        if plane.aruco is not None or plane.charuco is not None:
+            pp = _plane_pose_from_aruco(log, plane, image, camera, where)
+        elif plane.markers:
             names = [f"{plane.name} marker {m.id}" for m in plane.markers]
             pixels = np.array([m.pixel_hint for m in plane.markers])
             if all(m.exact for m in plane.markers):
@@ -451,7 +471,7 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
     if not declared:
         planes = []
         for p in log.planes:
-            if p.name in placed and (p.markers or p.chessboard):
+            if p.name in placed and (p.markers or p.chessboard or p.aruco or p.charuco):
                 point, normal, x_axis = placed[p.name]
                 p = dataclasses.replace(p, point=point, normal=normal / np.linalg.norm(normal), x_axis=x_axis)
             planes.append(p)
