@@ -131,3 +131,55 @@ def test_charuco_board_partly_covered(scene):
     with pytest.raises(GnomonError, match=r"desk.png: ChArUco board 5x4 \(DICT_4X4_50\) not found"):
         aruco.plane_pose_from_charuco(np.full_like(img, 200), as_opencv(sc.camera), "DICT_4X4_50", (5, 4), 40.0, 30.0,
                                       source="desk.png")
+
+
+# --------------------------------------------------------------------------- field log
+
+
+def _log_with(tmp_path, plane_extra):
+    from gnomon import toml_io
+
+    from conftest import write_tiny_capture
+
+    log_path = write_tiny_capture(tmp_path / "cap")
+    data = toml_io.load(log_path)
+    data["planes"][0].update({"x_axis": [1.0, 0.0, 0.0], **plane_extra})
+    toml_io.dump(data, log_path)
+    return log_path
+
+
+def test_field_log_reads_aruco_and_charuco(tmp_path):
+    from gnomon.fieldlog import load_field_log
+
+    aru = {"aruco": {"dictionary": "DICT_5X5_100", "size": 40.0,
+                     "markers": [{"id": 3, "plane_xy": [0.0, 0.0]}, {"id": 9, "plane_xy": [100.0, 50.0]}]}}
+    plane = load_field_log(_log_with(tmp_path / "a", aru)).planes[0]
+    assert plane.aruco.dictionary == "DICT_5X5_100" and plane.aruco.size == 40.0
+    assert plane.aruco.markers == ((3, (0.0, 0.0)), (9, (100.0, 50.0)))
+    assert np.allclose(plane.plane_to_world(np.array([[100.0, 50.0]])), [[100.0, 50.0, 0.0]])
+    ch = {"charuco": {"dictionary": "DICT_4X4_50", "squares": [7, 5], "square": 30.0, "marker": 22.0, "origin": [-100, 80]}}
+    plane = load_field_log(_log_with(tmp_path / "c", ch)).planes[0]
+    assert plane.charuco.squares == (7, 5) and plane.charuco.origin == (-100.0, 80.0)
+
+
+@pytest.mark.parametrize(
+    "extra, needle",
+    [
+        ({"aruco": {"dictionary": "DICT_9X9_9", "size": 40.0, "markers": [{"id": 1, "plane_xy": [0, 0]}] * 2}},
+         "[planes.0.aruco] dictionary: unknown ArUco dictionary 'DICT_9X9_9'"),
+        ({"aruco": {"size": 40.0, "markers": [{"id": 1, "plane_xy": [0, 0]}, {"id": 1, "plane_xy": [9, 0]}]}},
+         "ArUco id 1 is listed twice"),
+        ({"aruco": {"size": 40.0, "markers": [{"id": 1, "plane_xy": [0, 0]}]}}, "at least 2"),
+        ({"charuco": {"squares": [7, 5], "square": 30.0, "marker": 30.0}}, "must be smaller than the square"),
+        ({"charuco": {"squares": [7, 5], "square": 30.0, "marker": 20.0}, "chessboard": "9x6", "square": 25.0},
+         "one of markers, chessboard, aruco or charuco"),
+    ],
+)
+def test_field_log_aruco_mistakes_exit_2_with_one_line(tmp_path, capsys, extra, needle):
+    from gnomon.cli import main
+
+    log_path = _log_with(tmp_path, extra)
+    code = main(["scan", str(log_path), "--out", str(tmp_path / "out"), "--no-rrd"])
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert code == 2 and len(err) == 1 and needle in err[0], err
+    assert not (tmp_path / "out").exists()
