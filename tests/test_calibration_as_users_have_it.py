@@ -8,7 +8,6 @@ own ``ImageOps.exif_transpose``.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import cv2
 import numpy as np

@@ -30,8 +30,8 @@ lengths in the plane's units.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Callable, Mapping, Sequence
 
 import cv2
 import numpy as np
