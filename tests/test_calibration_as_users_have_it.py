@@ -8,7 +8,6 @@ own ``ImageOps.exif_transpose``.
 
 from __future__ import annotations
 
-
 import cv2
 import numpy as np
 import pytest
