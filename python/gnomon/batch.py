@@ -532,9 +532,11 @@ def _write_batch_recording(results: Sequence[JobResult], path: Path) -> None:
 
     import rerun as rr
 
-    with atomic.atomic_path(path) as tmp:
-        rec = rr.RecordingStream("gnomon", recording_id=uuid.uuid4())
-        rec.set_sinks(rr.FileSink(str(tmp)))
+    rec = rr.RecordingStream("gnomon", recording_id=uuid.uuid4())
+    # Encoded in memory and written by us (as gnomon.recording does): rerun's own file writer
+    # can hang on a full disk, an atomic write fails at once naming the file.
+    stream = rr.binary_stream(recording=rec)
+    try:
         rec.send_recording_name("gnomon batch")
         rec.log("batch/summary", rr.TextDocument(summary_markdown(results), media_type=rr.MediaType.MARKDOWN),
                 static=True)
@@ -548,5 +550,7 @@ def _write_batch_recording(results: Sequence[JobResult], path: Path) -> None:
                 rec.log(f"{base}/log", rr.TextLog(text, level="WARN"), static=False)
             if r.error:
                 rec.log(f"{base}/log", rr.TextLog(r.error, level="ERROR"), static=False)
-        rec.flush()
+        data = stream.read(flush=True) or b""
+    finally:
         rec.disconnect()
+    atomic.write_bytes(path, data + (stream.read(flush=False) or b""))
