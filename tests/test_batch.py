@@ -98,7 +98,7 @@ class Cluster:
                 p.send_signal(signal.SIGTERM)
         for p in reversed(self.procs):
             try:
-                p.wait(timeout=10)
+                p.wait(timeout=5)
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait(timeout=10)
@@ -148,17 +148,6 @@ def _batch(args: list[str], timeout: float = BATCH_TIMEOUT_S, **kw) -> subproces
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env(), **kw)
 
 
-def _run_batch(args: list[str]) -> subprocess.CompletedProcess:
-    p = _batch(args)
-    try:
-        out, err = p.communicate(timeout=BATCH_TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        p.kill()
-        p.communicate()
-        raise
-    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
-
-
 def _summary(out: Path) -> dict[str, dict]:
     with open(out / "summary.csv", newline="") as fh:
         return {row["name"]: row for row in csv.DictReader(fh)}
@@ -169,14 +158,24 @@ def _assert_same_outputs(a: Path, b: Path) -> None:
         assert (a / name).read_bytes() == (b / name).read_bytes(), f"{a / name} differs from {b / name}"
 
 
-def test_batch_on_scheduler_equals_sequential_and_isolates_a_broken_log(cluster, captures, sequential, tmp_path):
+def _run_batch_here(args: list, capsys) -> subprocess.CompletedProcess:
+    """The CLI in this process (the workers are still other processes)."""
+    from gnomon.cli import main
+
+    code = main(["batch", "--quiet", *map(str, args)])
+    out, err = capsys.readouterr()
+    return subprocess.CompletedProcess(args, code, out, err)
+
+
+def test_batch_on_scheduler_equals_sequential_and_isolates_a_broken_log(cluster, captures, sequential, tmp_path,
+                                                                        capsys):
     cluster.ensure_workers(2)
     broken = tmp_path / "broken"
     broken.mkdir()
     (broken / "field_log.toml").write_text('[capture]\nframes = "frames/*.png"\n')  # no frames, no camera
     out = tmp_path / "batch"
     logs = [captures[n] for n in ("left", "right", "tiny_a", "tiny_b")] + [broken / "field_log.toml"]
-    res = _run_batch([*logs, "--merge", "left,right", "--out", out, "--scheduler", cluster.address])
+    res = _run_batch_here([*logs, "--merge", "left,right", "--out", out, "--scheduler", cluster.address], capsys)
     assert res.returncode == 2, res.stderr
     errors = [ln for ln in res.stderr.splitlines() if ln.startswith("gnomon: error:")]
     assert len(errors) == 1 and str(broken / "field_log.toml") in errors[0], res.stderr
@@ -215,7 +214,8 @@ def test_batch_on_scheduler_equals_sequential_and_isolates_a_broken_log(cluster,
         img = cv2.imread(str(frame), cv2.IMREAD_UNCHANGED)
         cv2.imwrite(str(frame), img, [cv2.IMWRITE_PNG_COMPRESSION, 9])  # same pixels, other bytes
         assert frame.read_bytes() != original
-        res2 = _run_batch([*logs, "--merge", "left,right", "--out", out, "--scheduler", cluster.address])
+        res2 = _run_batch_here([*logs, "--merge", "left,right", "--out", out, "--scheduler", cluster.address],
+                               capsys)
     finally:
         frame.write_bytes(original)
     assert res2.returncode == 2
@@ -301,3 +301,4 @@ def test_batch_file_names_scans_and_merges(tmp_path):
     (m,) = plan.merges
     assert (m.name, m.scan_a, m.scan_b, m.weights, m.beta) == ("nov12+d2", "nov12", "d2", "sigmoid", 4.0)
     assert m.out == (tmp_path / "out" / "nov12+d2").resolve()
+

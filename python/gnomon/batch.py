@@ -46,6 +46,7 @@ __all__ = [
     "JobResult",
     "MergeJob",
     "ScanJob",
+    "connect_client",
     "input_digests",
     "load_batch_file",
     "plan_batch",
@@ -417,8 +418,9 @@ def run_merge_job(job: MergeJob, a: JobResult, b: JobResult) -> JobResult:
 # --------------------------------------------------------------------------- the batch
 
 
-def _connect(scheduler: str | None, workers: int | None, timeout_s: float):
-    """A distributed Client: to ``scheduler`` (an address), or to a new local cluster."""
+def connect_client(scheduler: str | None, workers: int | None, timeout_s: float = 30.0):
+    """``(client, cluster)``: a distributed Client of ``scheduler`` (an address, cluster None), or of a new
+    LocalCluster of ``workers`` processes on 127.0.0.1 (close both when done)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -454,7 +456,7 @@ def run_batch(plan: BatchPlan, *, scheduler: str | None = None, workers: int | N
 
     from gnomon.progress import Progress
 
-    client, cluster = _connect(scheduler, workers, timeout_s)
+    client, cluster = connect_client(scheduler, workers, timeout_s)
     try:
         futures = {}
         for job in plan.scans:
@@ -482,9 +484,23 @@ def run_batch(plan: BatchPlan, *, scheduler: str | None = None, workers: int | N
                 bar.update(len(results))
         return [results[n] for n in jobs]
     finally:
-        client.close()
-        if cluster is not None:
+        close_client(client, cluster)
+
+
+def close_client(client, cluster) -> None:
+    """Close a :func:`connect_client` pair. A local worker still busy after the nanny's grace period is
+    killed on purpose (our scan tasks hold no state worth saving), so that warning is not shown."""
+    import logging
+
+    client.close()
+    if cluster is not None:
+        nanny = logging.getLogger("distributed.nanny")
+        level = nanny.level
+        nanny.setLevel(logging.ERROR)
+        try:
             cluster.close()
+        finally:
+            nanny.setLevel(level)
 
 
 # --------------------------------------------------------------------------- the summary
