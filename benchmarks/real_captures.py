@@ -28,8 +28,8 @@ The captures and their conventions (read off the repository's own scripts):
 The crosses are given as exact pixels (``pixel = [u, v]``): each is the
 centre of the pen strokes found within 60 px of a rough position, which is
 the repository's own click (its extrinsics re-projected through its own
-intrinsics, scaled ×2: see the evidence printed; the clicks are up to ~60 px
-off the crosses) — for ``candle-mug``, which
+intrinsics, scaled ×2 where they were made on a half-size display: see the
+evidence printed; the clicks are up to ~60 px off the crosses) — for ``candle-mug``, which
 has no extrinsics, nothing: its objects hide all but three of its crosses.
 
 The hand-drawn outlines below (the frog and its cast shadows, in the first
@@ -196,12 +196,17 @@ def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
         return
     ev = npz_evidence(seq, first)
     planes = []
+    every = np.concatenate([ev["clicks_h"], ev["clicks_v"]])
+    # Most clicks were made on a 960×540 display of the 1920×1080 frame; where
+    # doubling them leaves the frame, they were made on the frame itself.
+    scale = 2.0 if (every[:, 0] * 2 < VIDEO_SIZE[0]).all() and (every[:, 1] * 2 < VIDEO_SIZE[1]).all() else 1.0
+    print(f"{name}: the npz clicks are at {'half' if scale == 2 else 'full'} size (scaled ×{scale:g})")
     for plane, s in (("desk", "h"), ("wall", "v")):
         clicks = ev["clicks_" + s]
-        rough = 2.0 * clicks  # the clicks were made on a 960×540 display of the 1920×1080 frame
+        rough = scale * clicks
         crosses = np.array([cross_centre(first, r) for r in rough])
         print(f"{name} {plane}: npz clicks re-projected {np.round(clicks, 1).tolist()}; crosses found at "
-              f"{np.round(crosses, 1).tolist()} (×2 clicks off by {np.round(np.hypot(*(crosses - rough).T), 1).tolist()} px)")
+              f"{np.round(crosses, 1).tolist()} (the scaled clicks off by {np.round(np.hypot(*(crosses - rough).T), 1).tolist()} px)")
         planes.append(plane_table(plane, PHONE_RECT, crosses, exact=True))
     print(f"{name}: npz intrinsics fx/fy = {ev['fx_over_fy']:.4f} (stills squashed to 1920×1080 give "
           f"{ev['squash']:.4f}); npz desk–wall angle {ev['angle_deg']:.2f}°", flush=True)
