@@ -113,3 +113,100 @@ def test_false_point_rate_counts_what_was_not_swept() -> None:
     assert acc.coverage == pytest.approx(79 / 80)
     # errors over swept pixels are unchanged by the false points elsewhere
     assert acc.median_abs == pytest.approx(0.5)
+
+
+def _scan(log: Path, out: Path, capsys) -> tuple[int, str]:
+    code = main(["scan", str(log), "--out", str(out), "--quiet", "--no-rrd"])
+    return code, capsys.readouterr().err.strip()
+
+
+def _refill_frames(folder: Path, make) -> None:
+    for i, png in enumerate(sorted((folder / "frames").glob("*.png"))):
+        image = cv2.imread(str(png), cv2.IMREAD_UNCHANGED)
+        cv2.imwrite(str(png), make(i, image))
+
+
+def test_random_noise_frames_are_an_error(tmp_path: Path, capsys) -> None:
+    log = write_tiny_capture(tmp_path / "capture", width=96, height=72)
+    rng = np.random.default_rng(1)
+    _refill_frames(tmp_path / "capture", lambda i, im: rng.integers(0, 256, im.shape, dtype=np.uint8))
+    code, err = _scan(log, tmp_path / "scan", capsys)
+    assert code == 2 and "noise" in err and "frames" in err, err
+    assert not (tmp_path / "scan").exists()
+
+
+def test_identical_frames_are_an_error(tmp_path: Path, capsys) -> None:
+    log = write_tiny_capture(tmp_path / "capture")
+    first = cv2.imread(str(sorted((tmp_path / "capture" / "frames").glob("*.png"))[0]), cv2.IMREAD_UNCHANGED)
+    _refill_frames(tmp_path / "capture", lambda i, im: first)
+    code, err = _scan(log, tmp_path / "scan", capsys)
+    assert code == 2 and "identical" in err, err
+    assert not (tmp_path / "scan").exists()
+
+
+def test_reference_regions_never_crossed_is_an_error(tmp_path: Path, capsys) -> None:
+    # The band sweeps the middle rows only: the reference regions (6 rows at the
+    # top and bottom) stay lit in every frame.
+    log = write_tiny_capture(tmp_path / "capture")
+
+    def keep_regions_lit(i, im):
+        im = im.copy()
+        im[:8] = 200
+        im[-8:] = 200
+        return im
+
+    _refill_frames(tmp_path / "capture", keep_regions_lit)
+    code, err = _scan(log, tmp_path / "scan", capsys)
+    assert code == 2 and "shadow line was found on the reference regions in 0" in err, err
+
+
+def test_reference_regions_rarely_crossed_is_an_error(tmp_path: Path, capsys) -> None:
+    # The shadow reaches the reference rows in only 3 of its 24 frames: the planes
+    # cover too little of the sweep for the depths between them to mean anything.
+    log = write_tiny_capture(tmp_path / "capture")
+
+    def regions_lit_mostly(i, im):
+        if i in (10, 11, 12):
+            return im
+        im = im.copy()
+        im[:8] = 200
+        im[-8:] = 200
+        return im
+
+    _refill_frames(tmp_path / "capture", regions_lit_mostly)
+    code, err = _scan(log, tmp_path / "scan", capsys)
+    assert code == 2 and "too few to scan" in err and "shadow planes were measured in" in err, err
+
+
+def _planes_through(lamp: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    return np.concatenate([normals, (normals @ lamp)[:, None]], axis=1)
+
+
+def test_lamp_from_planes_all_round() -> None:
+    from gnomon.validity import light_point_or_line
+
+    lamp = np.array([-200.0, 50.0, 400.0])
+    rng = np.random.default_rng(2)
+    # a stick swept by hand: its planes turn about several directions
+    normals = rng.normal(size=(40, 3))
+    est = light_point_or_line(_planes_through(lamp, normals))
+    assert not est.degenerate and est.conditioning > 0.2
+    np.testing.assert_allclose(est.point, lamp, atol=1e-6)
+
+
+def test_lamp_from_planes_sharing_one_direction_is_a_line() -> None:
+    from gnomon.validity import light_point_or_line
+
+    lamp = np.array([-200.0, 50.0, 400.0])
+    stick = np.array([0.0, 0.6, 0.8])  # a stick translated parallel to itself
+    rng = np.random.default_rng(3)
+    normals = np.cross(stick, rng.normal(size=(40, 3)))  # every plane contains the stick's direction
+    planes = _planes_through(lamp, normals)
+    planes[:, 3] += rng.normal(scale=0.05, size=len(planes))  # 0.05 mm of plane noise
+    est = light_point_or_line(planes)
+    assert est.degenerate and est.conditioning < 1e-3
+    assert abs(abs(est.direction @ stick) - 1.0) < 1e-6
+    # the lamp lies on the reported line (to the noise), wherever along it the point was put
+    off = (lamp - est.point) - ((lamp - est.point) @ est.direction) * est.direction
+    assert np.linalg.norm(off) < 0.5

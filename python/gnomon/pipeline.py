@@ -34,7 +34,6 @@ from gnomon.publish import OUTPUT_FILES, staged_outputs  # noqa: F401  (re-expor
 from gnomon.reference_lines import PlaneInCamera, ReferenceLines, measure_reference_lines
 from gnomon.shadow_planes import (
     lamp_shadow_planes,
-    light_point_from_planes,
     sun_shadow_planes,
     two_plane_shadow_planes,
 )
@@ -49,6 +48,11 @@ from gnomon.uncertainty import (
     undersampled,
 )
 
+# Quality gates: share of the sweep's frames with a measured shadow plane (error below / warning
+# below), and the longest gap (frames) to a plane over which a pixel's depth may be interpolated.
+MIN_PLANE_SHARE_ERROR = 0.2
+MIN_PLANE_SHARE_WARN = 0.5
+MAX_PLANE_GAP = 3.0
 
 
 @dataclass
@@ -71,6 +75,8 @@ class EdgeResult:
     depth: np.ndarray  # (H, W) camera Z, NaN = none
     sigma: np.ndarray  # (H, W) σZ
     degenerate: int
+    rejected: dict[str, int] = field(default_factory=dict)  # points refused, by reason
+    notes: list[str] = field(default_factory=list)  # warnings about this edge
 
 
 @dataclass
@@ -208,8 +214,74 @@ def _track(log: FieldLog, source: FrameSource, recorder, progress: bool, sun: _S
 
         sun.timeline = SunTimeline(sun.times, np.asarray(used), skipped_cloud, list(np.flatnonzero(sun.night)))
     noise = float(np.median(noise_samples)) if noise_samples else 1.0
+    _check_contrast(times, noise, log.scan.min_contrast, source.name)
     return _Tracked(times, len(used), first_grey, first_color, noise, lut, np.asarray(used), input_lut,
                     skipped_cloud)
+
+
+def _check_contrast(times: ShadowTimes, noise_dn: float, min_contrast: float, name: str) -> None:
+    """Only pixels whose dip stands out of the image noise are events; none at all is an error.
+
+    Random frames have a large ``imax − imin`` everywhere but never many σ of
+    their own noise; identical frames have no contrast at all.
+    """
+    from gnomon.validity import MIN_CONTRAST_SIGMAS, contrast_above_noise
+
+    loud = contrast_above_noise(times.contrast, noise_dn)
+    drop = times.valid & ~loud
+    if drop.any():
+        times.valid = times.valid & loud
+        times.enter[drop] = np.nan
+        times.leave[drop] = np.nan
+    n_pixels = times.valid.size
+    if times.valid.sum() <= 0.001 * n_pixels:
+        largest = float(np.nanmax(times.contrast)) if np.isfinite(times.contrast).any() else 0.0
+        if largest < min_contrast:
+            why = (f"no pixel changes by min_contrast = {min_contrast:g} DN (largest change {largest:.1f} DN): "
+                   "the frames are (nearly) identical, or the shadow never crossed the view")
+        else:
+            why = (f"the image noise is {noise_dn:.1f} DN between frames, so no pixel's dip stands "
+                   f"{MIN_CONTRAST_SIGMAS:g} σ out of it: the frames look like noise, not a shadow sweep")
+        raise FrameError(f"{name}: {why}")
+
+
+def _check_plane_coverage(edges: list[EdgeResult], n_frames: int, path: Path, warnings: list[str]) -> None:
+    """The shadow planes must cover the frames in which the pixels saw the shadow.
+
+    A pixel's depth comes from the planes of the frames around its shadow
+    time; where no plane was measured for many frames (the shadow missed the
+    reference regions) the depth is interpolated over the gap and is
+    meaningless. Points whose time falls in a gap longer than ``MAX_PLANE_GAP``
+    frames are dropped; when the planes cover less than half of the sweep a
+    warning says so, and below a fifth the scan is an error.
+    """
+    for e in edges:
+        have = np.isfinite(e.planes[:, 0])
+        t = e.times[np.isfinite(e.times)]
+        if t.size == 0 or not have.any():
+            continue
+        lo, hi = np.percentile(t, [2, 98])
+        span = np.arange(max(int(np.floor(lo)), 0), min(int(np.ceil(hi)) + 1, len(have)))
+        if span.size == 0:
+            continue
+        share = float(have[span].mean())
+        frames = np.flatnonzero(have)
+        # distance (frames) from each pixel time to the nearest frame with a plane
+        k = np.clip(np.searchsorted(frames, e.times), 1, max(len(frames) - 1, 1))
+        with np.errstate(invalid="ignore"):
+            gap = np.fmin(np.abs(e.times - frames[np.clip(k - 1, 0, len(frames) - 1)]),
+                          np.abs(e.times - frames[np.clip(k, 0, len(frames) - 1)]))
+            far = np.isfinite(e.depth) & ~(gap <= MAX_PLANE_GAP)
+        if far.any():
+            e.depth[far] = np.nan
+            warnings.append(f"{e.name} edge: {int(far.sum())} points dropped: their shadow time is more than "
+                            f"{MAX_PLANE_GAP:g} frames from any measured shadow plane")
+        msg = (f"{e.name} edge: shadow planes were measured in {int(have[span].sum())} of the {span.size} frames "
+               f"of the sweep ({100 * share:.0f} %); the shadow rarely crossed the [[planes]] regions")
+        if share < MIN_PLANE_SHARE_ERROR:
+            raise FrameError(f"{path}: {msg}: too few to scan (check the regions are bare and swept)")
+        if share < MIN_PLANE_SHARE_WARN:
+            warnings.append(msg)
 
 
 def _dn_index(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
@@ -264,9 +336,52 @@ def _reconstruct_pole(tracked: _Tracked, log: FieldLog, ray_map: np.ndarray, sun
     table = pole_plane_table(log.pole.base, log.pole.top, sun.timeline, sun.site, sun.heading_deg, log.pose)
     scaled = (centre * SUBSTEPS).astype(np.float32)
     tri = triangulate(ray_map, scaled, table)
+    # Only points where the pole's shadow can fall, lasting as long as it lasts there.
+    from gnomon.outdoor import sun_directions_camera
+    from gnomon.validity import (
+        contrast_like_neighbours,
+        event_order,
+        global_event_frames,
+        inside_sequence,
+        not_in_global_event,
+        pole_shadow_consistency,
+    )
+
+    pose = log.pose
+    check = pole_shadow_consistency(points_from_depth(ray_map, tri.depth), times.enter, times.leave,
+                                    sun_directions_camera(sun.timeline, sun.site, sun.heading_deg, pose),
+                                    pose.world_to_camera(log.pole.base), pose.world_to_camera(log.pole.top),
+                                    log.pole.radius)
+    spikes = np.union1d(global_event_frames(times.enter, tracked.n_frames),
+                        global_event_frames(times.leave, tracked.n_frames))
+    ordered = event_order(times.enter, times.leave) & inside_sequence(times.enter, times.leave, tracked.n_frames)
+    calm = not_in_global_event(times.enter, spikes) & not_in_global_event(times.leave, spikes)
+    had = np.isfinite(tri.depth)
+    rejected = {
+        "leave_before_enter_or_at_the_ends": int((had & ~ordered).sum()),
+        "global_darkening": int((had & ordered & ~calm).sum()),
+        "not_on_the_pole_shadow_side": int((had & ordered & calm & ~check.shadow_side).sum()),
+        "dip_duration_unlike_the_pole_shadow": int((had & ordered & calm & check.shadow_side & ~check.duration).sum()),
+    }
+    sound = ordered & calm & check.ok
+    deep = contrast_like_neighbours(times.contrast, sound)
+    rejected["dip_shallower_than_its_neighbours"] = int((had & sound & ~deep).sum())
+    sound &= deep
+    tri.depth[~sound] = np.nan
+    notes = []
+    if len(spikes):
+        notes.append(f"{rejected['global_darkening']} pixels had their shadow event in frames "
+                     f"{[int(f) for f in spikes[:8]]} where most of the image darkened at once (a cloud, not the "
+                     "pole's shadow): no points there")
+    n_had = max(int(had.sum()), 1)
+    refused = n_had - int(sound.sum())
+    if refused > 0.5 * n_had:
+        notes.append(f"{refused} of {n_had} pixels ({100 * refused / n_had:.0f} %) were refused as not the pole's "
+                     f"shadow ({', '.join(f'{k}: {v}' for k, v in rejected.items() if v)})")
     st = 0.5 * np.hypot(_pixel_time_sigma(times.enter_slope, tracked), _pixel_time_sigma(times.leave_slope, tracked))
     unc = depth_sigma(ray_map, scaled, table, tri.depth, st * SUBSTEPS, np.zeros(len(table)))
-    return EdgeResult("centre", centre, [], table, tri.depth, _with_typical_sigma(tri.depth, unc.sigma_z), 0)
+    return EdgeResult("centre", centre, [], table, tri.depth, _with_typical_sigma(tri.depth, unc.sigma_z), 0,
+                      rejected, notes)
 
 
 def _reconstruct_edge(name: str, times_map: np.ndarray, slope: np.ndarray, log: FieldLog, tracked: _Tracked,
@@ -568,7 +683,10 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
         for e in edges:
             if e.degenerate:
                 warnings.append(f"{e.name} edge: {e.degenerate} frames dropped as degenerate shadow planes")
+            warnings.extend(f"{e.name} edge: {note}" for note in e.notes)
         n_planes = max(int(np.isfinite(e.planes[:, 0]).sum()) for e in edges)
+        if not (sun is not None and log.pole is not None):
+            _check_plane_coverage(edges, tracked.n_frames, log.path, warnings)
         if n_planes < 2:
             raise FrameError(
                 f"{log.path}: the shadow line was found on the reference regions in {n_planes} of "
@@ -641,6 +759,12 @@ def _scan_into(log: FieldLog, source: FrameSource, staging: Path, opts: ScanOpti
                       surface.mesh, report, warnings)
 
 
+def _count(mask, within=None) -> int | None:
+    if mask is None:
+        return None
+    return int(np.count_nonzero(mask if within is None else (mask & within)))
+
+
 def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[EdgeResult], depth: np.ndarray,
             sigma: np.ndarray, keep: np.ndarray, conflict: np.ndarray, under: np.ndarray, mesh: GridMesh,
             timings: dict, warnings: list[str]) -> dict:
@@ -676,6 +800,15 @@ def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[E
             "fraction_of_contrast_ok": float(keep.sum() / max(int(times.valid.sum()), 1)),
             "edge_conflicts": int(conflict.sum()),
             "undersampled": int(under.sum()),
+            # pixels whose brightest sample is at the input's full scale (clipped: the shadow's
+            # edges look steeper and its width narrower there); None when the tracker saw
+            # normalised irradiance instead of the input's DN
+            "saturated": (int((times.imax >= len(tracked.input_lut) - 1).sum())
+                          if not log.scan.normalize_illumination else None),
+            # pixels with two comparable dips (no point), and with clipped samples, when the
+            # tracker reports them
+            "ambiguous": _count(getattr(times, "ambiguous", None), times.contrast >= log.scan.min_contrast),
+            "clipped": _count(getattr(times, "clipped", None)),
             "mesh_vertices": int(len(mesh.vertices)),
             "mesh_faces": int(len(mesh.faces)),
         },
@@ -685,6 +818,7 @@ def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[E
         report["edges"][e.name] = {
             "shadow_planes": int(np.isfinite(e.planes[:, 0]).sum()),
             "degenerate_frames": e.degenerate,
+            "rejected": e.rejected,
             "triangulated": int(np.isfinite(e.depth).sum()),
             "reference_lines": [
                 {"plane": ln.plane_name, "frames_with_line": int(ln.found.sum()),
@@ -697,9 +831,26 @@ def _report(log: FieldLog, source: FrameSource, tracked: _Tracked, edges: list[E
         # Every shadow plane of a point source, of either edge, passes through it.
         planes = np.concatenate([e.planes for e in edges])
         if np.isfinite(planes[:, 0]).sum() >= 3:
-            point_cam, rms = light_point_from_planes(planes)
-            report["light"]["estimated_position"] = pose.camera_to_world(point_cam).tolist()
-            report["light"]["estimated_position_plane_rms"] = float(rms)
+            from gnomon.validity import MIN_LAMP_CONDITIONING, light_point_or_line
+
+            est = light_point_or_line(planes)
+            report["light"]["estimated_position_conditioning"] = est.conditioning
+            if est.degenerate:
+                # The planes share one direction (a stick moved parallel to itself): they fix the
+                # lamp only along a line through the least-squares point, along that direction.
+                report["light"]["estimated_position"] = None
+                report["light"]["estimated_line"] = {
+                    "point": pose.camera_to_world(est.point).tolist(),
+                    "direction": (pose.R.T @ est.direction).tolist(),
+                    "reason": (f"the shadow planes all contain nearly one direction (singular-value ratio "
+                               f"{est.conditioning:.4f} < {MIN_LAMP_CONDITIONING}): the lamp lies on a line, "
+                               "not at a point"),
+                }
+                warnings.append(f"lamp estimate is degenerate: the shadow planes share one direction (ratio "
+                                f"{est.conditioning:.4f}); report.json gives the line the lamp lies on, not a point")
+            else:
+                report["light"]["estimated_position"] = pose.camera_to_world(est.point).tolist()
+                report["light"]["estimated_position_plane_rms"] = est.plane_rms
     if len(edges) == 2:
         # Over the pixels where both edges were fused into an output point: a
         # pair in conflict (beyond max_depth_jump) is an outlier, not noise, and

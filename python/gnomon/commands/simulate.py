@@ -7,7 +7,7 @@ import time
 
 from gnomon.errors import GnomonError
 
-SCENE_CHOICES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "chessboard")
+SCENE_CHOICES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "facade_day", "chessboard")
 
 
 def register(subparsers) -> None:
@@ -21,7 +21,10 @@ def register(subparsers) -> None:
             "(DIR/pencil/, DIR/pencil_log.toml). desk_lamp_right: the same scene and pixel grid with "
             "the lamp mirrored to the right of the camera (fuse the two scans). two_plane: a desk and "
             "a wall meeting in a corner, printed 2x2 checker markers on both, a lamp the field log "
-            "does not give (the shadow planes come from the lines on both planes). Writes DIR/frames/, "
+            "does not give (the shadow planes come from the lines on both planes). facade_sun: a pole's "
+            "shadow swept by the sun over a facade and the street (3 h 19 min). facade_day: the same over "
+            "a whole day, night at both ends, six cloud dips and a lamp post's moving shadow besides the "
+            "pole's. Writes DIR/frames/, "
             "DIR/ground_truth.npz, DIR/ground_truth.json and (last) DIR/field_log.toml."),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
@@ -30,7 +33,8 @@ def register(subparsers) -> None:
     p.add_argument("--width", type=int, default=800, help="image width, px (the field of view is kept)")
     p.add_argument("--height", type=int, default=600, help="image height, px")
     p.add_argument("--frames", type=int, default=None,
-                   help="number of frames (the sweep always covers the view); default 240, facade_sun 200")
+                   help="number of frames (the sweep always covers the view); default 240, facade_sun 200, "
+                        "facade_day 400")
     p.add_argument("--noise", type=float, default=1.5, help="sensor noise σ, DN")
     p.add_argument("--jpeg-quality", type=int, default=90, help="JPEG quality; 0 writes PNG")
     p.add_argument("--seed", type=int, default=0, help="random seed (noise, texture, hand wobble)")
@@ -46,7 +50,8 @@ def register(subparsers) -> None:
                    help="facade_sun: the first frame's time, local at the site (Zurich) or with an offset "
                         "(default 2026-11-12T11:40:00; the capture lasts 3 h 19 min)")
     p.add_argument("--pole-radius", type=float, default=0.05, metavar="M", help="facade_sun: pole radius, m")
-    p.add_argument("--clouds", type=int, default=3, help="facade_sun: number of cloud dips (0-10)")
+    p.add_argument("--clouds", type=int, default=None, help="facade_sun/facade_day: number of cloud dips (0-10); "
+                   "default 3, facade_day 6")
     p.add_argument("--markers", choices=("checker", "aruco"), default="checker",
                    help="two_plane: printed 2x2 checkers (pixel hints in the field log) or ArUco markers (ids only)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -75,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     from gnomon.simulate import DeskLampConfig, TwoPlaneConfig, simulate_desk_lamp, simulate_two_plane
 
     if args.frames is None:
-        args.frames = 200 if args.scene == "facade_sun" else 240
+        args.frames = {"facade_sun": 200, "facade_day": 400}.get(args.scene, 240)
     common = dict(
         width=args.width, height=args.height, frames=args.frames, noise=args.noise,
         jpeg_quality=args.jpeg_quality, seed=args.seed, distortion=not args.no_distortion,
@@ -89,13 +94,16 @@ def run(args: argparse.Namespace) -> int:
     elif args.scene == "two_plane":
         config = TwoPlaneConfig(**common, markers=args.markers)
         simulate = simulate_two_plane
-    elif args.scene == "facade_sun":
+    elif args.scene in ("facade_sun", "facade_day"):
         from gnomon.simulate.facade_sun import FacadeSunConfig, simulate_facade_sun
 
         sun = {k: v for k, v in common.items() if k not in ("lamp_radius", "stick_radius")}
         if args.start is not None:
             sun["start"] = args.start
-        config = FacadeSunConfig(**sun, pole_radius=args.pole_radius, clouds=args.clouds)
+        if args.clouds is not None:
+            sun["clouds"] = args.clouds
+        make = FacadeSunConfig.day if args.scene == "facade_day" else FacadeSunConfig
+        config = make(**sun, pole_radius=args.pole_radius)
         simulate = simulate_facade_sun
     else:  # pragma: no cover - argparse restricts choices
         raise GnomonError(f"simulate: unknown scene {args.scene!r}")

@@ -14,7 +14,10 @@ frames, ``.npz``). Scenes:
 * ``two_plane`` — :func:`simulate_two_plane` (:mod:`gnomon.simulate.two_plane`):
   desk + wall, printed markers, a lamp the field log does not give;
 * ``facade_sun`` — :func:`simulate_facade_sun` (:mod:`gnomon.simulate.facade_sun`):
-  a pole's shadow swept by the sun (pvlib) over ground and a building facade.
+  a pole's shadow swept by the sun (pvlib) over ground and a building facade;
+* ``facade_day`` — the same facade over a whole day, night at both ends
+  (``FacadeSunConfig.day()``): six cloud dips, a lamp post whose shadow is
+  another moving darkening, the evening's fading sun.
 """
 
 from gnomon.simulate.desk_lamp import (
@@ -28,7 +31,7 @@ from gnomon.simulate.two_plane import TwoPlaneConfig, TwoPlaneScene, simulate_tw
 
 from gnomon.simulate.facade_sun import FacadeSunConfig, FacadeSunResult, FacadeSunScene, simulate_facade_sun
 
-SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun")
+SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "facade_day")
 
 __all__ = [
     "SCENES",

@@ -159,9 +159,11 @@ Ground truth (``ground_truth.npz``; arrays H × W unless noted)
   3σ) sees another object, no surface or another surface (a neighbour with
   another normal or off the pixel's plane — ``desk_lamp``'s depth change
   > 1 % would flag the whole grazing ground), or fails (1);
-* ``swept_surface``: (1) and (2) without (3): a surface the shadow really
-  crossed while it was lit, mixed pixels included (a scanner's point
-  elsewhere measured nothing: it is a false point);
+* ``swept_surface``: (2), and from a frame before ``enter_time`` to a frame
+  after ``leave_time`` lit (n·d > 0.05, at least half the sun's disc seen
+  past the building, no lamp post shadow), without (3): a surface the
+  pole's shadow really crossed while it was lit, mixed pixels included (a
+  scanner's point anywhere else measured nothing: it is a false point);
 * ``cloud_free_passage``: swept and no cloud frame within
   [enter_time − 1, leave_time + 1];
 * per frame (N): ``frame_times_utc`` (ISO 8601 strings), ``frame_times_utc_ns``
@@ -233,10 +235,16 @@ BALCONIES = (((17.65, 20.85), (0.0, 1.1), (3.40, 4.45)),
              ((10.65, 13.85), (0.0, 1.1), (6.60, 7.65)))
 OCCLUDER_Y_MAX = 1.1                               # no building occluder reaches beyond this y
 
-GROUND, WALL, WINDOW, REVEAL, BALCONY, LEDGE_ID, POLE = 0, 1, 2, 3, 4, 5, 6
+GROUND, WALL, WINDOW, REVEAL, BALCONY, LEDGE_ID, POLE, POST = 0, 1, 2, 3, 4, 5, 6, 7
 OBJECT_NAMES = {GROUND: "ground", WALL: "wall", WINDOW: "window", REVEAL: "reveal",
-                BALCONY: "balcony", LEDGE_ID: "ledge", POLE: "pole"}
-ALBEDO = {WINDOW: 0.16, BALCONY: 0.60, LEDGE_ID: 0.70, POLE: 0.35}
+                BALCONY: "balcony", LEDGE_ID: "ledge", POLE: "pole", POST: "post"}
+ALBEDO = {WINDOW: 0.16, BALCONY: 0.60, LEDGE_ID: 0.70, POLE: 0.35, POST: 0.30}
+# facade_day's other moving shadow: a street-lamp post (vertical cylinder) left of the pole.
+POST_BASE = np.array([3.0, 9.0, 0.0])
+POST_HEIGHT = 5.0
+POST_RADIUS = 0.07
+# facade_day: the sun lights a surface (for the ground truth) only this high above the horizon.
+MIN_LIT_ELEVATION_DEG = 2.0
 
 SKY_FRACTION = 0.22          # sky irradiance on a horizontal surface / direct sun at the start
 GROUND_BOUNCE = 0.25
@@ -280,6 +288,17 @@ class FacadeSunConfig:
     clouds: int = 3                      # number of cloud dips
     gain_drift: float = 0.2              # auto-exposure gain amplitude (±)
     soft_shadows: bool = True            # building shadows with the sun's disc (False: hard, from its centre)
+    full_day: bool = False               # sunrise to sunset and night at both ends (facade_day)
+    post: bool = False                   # a street-lamp post casting another moving shadow (facade_day)
+
+    @classmethod
+    def day(cls, **overrides) -> "FacadeSunConfig":
+        """The ``facade_day`` scene: a whole November day (06:40–17:40 local, night at both ends),
+        six cloud dips, a lamp post's shadow besides the pole's, 8-bit JPEG."""
+        base = {"start": "2026-11-12T06:40:00", "duration_s": 11 * 3600.0, "frames": 400, "clouds": 6,
+                "full_day": True, "post": True}
+        base.update(overrides)
+        return cls(**base)
 
     def validate(self) -> None:
         def bad(msg: str) -> GnomonError:
@@ -289,8 +308,9 @@ class FacadeSunConfig:
             raise bad(f"image size {self.width}x{self.height} out of range (128..8192 x 96..8192)")
         if not 8 <= self.frames <= 20000:
             raise bad(f"--frames {self.frames}: need 8 to 20000 frames")
-        if not (math.isfinite(self.duration_s) and 600 <= self.duration_s <= 6 * 3600):
-            raise bad(f"duration {self.duration_s} s: must be 600 s to 6 h")
+        longest = 24 if self.full_day else 6
+        if not (math.isfinite(self.duration_s) and 600 <= self.duration_s <= longest * 3600):
+            raise bad(f"duration {self.duration_s} s: must be 600 s to {longest} h")
         if round(self.duration_s / (self.frames - 1)) < 1:
             raise bad(f"{self.frames} frames over {self.duration_s:g} s: frames must be at least 1 s apart")
         if not (math.isfinite(self.noise) and self.noise >= 0):
@@ -535,6 +555,8 @@ class FacadeSunScene:
         self.Qtop = self.Q + np.array([0.0, 0.0, POLE_HEIGHT])
         self.pole = geo.Cylinder(self.Q + np.array([0.0, 0.0, POLE_HEIGHT / 2]), (0.0, 0.0, 1.0),
                                  config.pole_radius, POLE_HEIGHT)
+        self.post = (geo.Cylinder(POST_BASE + np.array([0.0, 0.0, POST_HEIGHT / 2]), (0.0, 0.0, 1.0),
+                                  POST_RADIUS, POST_HEIGHT) if config.post else None)
         self._setup_camera()
         self._setup_sun()
         self._cast_primary_rays()
@@ -577,13 +599,15 @@ class FacadeSunScene:
         self.sun_enu = np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], axis=-1)
         self.R_we = R_world_from_enu(HEADING_DEG)
         self.sun_world = self.sun_enu @ self.R_we.T
-        if self.elevation.min() < 3.0 or (self.sun_world[:, 1] <= 0.05).any():
+        if not c.full_day and (self.elevation.min() < 3.0 or (self.sun_world[:, 1] <= 0.05).any()):
             raise GnomonError(
                 f"simulate facade_sun: from {c.start} for {c.duration_s:g} s the sun is below 3° or behind "
                 "the facade (it faces 205°); choose a start nearer midday")
-        am = np.asarray(get_relative_airmass(90.0 - self.elevation, model="kastenyoung1989"), dtype=np.float64)
-        self.sun_strength = np.power(0.7, np.power(am, 0.678))
-        self.sun_strength = self.sun_strength / self.sun_strength[0]
+        up = self.elevation > 0.0
+        am = np.asarray(get_relative_airmass(90.0 - np.where(up, self.elevation, 45.0), model="kastenyoung1989"),
+                        dtype=np.float64)
+        strength = np.where(up, np.power(0.7, np.power(am, 0.678)), 0.0)
+        self.sun_strength = strength / strength[np.argmax(up)] if up.any() else strength
 
     def sun_at(self, tau) -> np.ndarray:
         """World sun direction at fractional frame(s) tau: the renormalised chord between frames."""
@@ -605,6 +629,14 @@ class FacadeSunScene:
         pole = tp < t
         t = np.where(pole, tp, t)
         ids = np.where(pole, POLE, ids).astype(np.int8)
+        if self.post is not None:
+            tq = self.post.intersect(self.C, d)
+            post = tq < t
+            t = np.where(post, tq, t)
+            ids = np.where(post, POST, ids).astype(np.int8)
+            if post.any():
+                n[post] = self.post.normal((self.C + np.where(post, tq, 0.0)[..., None] * d)[post])
+            pole = pole | post
         self._own_box_f = np.where(pole, -1, box).astype(np.int8)
         hit = np.isfinite(t)
         ts = np.where(hit, t, 0.0)
@@ -690,6 +722,8 @@ class FacadeSunScene:
     def _surely_lit(self, k: int) -> np.ndarray:
         """Points (padded grid) that see the whole sun disc past the building at frame k, n·d > 0.05."""
         d = self.sun_world[k]
+        if self.elevation[k] < MIN_LIT_ELEVATION_DEG and self.config.full_day:
+            return np.zeros(self.hit_f.shape, dtype=bool)
         cos_i = _dot(self._n0, d)
         lit = self.hit_f & (cos_i > 0.05)
         m = self._occ_candidates & lit
@@ -731,9 +765,13 @@ class FacadeSunScene:
         self.cloud = direct < 0.99
         # sky: follows the sun's elevation a little, a slow drift, brighter under clouds
         ph = rng.uniform(0, 2 * np.pi)
-        el = np.sin(np.radians(self.elevation))
+        el = np.sin(np.radians(np.maximum(self.elevation, 0.0)))
+        if c.full_day:  # dusk: the sky fades to 3 % between 0° and −6°
+            fade = np.clip((self.elevation + 6.0) / 6.0, 0.03, 1.0)
+        else:
+            fade = np.ones(N)
         self.sky = SKY_FRACTION * (0.9 + 0.1 * el / el.max()) * (1 + 0.05 * np.sin(2 * np.pi * 0.7 * s + ph)) \
-            * (1 + 0.3 * (1 - direct))
+            * (1 + 0.3 * (1 - direct)) * fade
         # Scale: the brightest surface over all frames (building shadows ignored: a bound) is SURFACE_PEAK.
         peak = 0.0
         for k in range(N):
@@ -780,6 +818,24 @@ class FacadeSunScene:
         Pm = P[m]
         f = shadow.occluded_fraction(Pm, Pm + d, math.sin(RHO), self.Q, self.Qtop, r)
         out[m] = f * self._tip_factor(Pm, d)
+        return out
+
+    def post_occlusion(self, k: int) -> np.ndarray | float:
+        """Occluded fraction of the sun's disc by the lamp post at frame k (padded grid); 0 without one."""
+        if self.post is None:
+            return 0.0
+        d = self.sun_world[k]
+        out = np.zeros(self.hit_f.shape)
+        m = self.hit_f & (self.object_id_f != POST)
+        rel = self._P0 - POST_BASE
+        dh = math.hypot(d[0], d[1])
+        along = -(rel[..., 0] * d[0] + rel[..., 1] * d[1]) / dh
+        n = np.array([-d[1], d[0], 0.0]) / dh
+        m &= (along > 0) & (np.abs(rel @ n) <= POST_RADIUS + 2.0 * math.tan(RHO) * along / dh + 1e-3)
+        if m.any():
+            Pm = self._P0[m]
+            out[m] = shadow.occluded_fraction(Pm, Pm + d, math.sin(RHO), POST_BASE,
+                                              POST_BASE + np.array([0.0, 0.0, POST_HEIGHT]), POST_RADIUS)
         return out
 
     def _tip_margin(self, P: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -856,7 +912,7 @@ class FacadeSunScene:
             vals = arr[hit]
             vals[~good] = np.nan
             arr[hit] = vals
-        not_pole = self.object_id_f[self.crop] != POLE
+        not_pole = (self.object_id_f[self.crop] != POLE) & (self.object_id_f[self.crop] != POST)
         for arr in (center, enter, leave):
             arr[~not_pole] = np.nan
         self.center_time, self.enter_time, self.leave_time = center, enter, leave
@@ -876,9 +932,31 @@ class FacadeSunScene:
         tip_ok[idx] = tipv
         crossed = (enter >= 1.0) & (leave <= N - 2.0) & tip_ok
         # Sunlit at every frame: n·d > 0.05 and the whole disc seen past the building.
-        lit = self.hit_f & (self.object_id_f != POLE)
+        lit = self.hit_f & (self.object_id_f != POLE) & (self.object_id_f != POST)
+        # Lit while the pole's shadow passes (a frame either side): the pixel measured it.
+        lit_passage = lit[self.crop].copy()
+        strict_passage = lit[self.crop].copy()  # the whole disc seen, while the shadow passes
+        first = np.floor(np.nan_to_num(enter, nan=np.inf)) - 1
+        last = np.ceil(np.nan_to_num(leave, nan=-np.inf)) + 1
         for k in range(N):
-            lit &= self._surely_lit(k)
+            lit_k = self._surely_lit(k)
+            lit &= lit_k
+            passing = ~((k < first) | (k > last))
+            if passing.any():
+                # Lit enough for the pole's dip to be there: n·d > 0.05 and at least half the sun's
+                # disc seen past the building (a building penumbra makes the dip shallower, not absent);
+                # the lamp post's shadow at the same time mixes two events: not a clean measurement.
+                up = self.elevation[k] >= MIN_LIT_ELEVATION_DEG or not self.config.full_day
+                seen_k = (up & (_dot(self._n0, self.sun_world[k]) > 0.05)
+                          & (self.building_visibility(k) >= 0.5))[self.crop]
+                if self.post is not None:
+                    seen_k &= np.asarray(self.post_occlusion(k))[self.crop] < 1e-3
+                lit_passage &= seen_k | ~passing
+                strict_passage &= (seen_k & lit_k[self.crop]) | ~passing
+        if self.config.full_day:
+            # A day has nights: "lit at every frame" means nothing; lit while swept is what counts.
+            lit = np.zeros_like(lit)
+            lit[self.crop] = strict_passage
         self.sunlit_f = lit
         self.sunlit = lit[self.crop]
         # Mixed pixels (as desk_lamp): boundaries, depth jumps, sky and not-sunlit pixels nearby.
@@ -904,8 +982,8 @@ class FacadeSunScene:
                                borderValue=0).astype(bool)
         self.unmixed = (self.hit_f & ~near_edge)[self.crop]
         self.swept = self.sunlit & crossed & self.unmixed
-        # Sunlit and crossed, mixed or not: where a shadow event was really there to measure.
-        self.swept_surface = self.sunlit & crossed
+        # Crossed while sunlit, mixed or not: where a shadow event was really there to measure.
+        self.swept_surface = lit_passage & crossed
         # No cloud frame while the shadow passes.
         cloud_frames = np.nonzero(self.cloud)[0]
         free = self.swept.copy()
@@ -977,7 +1055,8 @@ class FacadeSunScene:
         cos_i = np.maximum(_dot(self._n0, d), 0.0)
         vis = self.building_visibility(k)
         f = self.pole_occlusion(k) if pole else 0.0
-        direct = self.sun_strength[k] * self.direct_factor[k] * cos_i * vis * (1.0 - f)
+        direct = self.sun_strength[k] * self.direct_factor[k] * cos_i * vis * (1.0 - f) \
+            * (1.0 - self.post_occlusion(k))
         L = self.albedo_f * (self.sky[k] * self.ambient_coef_f + direct) * self.scale
         sky_level = SKY_RADIANCE * (self.sky[k] / self.sky.max())
         L = np.where(self.hit_f, L, sky_level / (self.gain.max()))
@@ -1100,7 +1179,7 @@ class FacadeSunScene:
         sw = self.swept
         by_object = {OBJECT_NAMES[o]: int((sw & (self.object_id == o)).sum()) for o in OBJECT_NAMES}
         return {
-            "scene": "facade_sun",
+            "scene": "facade_day" if c.full_day else "facade_sun",
             "seed": c.seed,
             "config": dataclasses.asdict(c),
             "units": "m",
