@@ -110,8 +110,14 @@ impl SimdPath {
 pub trait Vector<T: Sample>: Copy {
     const LANES: usize;
     /// `LANES` samples from `ptr` (no alignment needed).
+    ///
+    /// # Safety
+    /// `ptr` must point to `LANES` readable samples.
     unsafe fn load(ptr: *const T) -> Self;
     /// Store `LANES` samples at `ptr` (no alignment needed).
+    ///
+    /// # Safety
+    /// `ptr` must point to `LANES` writable samples.
     unsafe fn store(self, ptr: *mut T);
     fn splat(v: T) -> Self;
     fn max(self, o: Self) -> Self;
