@@ -21,7 +21,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="kernel throughput vs the numpy reference",
         description="Synthesise grey frames of a sweeping shadow, time the Rust tracker and the numpy "
         "tracker on them, and measure the kernel's peak memory (RSS of a fresh process) for 100 and "
-        "for --frames frames.",
+        "for --frames frames. With --scan FIELD_LOG: time decoding that capture's frames alone, then "
+        "its whole scan, in one run.",
     )
     p.add_argument("--frames", type=int, default=1000, metavar="N", help="frames for the kernel (default 1000)")
     p.add_argument("--numpy-frames", type=int, default=30, metavar="M",
