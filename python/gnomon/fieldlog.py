@@ -19,6 +19,7 @@ from gnomon import toml_io
 from gnomon.camera import CameraModel, Pose
 from gnomon.errors import FieldLogError
 from gnomon.frames import glob_frames, image_size, video_size
+from gnomon.validate import check_field_log
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
 UNITS = ("mm", "m")
@@ -322,6 +323,12 @@ def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
     t.done()
     extra = dict(timestamps=timestamps, time_pattern=time_pattern, start=start, fps=fps)
 
+    if not pattern.strip():
+        raise t.error("frames", "is empty; give a glob such as 'frames/*.png' or a video file")
+    if Path(pattern).is_absolute():  # an absolute glob: search from its root
+        base, pattern = Path(Path(pattern).anchor), str(Path(pattern).relative_to(Path(pattern).anchor))
+        if not pattern or pattern == ".":
+            raise t.error("frames", "names a root folder, not frames")
     if Path(pattern).suffix.lower() in VIDEO_SUFFIXES and not any(c in pattern for c in "*?["):
         video = base / pattern
         if not video.is_file():
@@ -613,7 +620,7 @@ def _parse_output(t: _Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec
 def load_field_log(path: str | Path) -> FieldLog:
     """Read and validate a field log. Raises :class:`FieldLogError` on any problem."""
     p = Path(path)
-    if not p.is_file():
+    if not p.exists():
         raise FieldLogError(f"{p}: field log not found")
     root = _Table(p, "field log", toml_io.load(p))
     base = p.resolve().parent
@@ -662,6 +669,7 @@ def load_field_log(path: str | Path) -> FieldLog:
                    output)
     if pose is not None:
         check_geometry(log, pose)
+    check_field_log(log)  # plausible numbers and geometry (gnomon.validate)
     return log
 
 

@@ -134,10 +134,17 @@ def decode_image_file(path: Path) -> tuple[np.ndarray, bytes]:
         raw = path.read_bytes()
     except OSError as exc:
         raise FrameError(f"{path}: cannot be read ({exc.strerror})") from None
+    if not raw:
+        raise FrameError(f"{path}: empty file (0 bytes)")
     problem = truncation_problem(raw)
     if problem is not None:
         raise FrameError(f"{path}: corrupt frame: {problem}")
-    image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)  # ignores EXIF: applied below
+    try:
+        image = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_UNCHANGED)  # ignores EXIF: applied below
+    except cv2.error as exc:  # e.g. a header claiming more pixels than OpenCV decodes
+        reason = "its header claims more pixels than a frame can have" if "MAX_IMAGE_PIXELS" in str(exc) \
+            else str(exc).strip().splitlines()[-1]
+        raise FrameError(f"{path}: cannot be decoded: {reason}") from None
     if image is None or image.size == 0:
         raise FrameError(f"{path}: cannot be decoded as an image")
     if image.dtype not in (np.uint8, np.uint16):
@@ -153,6 +160,8 @@ def image_size(path: Path) -> tuple[int, int]:
         with Image.open(path) as im:
             w, h = im.size
             orientation = im.getexif().get(_EXIF_ORIENTATION, 1)
+    except Image.DecompressionBombError:
+        raise FrameError(f"{path}: its header claims more pixels than a frame can have") from None
     except (UnidentifiedImageError, OSError, ValueError, SyntaxError):
         image, _ = decode_image_file(path)  # formats PIL cannot read: decode (raises naming the file)
         return int(image.shape[1]), int(image.shape[0])
@@ -175,7 +184,8 @@ def _any_case(suffix: str) -> str:
 
 
 def glob_frames(base: Path, pattern: str) -> tuple[Path, ...]:
-    """Files matching ``pattern`` under ``base``, sorted by path; the suffix matches in any case.
+    """Files matching ``pattern`` under ``base`` in natural order (``frame_2`` before ``frame_10``);
+    the suffix matches in any case.
 
     ``frames/*.jpg`` finds ``IMG_0001.JPG`` too (cameras and phones write
     upper-case suffixes; Linux file systems are case-sensitive). Only a plain
@@ -185,7 +195,13 @@ def glob_frames(base: Path, pattern: str) -> tuple[Path, ...]:
     m = re.fullmatch(r"(.*\.)([A-Za-z0-9]+)", name)
     if m:
         pattern = head + sep + m.group(1) + _any_case(m.group(2))
-    return tuple(sorted({p for p in base.glob(pattern) if p.is_file()}))
+    return tuple(sorted({p for p in base.glob(pattern) if p.is_file()}, key=natural_key))
+
+
+def natural_key(path: Path) -> tuple:
+    """Sort key in which digit runs compare as numbers: frame_2 before frame_10 (as a camera numbers them)."""
+    parts = re.split(r"(\d+)", str(path))
+    return tuple((0, int(x), x) if x.isdigit() else (1, 0, x) for x in parts)
 
 
 @dataclass

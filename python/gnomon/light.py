@@ -482,6 +482,19 @@ def _decimals(sigma: float) -> int:
     return int(min(6, max(0, 1 - math.floor(math.log10(sigma)))))
 
 
+def _degenerate_lamp(cal, distance: float) -> str | None:
+    """Why a lamp estimate must not be written without --force (its σ is a large part of its distance,
+    or the photos' lines are nearly parallel), or None."""
+    sig = np.asarray(cal.sigma_world, dtype=float)
+    if not (np.all(np.isfinite(cal.position_world)) and np.all(np.isfinite(sig))):
+        return "not finite"
+    if sig.max() > 0.25 * distance:
+        return f"σ {sig.max():.3g} against a distance of {distance:.3g} to the pencils"
+    if math.isfinite(cal.line_spread_deg) and cal.line_spread_deg < 2.0:
+        return f"the photos' lines spread over {cal.line_spread_deg:.2g}° only"
+    return None
+
+
 def calibrate_lamp_cli(args: argparse.Namespace) -> int:
     """``gnomon calibrate lamp FIELD_LOG``: reads ``args.field_log`` (a Path), prints the
     lamp ± 1σ, residuals and warnings, writes ``lamp.toml`` beside the field log (atomic)."""
@@ -520,6 +533,10 @@ def calibrate_lamp_cli(args: argparse.Namespace) -> int:
         print(f"warning: {w}")
 
     out = log.path.parent / "lamp.toml"
+    problem = _degenerate_lamp(cal, distance)
+    if problem is not None and not getattr(args, "force", False):
+        raise GnomonError(f"{out}: not written: the lamp estimate is degenerate ({problem}); take photos with "
+                          "the pencil in places spread around the scene, or write it anyway with --force")
     data = {
         "light": {"kind": "lamp", "position": cal.position_world},
         "lamp_calibration": {

@@ -29,7 +29,7 @@ from gnomon.pipeline import (
     record_surface,
     write_surface,
 )
-from gnomon.publish import staged_outputs
+from gnomon.publish import recover, staged_outputs
 from gnomon.triangulation import supported_by_neighbours
 
 
@@ -52,6 +52,7 @@ def load_scan(folder: str | Path) -> ScanOnDisk:
     f = Path(folder)
     if not f.is_dir():
         raise GnomonError(f"{f}: not a scan output folder")
+    recover(f)  # a publication a killed run left half-done is completed first
     for name in ("depth.npy", "sigma.npy", "report.json", "points.ply"):
         if not (f / name).is_file():
             raise GnomonError(f"{f}: missing {name} (is it the output folder of `gnomon scan`?)")
@@ -65,16 +66,37 @@ def load_scan(folder: str | Path) -> ScanOnDisk:
         jump = float(report["settings"]["max_depth_jump"])
     except (ValueError, KeyError, TypeError) as exc:
         raise GnomonError(f"{f / 'report.json'}: not a gnomon scan report ({exc})") from None
-    depth = np.load(f / "depth.npy")
-    sigma = np.load(f / "sigma.npy")
-    if depth.shape != (camera.height, camera.width) or sigma.shape != depth.shape:
-        raise GnomonError(f"{f}: depth.npy / sigma.npy do not match the {camera.width}x{camera.height} camera")
-    points = ply.read_ply(f / "points.ply")
+    depth = _load_map(f / "depth.npy", camera)
+    sigma = _load_map(f / "sigma.npy", camera)
+    try:
+        points = ply.read_ply(f / "points.ply")
+    except GnomonError:
+        raise
+    except (ValueError, KeyError, TypeError, EOFError, OSError, IndexError) as exc:
+        raise GnomonError(f"{f / 'points.ply'}: not a readable gnomon point cloud ({exc})") from None
     rgb = np.zeros((camera.height, camera.width, 3), np.uint8)
     if points.get("uv") is not None and points.get("rgb") is not None:
-        u, v = points["uv"][:, 0].astype(np.int64), points["uv"][:, 1].astype(np.int64)
+        uv = np.asarray(points["uv"], dtype=np.float64)
+        if uv.size and not (np.all(np.isfinite(uv)) and uv[:, 0].min() >= 0 and uv[:, 1].min() >= 0
+                            and uv[:, 0].max() < camera.width and uv[:, 1].max() < camera.height):
+            raise GnomonError(f"{f / 'points.ply'}: pixel coordinates u v outside the "
+                              f"{camera.width}x{camera.height} image")
+        u, v = uv[:, 0].astype(np.int64), uv[:, 1].astype(np.int64)
         rgb[v, u] = points["rgb"]
     return ScanOnDisk(f, depth, sigma, rgb, camera, pose, units, jump)
+
+
+def _load_map(path: Path, camera: CameraModel) -> np.ndarray:
+    """A per-pixel float map (.npy) of the camera's size, or a one-line error naming the file."""
+    try:
+        m = np.load(path, allow_pickle=False)
+    except (ValueError, EOFError, OSError) as exc:  # truncated, empty, text, pickled objects
+        raise GnomonError(f"{path}: not a readable .npy map ({exc})") from None
+    if not isinstance(m, np.ndarray) or m.dtype.kind != "f":
+        raise GnomonError(f"{path}: expected a float map, got {getattr(m, 'dtype', type(m).__name__)}")
+    if m.shape != (camera.height, camera.width):
+        raise GnomonError(f"{path}: shape {m.shape} does not match the {camera.width}x{camera.height} camera")
+    return m
 
 
 def _check_same_camera(a: ScanOnDisk, b: ScanOnDisk) -> None:

@@ -164,7 +164,7 @@ def _fsync_path(path: Path, directory: bool = False) -> None:
 
 def fsync_tree(folder: Path) -> None:
     """fsync every file in ``folder`` (recursively) and the folders themselves."""
-    for root, dirs, files in os.walk(folder):
+    for root, _dirs, files in os.walk(folder):
         for name in files:
             _fsync_path(Path(root) / name)
         _fsync_path(Path(root), directory=True)

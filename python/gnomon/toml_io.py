@@ -24,13 +24,13 @@ __all__ = ["load", "dumps", "dump"]
 
 
 def load(path: str | os.PathLike) -> dict[str, Any]:
-    """Parse a TOML file; a missing or malformed file is a :class:`GnomonError`."""
+    """Parse a TOML file; a missing, binary, non-UTF-8 or malformed file is a :class:`GnomonError`."""
+    from gnomon.validate import read_text
+
     p = Path(path)
+    text = read_text(p, "file")  # missing, a folder, binary or not UTF-8: one line naming it
     try:
-        with p.open("rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise GnomonError(f"{p}: file not found") from None
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise GnomonError(f"{p}: not valid TOML: {exc}") from None
 

@@ -45,6 +45,14 @@ def run(args: argparse.Namespace) -> int:
     for name in ("frames", "numpy_frames", "width", "height", "window", "max_width"):
         if getattr(args, name) < 1:
             raise GnomonError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(args, name)}")
+    from gnomon.validate import MAX_WINDOW
+
+    if args.window > MAX_WINDOW:
+        raise GnomonError(f"--window must be ≤ {MAX_WINDOW}, got {args.window}")
+    if args.json:
+        from gnomon.publish import check_output_file
+
+        check_output_file(args.json, "--json")
     memory_frames = () if args.no_memory else tuple(sorted({100, args.frames}))
     try:
         result = run_bench(

@@ -16,6 +16,7 @@ Willson's reference implementation's data files; ``#`` starts a comment.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -59,6 +60,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     c.add_argument("--rrd", default=None, metavar="PATH",
                    help="rerun recording of the views with the reprojected board (default: beside --out, .rrd)")
     c.add_argument("--no-rrd", action="store_true", help="do not write a recording")
+    c.add_argument("--force", action="store_true",
+                   help="write the camera file even when the calibration is degenerate (a lens model that "
+                        "cannot be inverted over the image, or reprojection RMS over 5 px)")
     c.add_argument(
         "--reject",
         type=float,
@@ -91,6 +95,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Locate the lamp from 2+ photos of a standing pencil and its shadow (described in the field log).",
     )
     lamp.add_argument("field_log", type=Path, metavar="FIELD_LOG", help="field log describing the pencil photos")
+    lamp.add_argument("--force", action="store_true",
+                      help="write lamp.toml even when the estimate is degenerate (the pencils' shadow lines "
+                           "nearly parallel or collinear)")
     lamp.set_defaults(func=run_lamp)
 
 
@@ -103,9 +110,22 @@ def _pitch(text: str | None) -> tuple[float, float] | None:
         raise GnomonError(f"--pixel-pitch '{text}': expected DX or DX,DY in mm") from None
     if len(vals) == 1:
         vals = vals * 2
-    if len(vals) != 2 or not all(v > 0 for v in vals):
+    if len(vals) != 2 or not all(math.isfinite(v) and v > 0 for v in vals):
         raise GnomonError(f"--pixel-pitch '{text}': expected one or two positive numbers (mm)")
     return vals[0], vals[1]
+
+
+def _degenerate_camera(cal) -> str | None:
+    """Why a calibration result must not replace a camera file without --force, or None."""
+    from gnomon import validate
+
+    if not math.isfinite(cal.rms_px) or cal.rms_px > 5.0:
+        return f"reprojection RMS {cal.rms_px:.3g} px"
+    try:
+        validate.check_camera(cal.camera, "calibrated camera")
+    except GnomonError as exc:
+        return str(exc).removeprefix("calibrated camera: ")
+    return None
 
 
 def _fmt(v: float, s: float | None) -> str:
@@ -139,7 +159,21 @@ def run(args: argparse.Namespace) -> int:
     from gnomon import calibration
     from gnomon.progress import Progress
 
-    board = calibration.parse_board(args.board)
+    from gnomon import publish, validate
+
+    try:
+        board = calibration.parse_board(args.board)
+    except GnomonError as exc:
+        raise GnomonError(f"--board {exc}") from None
+    if min(board) < validate.MIN_CHESSBOARD:
+        raise GnomonError(f"--board {args.board}: a chessboard needs at least "
+                          f"{validate.MIN_CHESSBOARD}x{validate.MIN_CHESSBOARD} inner corners")
+    validate.number(args.square, "--square")  # finite; the sign is calibrate_images' to check
+    validate.number(args.reject, "--reject", minimum=1.0)
+    validate.number(args.sx, "--sx", positive=True)
+    publish.check_output_file(args.out, "--out")
+    if args.rrd and not args.no_rrd:
+        publish.check_output_file(args.rrd, "--rrd")
     pitch = _pitch(args.pixel_pitch)
     if args.model == "zhang" and (pitch is not None or args.full or args.sx != 1.0):
         raise GnomonError("--pixel-pitch, --sx and --full apply to --model tsai only")
@@ -188,6 +222,10 @@ def run(args: argparse.Namespace) -> int:
             print("  dist " + ", ".join(f"{n} {_fmt(x, std.get(n))}" for n, x in zip(names, v)))
         else:
             print(f"  {k} {_fmt(v, std.get(k))}")
+    problem = _degenerate_camera(cal)
+    if problem is not None and not args.force:
+        raise GnomonError(f"{args.out}: not written: the calibration is degenerate ({problem}); "
+                          "check the views, or write it anyway with --force")
     calibration.write_camera_file(args.out, cal)
     print(f"wrote {args.out}")
     return 0

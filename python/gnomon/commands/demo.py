@@ -77,8 +77,9 @@ def run_facade_sun(out: Path, *, small: bool, progress: bool) -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from gnomon import atomic
+    from gnomon.publish import check_output_folder
 
-    out: Path = args.out
+    out: Path = check_output_folder(args.out)
     results = run_desk_lamp(out, small=args.small, progress=not args.quiet)
     results.update(run_facade_sun(out, small=args.small, progress=not args.quiet))
     atomic.write_text(out / "accuracy.json", json.dumps(results, indent=2))

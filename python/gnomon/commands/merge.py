@@ -23,10 +23,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gnomon import publish, validate
+    from gnomon.errors import GnomonError
     from gnomon.merge import merge_scans
     from gnomon.pipeline import ScanOptions
 
-    _, report = merge_scans(args.scan_a, args.scan_b, args.out, method=args.weights, beta=args.beta,
+    beta = validate.number(args.beta, "--beta", positive=True)
+    out = publish.check_output_folder(args.out)
+    for name, scan in (("SCAN_A", args.scan_a), ("SCAN_B", args.scan_b)):
+        folder = validate.input_folder(scan, f"{name} (a scan output folder)").resolve()
+        if out == folder or folder in out.parents or out in folder.parents:
+            raise GnomonError(f"--out {args.out}: would write into the input {scan}; choose another folder")
+
+    _, report = merge_scans(args.scan_a, args.scan_b, args.out, method=args.weights, beta=beta,
                             options=ScanOptions(rrd=not args.no_rrd, progress=False))
     c = report["coverage"]
     print(f"{c['points']} points (A {c['scan_a_points']}, B {c['scan_b_points']}; only A {c['only_a']}, "

@@ -44,8 +44,13 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import review
+    from gnomon import publish, review, validate
 
+    validate.input_file(args.recording, "recording")
+    if args.compare is not None:
+        validate.input_file(args.compare, "recording")
+    if args.export is not None:
+        publish.check_output_file(args.export, "--export")
     summary = review.summarize(args.recording)
     result: dict = {"summary": summary.to_dict()}
     messages = []

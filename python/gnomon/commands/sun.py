@@ -53,6 +53,14 @@ def _vec(v: np.ndarray) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gnomon import validate
+
+    validate.number(args.lat, "--lat")  # finite; the range is Site's to check
+    validate.number(args.lon, "--lon")
+    validate.number(args.alt, "--alt")
+    for name in ("pressure", "temperature", "heading"):
+        if getattr(args, name) is not None:
+            validate.number(getattr(args, name), f"--{name}", positive=name == "pressure")
     site = Site(args.lat, args.lon, args.alt, args.pressure, args.temperature, args.tz)
     times = [parse_time(t, site.timezone) for t in args.time]
     pos = sun_position(times, site)

@@ -1,0 +1,263 @@
+"""Validation at the edge: numbers that make sense, paths that are what they claim.
+
+Every check raises a :class:`~gnomon.errors.GnomonError` (a
+:class:`~gnomon.errors.FieldLogError` for field-log keys) whose message names
+the file and key, or the command-line option, and the value: the CLI prints it
+as one line and exits with code 2. Inner steps can then take plain values
+without re-checking them.
+
+What is checked beyond "a finite number of the right sign":
+
+- a camera whose lens model is invertible over the whole image (every border
+  pixel's ray projects back onto that pixel) and whose field of view is
+  plausible (between 0.05° and 175°);
+- a lamp that is not at the camera's centre (shadow planes through the camera
+  centre are seen edge-on) nor absurdly far;
+- a pole that is not within 20° of horizontal (the world's z axis is up in
+  sun scans);
+- frame times: a frame rate between one frame a day and 10,000 per second; a
+  time zone that exists;
+- reference planes with distinct names; chessboards of at least 3x3 inner
+  corners; a tracker window the kernel supports.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gnomon.errors import FieldLogError, GnomonError
+
+__all__ = [
+    "MAX_WINDOW",
+    "check_camera",
+    "check_field_log",
+    "input_file",
+    "input_folder",
+    "number",
+    "read_text",
+]
+
+MAX_WINDOW = 64
+"""The kernel tracker's largest window half-width (``rust/core/src/tracker.rs``: ``MAX_WINDOW``)."""
+
+MIN_FOV_DEG, MAX_FOV_DEG = 0.05, 175.0
+MIN_FPS, MAX_FPS = 1.0 / 86400.0, 10_000.0
+MIN_POLE_ELEVATION_DEG = 20.0
+MIN_CHESSBOARD = 3
+
+
+# ------------------------------------------------------------------------ numbers
+
+
+def number(value: Any, option: str, *, positive: bool = False, minimum: float | None = None,
+           maximum: float | None = None, integer: bool = False) -> float:
+    """A finite number within bounds, or a one-line error naming ``option``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise GnomonError(f"{option} {value!r}: expected a number")
+    v = float(value)
+    if not math.isfinite(v):
+        raise GnomonError(f"{option} {value}: must be a finite number")
+    if integer and v != int(v):
+        raise GnomonError(f"{option} {value}: must be a whole number")
+    if positive and v <= 0:
+        raise GnomonError(f"{option} {value}: must be > 0")
+    if minimum is not None and v < minimum:
+        raise GnomonError(f"{option} {value}: must be ≥ {minimum:g}")
+    if maximum is not None and v > maximum:
+        raise GnomonError(f"{option} {value}: must be ≤ {maximum:g}")
+    return v
+
+
+# -------------------------------------------------------------------------- paths
+
+
+def input_file(path: str | os.PathLike, what: str = "file") -> Path:
+    """An existing regular file (not a folder), or a one-line error."""
+    p = Path(path)
+    if not p.exists():
+        raise GnomonError(f"{p}: {what} not found")
+    if p.is_dir():
+        raise GnomonError(f"{p}: {what} is a folder, expected a file")
+    if not p.is_file():
+        raise GnomonError(f"{p}: {what} is not a regular file")
+    if not os.access(p, os.R_OK):
+        raise GnomonError(f"{p}: {what} is not readable (permission denied)")
+    return p
+
+
+def input_folder(path: str | os.PathLike, what: str = "folder") -> Path:
+    """An existing folder, or a one-line error."""
+    p = Path(path)
+    if not p.exists():
+        raise GnomonError(f"{p}: {what} not found")
+    if not p.is_dir():
+        raise GnomonError(f"{p}: {what} is a file, expected a folder")
+    return p
+
+
+def read_text(path: str | os.PathLike, what: str = "file") -> str:
+    """The UTF-8 text of an existing file, or a one-line error (missing, a folder, binary, not UTF-8)."""
+    p = input_file(path, what)
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise GnomonError(f"{p}: {what} cannot be read: {exc.strerror or exc}") from None
+    if b"\x00" in data:
+        raise GnomonError(f"{p}: {what} is a binary file, expected text (TOML)")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise GnomonError(f"{p}: {what} is not UTF-8 text (byte {exc.start}: {data[exc.start:exc.start + 1]!r}); "
+                          "save it as UTF-8") from None
+
+
+# ------------------------------------------------------------------------ cameras
+
+
+def _border_pixels(width: int, height: int, n: int = 24) -> np.ndarray:
+    u = np.linspace(0.0, width - 1.0, n)
+    v = np.linspace(0.0, height - 1.0, n)
+    edges = [np.stack([u, np.zeros(n)], 1), np.stack([u, np.full(n, height - 1.0)], 1),
+             np.stack([np.zeros(n), v], 1), np.stack([np.full(n, width - 1.0), v], 1)]
+    return np.concatenate(edges)
+
+
+def check_camera(camera, where: str) -> None:
+    """Image size, focal lengths, principal point and lens distortion of a camera, or a one-line error.
+
+    ``where`` names the file and table, e.g. ``"scan.toml: [camera]"``.
+    """
+    w, h = int(camera.width), int(camera.height)
+    if not (2 <= w <= 100_000 and 2 <= h <= 100_000):
+        raise GnomonError(f"{where}: image size {w}x{h} is not plausible (2 … 100000 pixels a side)")
+    model = type(camera).__name__
+    focal_keys: list[tuple[str, float, int]] = []
+    if hasattr(camera, "fx"):
+        focal_keys = [("fx", float(camera.fx), w), ("fy", float(camera.fy), h)]
+    elif hasattr(camera, "f_mm") and hasattr(camera, "dx_mm"):
+        focal_keys = [("f_mm", float(camera.f_mm) / float(camera.dx_mm), w)]
+    for key, f_px, size in focal_keys:
+        if not math.isfinite(f_px) or f_px <= 0:
+            raise GnomonError(f"{where}: key '{key}' must be a positive finite number")
+        fov = math.degrees(2.0 * math.atan(size / (2.0 * f_px)))
+        if not MIN_FOV_DEG <= fov <= MAX_FOV_DEG:
+            raise GnomonError(f"{where}: key '{key}' gives a field of view of {fov:.3g}° over {size} pixels "
+                              f"(plausible: {MIN_FOV_DEG:g}° … {MAX_FOV_DEG:g}°); is it in pixels?")
+    for key in ("cx", "cy"):
+        if hasattr(camera, key):
+            c = float(getattr(camera, key))
+            size = w if key == "cx" else h
+            if not math.isfinite(c) or not -size <= c <= 2 * size:
+                raise GnomonError(f"{where}: key '{key}' = {c:g} is far outside the {w}x{h} image")
+    dist_key = "dist" if model == "OpenCVCamera" else ("kappa1" if hasattr(camera, "kappa1") else "distortion")
+    pix = _border_pixels(w, h)
+    with np.errstate(all="ignore"):
+        try:
+            rays = camera.rays(pix)
+            back = camera.project(rays)
+        except Exception as exc:  # OpenCV rejecting absurd coefficients
+            raise GnomonError(f"{where}: key '{dist_key}': the lens model cannot be inverted ({exc})") from None
+    bad = ~np.all(np.isfinite(rays), axis=1) | (rays[:, 2] <= 1e-6)
+    err = np.where(bad, np.inf, np.linalg.norm(np.asarray(back) - pix, axis=1))
+    worst = int(np.argmax(err))
+    if not err[worst] <= 0.5:
+        u, v = pix[worst]
+        raise GnomonError(f"{where}: key '{dist_key}': the distortion is not invertible over the image "
+                          f"(pixel ({u:.0f}, {v:.0f}) does not map back onto itself); check the coefficients")
+    # The field of view the rays span, corner to corner through the image, after distortion.
+    span = math.degrees(math.acos(float(np.clip(np.min(rays @ rays.T), -1.0, 1.0))))
+    if not MIN_FOV_DEG <= span <= 2 * MAX_FOV_DEG:
+        raise GnomonError(f"{where}: key '{dist_key}': with this distortion the image spans {span:.3g}° "
+                          f"(plausible: {MIN_FOV_DEG:g}° … {MAX_FOV_DEG:g}°); check the coefficients")
+    angle = np.degrees(np.arccos(np.clip(rays[:, 2], -1.0, 1.0)))
+    if angle.max() > MAX_FOV_DEG / 2:
+        raise GnomonError(f"{where}: key '{dist_key}': the image corners would look {angle.max():.0f}° off the "
+                          "optical axis; check the coefficients")
+
+
+# ----------------------------------------------------------------------- field log
+
+
+def _zone_exists(name: str) -> bool:
+    from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
+
+    try:
+        ZoneInfo(name)
+        return True
+    except (ZoneInfoNotFoundError, ValueError, OSError):
+        pass
+    try:  # offsets such as "UTC+02:00", "+02:00"
+        from gnomon.sun import Site
+
+        Site(0.0, 0.0, 0.0, None, None, name)
+        return True
+    except Exception:
+        return False
+
+
+def check_field_log(log) -> None:
+    """Plausibility of a parsed field log's numbers and geometry (see the module's list)."""
+    p = log.path
+    if log.scan.window > MAX_WINDOW:
+        raise FieldLogError(f"{p}: [scan] window: must be ≤ {MAX_WINDOW} frames, got {log.scan.window}")
+    gamma = log.capture.gamma
+    if not isinstance(gamma, str) and not 0.1 <= gamma <= 10.0:
+        raise FieldLogError(f"{p}: [capture] gamma: {gamma:g} is not a camera gamma (0.1 … 10, or 'srgb')")
+    fps = log.capture.fps
+    if fps is not None and not MIN_FPS <= fps <= MAX_FPS:
+        raise FieldLogError(f"{p}: [capture] fps: {fps:g} frames/s is not plausible "
+                            f"(one a day … {MAX_FPS:g} a second)")
+    where = f"{log.camera_file}: [camera]" if log.camera_file else f"{p}: [camera]"
+    try:
+        check_camera(log.camera, where)
+    except FieldLogError:
+        raise
+    except GnomonError as exc:
+        raise FieldLogError(str(exc)) from None
+    names: dict[str, int] = {}
+    for i, plane in enumerate(log.planes):
+        if plane.name in names:
+            raise FieldLogError(f"{p}: [[planes]] name {plane.name!r} is used by planes {names[plane.name]} and {i}; "
+                                "give each plane its own name")
+        names[plane.name] = i
+        if plane.chessboard is not None and min(plane.chessboard) < MIN_CHESSBOARD:
+            cols, rows = plane.chessboard
+            raise FieldLogError(f"{p}: [planes.{i}] chessboard: {cols}x{rows} inner corners; "
+                                f"a chessboard needs at least {MIN_CHESSBOARD}x{MIN_CHESSBOARD}")
+    if log.pose is not None:
+        _check_lamp(log, log.pose)
+    if log.site is not None and log.site.timezone is not None and not _zone_exists(log.site.timezone):
+        raise FieldLogError(f"{p}: [site] timezone: unknown time zone {log.site.timezone!r} "
+                            "(an IANA name such as 'Europe/Zurich', or an offset such as 'UTC+02:00')")
+    if log.pole is not None:
+        axis = log.pole.top - log.pole.base
+        elevation = math.degrees(math.asin(min(1.0, abs(axis[2]) / float(np.linalg.norm(axis)))))
+        if elevation < MIN_POLE_ELEVATION_DEG:
+            raise FieldLogError(f"{p}: [pole] base → top rises {elevation:.1f}° above the horizontal; a pole "
+                                f"stands (≥ {MIN_POLE_ELEVATION_DEG:g}°; world z is up). Are base and top swapped "
+                                "with another axis?")
+
+
+def _check_lamp(log, pose) -> None:
+    """A lamp neither at the camera's centre nor absurdly far, relative to the camera's distance to the scene."""
+    if log.light.kind != "lamp" or log.light.position is None:
+        return
+    centre = pose.camera_centre_world
+    plane = log.planes[0]
+    with np.errstate(all="ignore"):
+        scene = abs(float(np.dot(centre - plane.point, plane.normal)))
+        gap = float(np.linalg.norm(np.asarray(log.light.position, dtype=np.float64) - centre))
+    if not scene > 0:
+        return
+    if gap < 0.01 * scene:
+        raise FieldLogError(f"{log.path}: [light] position {log.light.position.tolist()} is at the camera's centre "
+                            f"({gap:.3g} from it, the scene is {scene:.3g} away): its shadow planes would pass "
+                            "through the camera and be seen edge-on")
+    if not gap <= 1e4 * scene:
+        raise FieldLogError(f"{log.path}: [light] position is {gap:.3g} from the camera, the scene {scene:.3g}: "
+                            "not a lamp (for the sun, use kind = 'sun')")

@@ -1,0 +1,556 @@
+"""Bad input and faults: one line and exit code 2 (or 128+n for a signal), never a traceback,
+never a hang, nothing half-written, nothing mixed.
+
+One test per class of traceback or silently accepted input listed in issue #12, a
+fuzz test of the field-log parser, and fault tests (a file-size limit, a full or
+read-only filesystem where mounting is allowed, SIGTERM/SIGHUP mid-scan, a kill
+during publication). ``tests/fault_matrix.py`` runs the same classes as a user
+would, in subprocesses, and prints the table.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import struct
+import subprocess
+import sys
+import textwrap
+import time
+import tomllib
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gnomon import toml_io
+from gnomon.cli import main
+from gnomon.errors import GnomonError
+
+from conftest import write_tiny_capture
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT / "python"), "CI": "1"}
+
+
+def one_line(code: int, capsys, *needles: str) -> str:
+    err = capsys.readouterr().err.strip()
+    lines = err.splitlines()
+    assert code == 2, err
+    assert len(lines) == 1 and lines[0].startswith("gnomon: error: "), err
+    for n in needles:
+        assert n in lines[0], lines[0]
+    return lines[0]
+
+
+def no_leftovers(folder: Path) -> None:
+    left = [p.name for p in folder.iterdir() if ".partial-" in p.name or p.name.startswith(".gnomon-commit")]
+    assert left == []
+
+
+def edit(log: Path, fn) -> Path:
+    data = tomllib.loads(log.read_text())
+    fn(data)
+    toml_io.dump(data, log)
+    return log
+
+
+def scan(log: Path, out: Path, *extra: str) -> int:
+    return main(["scan", str(log), "--out", str(out), "--quiet", *extra])
+
+
+@pytest.fixture
+def cap(tmp_path: Path) -> Path:
+    return write_tiny_capture(tmp_path / "cap")
+
+
+@pytest.fixture(scope="module")
+def scanned(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("scanned")
+    log = write_tiny_capture(root / "cap")
+    assert main(["scan", str(log), "--out", str(root / "a"), "--quiet", "--no-rrd"]) == 0
+    return root / "a"
+
+
+# ------------------------------------------------------------------ frames
+
+
+def test_zero_byte_frame(cap: Path, capsys) -> None:
+    (cap.parent / "frames" / "frame_0005.png").write_bytes(b"")
+    one_line(scan(cap, cap.parent / "out"), capsys, "frame_0005.png", "empty")
+    assert not (cap.parent / "out").exists()
+
+
+def _png_header(width: int, height: int) -> bytes:
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b"")
+
+
+@pytest.mark.parametrize("name", ["frame_0000.png", "frame_0003.png"])
+def test_png_header_claiming_60000_squared(cap: Path, capsys, name: str) -> None:
+    (cap.parent / "frames" / name).write_bytes(_png_header(60000, 60000))
+    one_line(scan(cap, cap.parent / "out"), capsys, name)
+
+
+def test_frames_sorted_naturally(tmp_path: Path, capsys) -> None:
+    """frame_0 … frame_23 are scanned in capture order, as frame_0000 … frame_0023 are."""
+    ref_log = write_tiny_capture(tmp_path / "ref")
+    log = write_tiny_capture(tmp_path / "nat")
+    for p in (log.parent / "frames").glob("*.png"):
+        p.rename(p.with_name(f"frame_{int(p.stem.split('_')[1])}.png"))
+    assert scan(ref_log, tmp_path / "a", "--no-rrd") == 0
+    assert scan(log, tmp_path / "b", "--no-rrd") == 0
+    a, b = np.load(tmp_path / "a" / "depth.npy"), np.load(tmp_path / "b" / "depth.npy")
+    np.testing.assert_array_equal(np.isfinite(a), np.isfinite(b))
+    np.testing.assert_allclose(a[np.isfinite(a)], b[np.isfinite(b)], rtol=1e-6)
+
+
+# ------------------------------------------------------------------ text files
+
+
+@pytest.mark.parametrize("content, needle", [
+    (bytes(range(256)), "binary"),
+    ("[capture]\n# caf\xe9\n".encode("latin-1"), "UTF-8"),
+])
+def test_field_log_not_text(tmp_path: Path, capsys, content: bytes, needle: str) -> None:
+    log = tmp_path / "field_log.toml"
+    log.write_bytes(content)
+    one_line(scan(log, tmp_path / "out"), capsys, "field_log.toml", needle)
+
+
+def test_field_log_is_a_folder(tmp_path: Path, capsys) -> None:
+    (tmp_path / "field_log.toml").mkdir()
+    one_line(scan(tmp_path / "field_log.toml", tmp_path / "out"), capsys, "field_log.toml", "folder")
+
+
+@pytest.mark.parametrize("kind", ["binary", "latin-1", "folder"])
+@pytest.mark.parametrize("which", ["camera", "light"])
+def test_camera_and_light_files_not_text(cap: Path, capsys, kind: str, which: str) -> None:
+    target = cap.parent / f"{which}.toml"
+    if kind == "folder":
+        target.mkdir()
+    else:
+        target.write_bytes(b"\x00\xff\x01" if kind == "binary" else "x = 1 # caf\xe9\n".encode("latin-1"))
+
+    def point_at(d: dict) -> None:
+        if which == "camera":
+            d["camera"] = {"file": "camera.toml", "pose": d["camera"]["pose"]}
+        else:
+            d["light"] = {"kind": "lamp", "file": "light.toml"}
+    edit(cap, point_at)
+    one_line(scan(cap, cap.parent / "out"), capsys, f"{which}.toml")
+
+
+@pytest.mark.parametrize("frames, needle", [("", "empty"), ("/", "root"), ("/nonexistent-gnomon/*.png", "not found")])
+def test_frames_glob_empty_or_absolute(cap: Path, capsys, frames: str, needle: str) -> None:
+    edit(cap, lambda d: d["capture"].update(frames=frames))
+    one_line(scan(cap, cap.parent / "out"), capsys, "frames", needle)
+
+
+def test_absolute_frames_glob_that_exists_scans(cap: Path, capsys) -> None:
+    edit(cap, lambda d: d["capture"].update(frames=str(cap.parent / "frames" / "*.png")))
+    assert scan(cap, cap.parent / "out", "--no-rrd") == 0, capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ numbers and geometry
+
+
+@pytest.mark.parametrize("section, key, value, needle", [
+    ("scan", "window", 65, "window"),
+    ("capture", "gamma", float("inf"), "gamma"),
+    ("capture", "gamma", 1e300, "gamma"),
+    ("camera", "fx", 1e300, "fx"),
+    ("camera", "dist", [1e10, 0.0, 0.0, 0.0, 0.0], "dist"),
+    ("camera", "dist", [-5.0, 0.0, 0.0, 0.0, 0.0], "dist"),
+    ("light", "position", [0.0, 0.0, 500.0], "camera's centre"),  # the camera sits at (0, 0, 500)
+    ("light", "position", [1e300, 0.0, 400.0], "position"),
+])
+def test_implausible_numbers(cap: Path, capsys, section: str, key: str, value, needle: str) -> None:
+    edit(cap, lambda d: d[section].update({key: value}))
+    one_line(scan(cap, cap.parent / "out"), capsys, "field_log.toml", needle)
+    assert not (cap.parent / "out").exists()
+
+
+@pytest.mark.parametrize("board", ["0x0", "2x5", "-3x4"])
+def test_plane_chessboard_too_small(cap: Path, capsys, board: str) -> None:
+    edit(cap, lambda d: d["planes"][0].update(chessboard=board, square=25.0))
+    one_line(scan(cap, cap.parent / "out"), capsys, "chessboard")
+
+
+def test_two_planes_with_one_name(cap: Path, capsys) -> None:
+    edit(cap, lambda d: d["planes"].append(dict(d["planes"][0])))
+    one_line(scan(cap, cap.parent / "out"), capsys, "'desk'", "own name")
+
+
+def test_timezone_that_does_not_exist(cap: Path, capsys) -> None:
+    edit(cap, lambda d: d.update(site={"latitude": 47.0, "longitude": 8.0, "timezone": "Mars/Olympus"}))
+    one_line(scan(cap, cap.parent / "out"), capsys, "Mars/Olympus")
+
+
+def _sun_log(tmp_path: Path) -> Path:
+    """A tiny sun capture's field log (the geometry checks run before any frame is tracked)."""
+    log = write_tiny_capture(tmp_path / "sun")
+
+    def to_sun(d: dict) -> None:
+        d["light"] = {"kind": "sun"}
+        d["site"] = {"latitude": 47.37, "longitude": 8.54, "timezone": "Europe/Zurich", "heading_deg": 10.0}
+        d["capture"].update(timestamps="start+fps", start="2026-06-01T12:00:00", fps=1.0 / 60)
+        d["pole"] = {"base": [0.0, 0.0, 0.0], "top": [0.0, 0.0, 3.0], "radius": 0.05}
+    return edit(log, to_sun)
+
+
+def test_horizontal_pole(tmp_path: Path, capsys) -> None:
+    log = edit(_sun_log(tmp_path), lambda d: d["pole"].update(top=[3.0, 0.0, 0.2]))
+    one_line(scan(log, tmp_path / "out"), capsys, "[pole]")
+
+
+@pytest.mark.parametrize("fps", [1e300, 1e-300])
+def test_implausible_frame_rate(tmp_path: Path, capsys, fps: float) -> None:
+    log = edit(_sun_log(tmp_path), lambda d: d["capture"].update(fps=fps))
+    one_line(scan(log, tmp_path / "out"), capsys, "fps")
+
+
+# ------------------------------------------------------------------ output paths
+
+
+def test_out_is_a_file_or_under_one(cap: Path, capsys) -> None:
+    f = cap.parent / "taken"
+    f.write_text("keep")
+    one_line(scan(cap, f), capsys, str(f), "is a file")
+    one_line(scan(cap, f / "sub"), capsys, "is a file")
+    assert f.read_text() == "keep"
+
+
+def test_read_only_output(cap: Path, capsys, tmp_path: Path) -> None:
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    if os.geteuid() == 0:
+        r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m,ro", "tmpfs", str(ro)], capture_output=True)
+        if r.returncode != 0:
+            pytest.skip("root, and no read-only mount possible: permissions do not apply to root")
+    else:
+        ro.chmod(0o555)
+    try:
+        one_line(scan(cap, ro / "scan"), capsys, str(ro / "scan"))
+    finally:
+        if os.geteuid() == 0:
+            subprocess.run(["umount", str(ro)], capture_output=True)
+        else:
+            ro.chmod(0o755)
+
+
+def test_review_export_to_a_folder(tmp_path: Path, capsys) -> None:
+    rec = tmp_path / "x.rrd"
+    rec.write_bytes(b"anything")
+    one_line(main(["review", str(rec), "--export", str(tmp_path)]), capsys, "--export", "folder")
+
+
+def test_bench_json_to_a_folder(tmp_path: Path, capsys) -> None:
+    one_line(main(["bench", "--no-memory", "--json", str(tmp_path)]), capsys, "--json", "folder")
+
+
+def test_demo_out_is_a_file(tmp_path: Path, capsys) -> None:
+    (tmp_path / "f").write_text("keep")
+    one_line(main(["demo", "--small", "--quiet", "--out", str(tmp_path / "f")]), capsys, "is a file")
+    assert (tmp_path / "f").read_text() == "keep"
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--seed", "-1"], "--seed"), (["--noise", "nan"], "--noise"), (["--frames", "1"], "--frames"),
+    (["--gamma", "inf"], "--gamma"),
+])
+def test_simulate_numbers(tmp_path: Path, capsys, args: list[str], needle: str) -> None:
+    one_line(main(["simulate", "two_plane", "--out", str(tmp_path / "o"), "--quiet", *args]), capsys, needle)
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--lat", "nan", "--lon", "8"], "--lat"), (["--lat", "47", "--lon", "inf"], "--lon"),
+    (["--lat", "47", "--lon", "8", "--heading", "nan"], "--heading"),
+])
+def test_sun_numbers(capsys, args: list[str], needle: str) -> None:
+    one_line(main(["sun", *args, "--time", "2026-06-01T12:00Z"]), capsys, needle)
+
+
+# ------------------------------------------------------------------ merge
+
+
+@pytest.mark.parametrize("beta", ["nan", "inf", "-5"])
+def test_merge_beta(scanned: Path, tmp_path: Path, capsys, beta: str) -> None:
+    code = main(["merge", str(scanned), str(scanned), "--out", str(tmp_path / "m"), "--weights", "sigmoid",
+                 f"--beta={beta}", "--no-rrd"])
+    one_line(code, capsys, "--beta")
+    assert not (tmp_path / "m").exists()
+
+
+def test_merge_into_an_input(scanned: Path, capsys) -> None:
+    before = {p.name: p.read_bytes() for p in scanned.iterdir() if p.is_file()}
+    one_line(main(["merge", str(scanned), str(scanned), "--out", str(scanned), "--no-rrd"]), capsys, "input")
+    assert {p.name: p.read_bytes() for p in scanned.iterdir() if p.is_file()} == before
+
+
+@pytest.mark.parametrize("spoil, needle", [
+    (lambda b: (b / "depth.npy").write_bytes((b / "depth.npy").read_bytes()[:100]), "depth.npy"),
+    (lambda b: (b / "depth.npy").write_bytes(b""), "depth.npy"),
+    (lambda b: (b / "depth.npy").write_text("hello"), "depth.npy"),
+    (lambda b: np.save(b / "depth.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True), "depth.npy"),
+    (lambda b: (b / "report.json").write_bytes(b"\xff\xfe"), "report.json"),
+])
+def test_merge_spoilt_input(scanned: Path, tmp_path: Path, capsys, spoil, needle: str) -> None:
+    import shutil
+
+    b = tmp_path / "b"
+    shutil.copytree(scanned, b)
+    spoil(b)
+    one_line(main(["merge", str(scanned), str(b), "--out", str(tmp_path / "m"), "--no-rrd"]), capsys, needle)
+    assert not (tmp_path / "m").exists()
+
+
+def test_merge_point_pixels_out_of_range(scanned: Path, tmp_path: Path, capsys) -> None:
+    import shutil
+
+    from gnomon import ply
+
+    b = tmp_path / "b"
+    shutil.copytree(scanned, b)
+    n = 10
+    ply.write_points_ply(b / "points.ply", np.zeros((n, 3), np.float32), np.zeros((n, 3), np.uint8),
+                         np.ones(n, np.float32), np.full((n, 2), 1e6, np.float32))
+    one_line(main(["merge", str(scanned), str(b), "--out", str(tmp_path / "m"), "--no-rrd"]), capsys, "points.ply")
+
+
+# ------------------------------------------------------------------ calibrate (CLI-level checks)
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--board", "2x2"], "--board"),
+    (["--board", "9x6", "--reject", "nan"], "--reject"),
+    (["--board", "9x6", "--square", "inf"], "--square"),
+    (["--board", "9x6", "--model", "tsai", "--pixel-pitch", "inf"], "--pixel-pitch"),
+    (["--board", "9x6", "--model", "tsai", "--pixel-pitch", "0.005", "--sx", "0"], "--sx"),
+    (["--board", "9x6", "--model", "tsai", "--pixel-pitch", "0.005", "--sx", "nan"], "--sx"),
+])
+def test_calibrate_camera_arguments(tmp_path: Path, capsys, args: list[str], needle: str) -> None:
+    good = tmp_path / "camera.toml"
+    good.write_text("# a good camera file\n")
+    argv = ["calibrate", "camera", str(tmp_path), "--out", str(good), "--no-rrd", *args]
+    if "--square" not in args:
+        argv += ["--square", "25"]
+    one_line(main(argv), capsys, needle)
+    assert good.read_text() == "# a good camera file\n"
+
+
+def test_degenerate_lamp_does_not_overwrite(tmp_path: Path, capsys) -> None:
+    """Pencil shadows all on one line leave the lamp anywhere along it: lamp.toml is kept without --force."""
+    from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
+
+    simulate_desk_lamp(tmp_path / "desk", DeskLampConfig(width=200, height=150, frames=8, pencil_photos=3))
+    pencil = tmp_path / "desk" / "pencil_log.toml"
+    assert main(["calibrate", "lamp", str(pencil)]) == 0, capsys.readouterr().err
+    lamp = tmp_path / "desk" / "lamp.toml"
+    good = lamp.read_text()
+
+    def collinear(d: dict) -> None:
+        photos = d["pencil"]["photos"]
+        b0, t0 = np.array(photos[0]["base"]), np.array(photos[0]["tip"])
+        for k, p in enumerate(photos[1:], 1):
+            p["base"] = (b0 - 0.4 * k * (t0 - b0)).tolist()
+            p["tip"] = (t0 - 0.3 * k * (t0 - b0)).tolist()
+            p.pop("image", None)
+    edit(pencil, collinear)
+    capsys.readouterr()
+    one_line(main(["calibrate", "lamp", str(pencil)]), capsys, "lamp.toml", "degenerate", "--force")
+    assert lamp.read_text() == good
+    assert main(["calibrate", "lamp", str(pencil), "--force"]) == 0
+    assert lamp.read_text() != good
+
+
+# ------------------------------------------------------------------ the CLI process
+
+
+def run_cli(*args: str, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "gnomon", *args], env=ENV, capture_output=True, timeout=120, **kw)
+
+
+def test_broken_pipe_is_quiet() -> None:
+    """`gnomon sun ... | head -1`: no traceback when the reader goes away."""
+    p = subprocess.Popen([sys.executable, "-m", "gnomon", "sun", "--lat", "47", "--lon", "8",
+                          *sum((["--time", f"2026-06-01T{h:02d}:00Z"] for h in range(6, 18)), [])],
+                         env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.readline()
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    p.wait(timeout=60)
+    assert "Traceback" not in err and err.strip() == "", err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
+def test_signal_mid_scan_leaves_nothing(tmp_path: Path, sig: signal.Signals) -> None:
+    log = write_tiny_capture(tmp_path / "cap", n_frames=400, width=160, height=120)
+    out = tmp_path / "out"
+    p = subprocess.Popen([sys.executable, "-m", "gnomon", "scan", str(log), "--out", str(out), "--quiet"],
+                         env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not any(".partial-" in q.name for q in tmp_path.iterdir()):
+        time.sleep(0.01)
+    time.sleep(0.3)
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=60)
+    err = err.decode()
+    assert p.returncode == 128 + sig, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not out.exists()
+    no_leftovers(tmp_path)
+
+
+def test_file_size_limit(tmp_path: Path) -> None:
+    """`ulimit -f`: EFBIG on the first output that outgrows it; one line naming it; nothing published."""
+    log = write_tiny_capture(tmp_path / "cap", n_frames=30, width=160, height=120)
+    out = tmp_path / "out"
+
+    def limit() -> None:
+        import resource
+        resource.setrlimit(resource.RLIMIT_FSIZE, (64 << 10, 64 << 10))
+    r = subprocess.run([sys.executable, "-m", "gnomon", "scan", str(log), "--out", str(out), "--quiet"],
+                       env=ENV, capture_output=True, timeout=120, preexec_fn=limit)
+    err = r.stderr.decode().strip()
+    assert r.returncode == 2 and len(err.splitlines()) == 1, err
+    assert str(out) in err and "File too large" in err
+    assert not out.exists()
+    no_leftovers(tmp_path)
+
+
+def test_full_disk_does_not_hang(tmp_path: Path) -> None:
+    """A full filesystem (a small tmpfs as --out's parent): one line naming the output, no hang, no leftovers.
+    The recording is the last output written: a size where every other output fits checks it too."""
+    mnt = tmp_path / "mnt"
+    mnt.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=3m", "tmpfs", str(mnt)],
+                                           capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a tmpfs here (needs root)")
+    try:
+        log = write_tiny_capture(tmp_path / "cap", n_frames=120, width=320, height=240)
+        r = subprocess.run([sys.executable, "-m", "gnomon", "scan", str(log), "--out", str(mnt / "scan"),
+                            "--quiet", "--frame-stride", "1"], env=ENV, capture_output=True, timeout=120)
+        err = r.stderr.decode().strip()
+        assert r.returncode == 2 and len(err.splitlines()) == 1, err
+        assert "No space left" in err and str(mnt / "scan") in err
+        assert os.listdir(mnt) == []
+    finally:
+        subprocess.run(["umount", str(mnt)], capture_output=True)
+
+
+KILL_AT = textwrap.dedent("""
+    import os, signal, sys
+    import gnomon.publish as pub
+    stage = sys.argv[1]
+    real_replace, real_rmtree = os.replace, pub.shutil.rmtree
+    moved = []
+    def replace(src, dst, *a, **k):
+        real_replace(src, dst, *a, **k)
+        moved.append(dst)
+        if stage == "roll-forward" and ".gnomon-commit-" in str(src) and len(moved) >= 2:
+            os.kill(os.getpid(), signal.SIGKILL)
+    def rmtree(path, *a, **k):
+        if stage == "after-exchange":
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real_rmtree(path, *a, **k)
+    pub.os.replace = replace
+    pub.shutil.rmtree = rmtree
+    from gnomon.cli import main
+    sys.exit(main(sys.argv[2:]))
+""")
+
+
+@pytest.mark.parametrize("stage", ["roll-forward", "after-exchange"])
+def test_kill_during_publication_never_mixes(tmp_path: Path, stage: str) -> None:
+    """SIGKILL in the middle of publishing over an earlier scan: the folder is whole-old or, once the next
+    run (or a reader such as merge) has recovered it, whole-new — never new points beside old maps."""
+    from gnomon.publish import recover
+
+    small = write_tiny_capture(tmp_path / "small")
+    big = write_tiny_capture(tmp_path / "big", width=64, height=48)
+    out = tmp_path / "out"
+    assert main(["scan", str(small), "--out", str(out), "--quiet", "--no-rrd"]) == 0
+    if stage == "roll-forward":
+        (out / "notes.txt").write_text("mine")  # a foreign file: the per-file path
+    r = subprocess.run([sys.executable, "-c", KILL_AT, stage, "scan", str(big), "--out", str(out), "--quiet",
+                        "--no-rrd"], env=ENV, capture_output=True, timeout=120)
+    assert r.returncode == -signal.SIGKILL, r.stderr.decode()
+    recover(out)
+    shapes = {np.load(out / n).shape for n in ("depth.npy", "sigma.npy", "shadow_time.npy", "undersampled.npy")}
+    report = json.loads((out / "report.json").read_text())
+    assert shapes == {(48, 64)}
+    assert report["inputs"]["image_size"] == [64, 48]
+    if stage == "roll-forward":
+        assert (out / "notes.txt").read_text() == "mine"
+    no_leftovers(tmp_path)
+    no_leftovers(out)
+
+
+# ------------------------------------------------------------------ fuzzing the field-log parser
+
+hypothesis = pytest.importorskip("hypothesis")
+st = hypothesis.strategies
+
+_scalars = st.one_of(st.none(), st.booleans(), st.integers(min_value=-(2**70), max_value=2**70),
+                     st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=12),
+                     st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=6),
+                     st.lists(st.integers(-10**6, 10**6), max_size=5))
+
+
+def _toml_value(v):
+    return v if v is not None else {}
+
+
+@pytest.fixture(scope="module")
+def fuzz_base(tmp_path_factory) -> tuple[Path, dict]:
+    root = tmp_path_factory.mktemp("fuzz")
+    log = write_tiny_capture(root, n_frames=4)
+    return log, tomllib.loads(log.read_text())
+
+
+def _parse_ok_or_gnomon_error(path: Path) -> None:
+    from gnomon.fieldlog import load_field_log
+
+    try:
+        load_field_log(path)
+    except GnomonError as exc:
+        assert "\n" not in str(exc)
+
+
+@hypothesis.settings(max_examples=150, deadline=None, database=None,
+                     suppress_health_check=list(hypothesis.HealthCheck))
+@hypothesis.given(data=st.data())
+def test_fuzz_field_log_values(fuzz_base, data) -> None:
+    """Any value of any type under any key of a valid field log: parsed, or one GnomonError line."""
+    log, base = fuzz_base
+    doc = json.loads(json.dumps(base))
+    for _ in range(data.draw(st.integers(1, 3))):
+        section = data.draw(st.sampled_from(sorted(k for k in doc if isinstance(doc[k], dict)) + ["planes"]))
+        table = doc["planes"][0] if section == "planes" else doc[section]
+        key = data.draw(st.sampled_from(sorted(table) + ["unknown_key", "file", "pose"]))
+        table[key] = _toml_value(data.draw(_scalars))
+    path = log.parent / "fuzz.toml"
+    try:
+        toml_io.dump(doc, path)
+    except (TypeError, ValueError):
+        return  # not representable in TOML (e.g. NaN inside an array for tomli-w): nothing to parse
+    _parse_ok_or_gnomon_error(path)
+
+
+@hypothesis.settings(max_examples=150, deadline=None, database=None,
+                     suppress_health_check=list(hypothesis.HealthCheck))
+@hypothesis.given(raw=st.one_of(st.binary(max_size=300), st.text(max_size=300).map(str.encode)))
+def test_fuzz_field_log_bytes(fuzz_base, raw: bytes) -> None:
+    """Random bytes, and random bytes spliced into a valid field log: parsed, or one GnomonError line."""
+    log, _ = fuzz_base
+    text = log.read_bytes()
+    for content in (raw, text[: len(text) // 2] + raw + text[len(text) // 2:]):
+        path = log.parent / "fuzz.toml"
+        path.write_bytes(content)
+        _parse_ok_or_gnomon_error(path)
