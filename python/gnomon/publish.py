@@ -401,13 +401,13 @@ class staged_outputs:
         return self.staging
 
     # -- leaving: publish or discard
-    def __exit__(self, exc_type, exc, tb) -> bool:
+    def __exit__(self, exc_type, exc, tb) -> None:
         assert self.staging is not None
         if exc_type is not None:
             shutil.rmtree(self.staging, ignore_errors=True)
             if isinstance(exc, OSError) and not isinstance(exc, (BlockingIOError, ChildProcessError)):
                 raise output_error(exc, staging=self.staging, out=self.out) from None
-            return False
+            return
         staging = self.staging
         try:
             self._publish()
@@ -415,7 +415,6 @@ class staged_outputs:
             if not self._committed:  # a commit folder is complete: the next run finishes it
                 shutil.rmtree(self.staging, ignore_errors=True)
             raise output_error(err, staging=staging, out=self.out) from None
-        return False
 
     def _publish(self) -> None:
         staging = self.staging
@@ -431,7 +430,7 @@ class staged_outputs:
             fsync_tree(staging)
             with _interrupts_held():
                 self._swap_in(staging)
-                if rrd_tmp is not None:
+                if rrd_tmp is not None and self.rrd_path is not None:
                     os.replace(rrd_tmp, self.rrd_path)
                     rrd_tmp = None
                     _fsync_path(self.rrd_path.parent, directory=True)
