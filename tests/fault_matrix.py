@@ -169,6 +169,11 @@ def prepare(root: Path) -> dict:
     subprocess.run(gnomon("simulate", "desk_lamp", "--out", str(root / "desk"), "--width", "400", "--height", "300",
                           "--frames", "120", "--quiet"), check=True, env=env, capture_output=True)
     fx["desk"] = root / "desk" / "field_log.toml"
+    # the desk scan's outputs, to size a filesystem on which all but the recording fit
+    subprocess.run(gnomon("scan", str(fx["desk"]), "--out", str(root / "desk_scan"), "--quiet"), check=True, env=env,
+                   capture_output=True)
+    sizes = {p.name: p.stat().st_size for p in (root / "desk_scan").iterdir()}
+    fx["all_but_rrd_mb"] = (sum(sizes.values()) - sizes["scan.rrd"] // 2) / 2**20 + 1
     subprocess.run(gnomon("simulate", "facade_sun", "--out", str(root / "sun"), "--width", "160", "--height", "120",
                           "--frames", "40", "--quiet"), check=True, env=env, capture_output=True)
     fx["sun"] = root / "sun" / "field_log.toml"
@@ -576,8 +581,9 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
         out.append(Case(flt, "full disk (14 MB tmpfs)", gnomon("scan", str(fx["desk"]), "--out", str(full / "scan"),
                                                               "--quiet"), needle=str(full / "scan"),
                         check=absent(full / "scan")))
-        full2 = mounts.tmpfs(root / "mnt-full2", "30m")
-        out.append(Case(flt, "full disk (30 MB tmpfs: the recording)",
+        mb = int(fx["all_but_rrd_mb"])
+        full2 = mounts.tmpfs(root / "mnt-full2", f"{mb}m")
+        out.append(Case(flt, f"full disk ({mb} MB tmpfs: the recording overflows it)",
                         gnomon("scan", str(fx["desk"]), "--out", str(full2 / "scan"), "--quiet"),
                         needle=str(full2 / "scan"), check=absent(full2 / "scan")))
         ro = mounts.tmpfs(root / "mnt-ro", "4m", ro=True)

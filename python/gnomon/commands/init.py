@@ -101,10 +101,15 @@ def run(args: argparse.Namespace) -> int:
     from gnomon.errors import GnomonError
     from gnomon.frames import FrameSource
 
-    files = sorted(args.frames)
+    from gnomon.frames import natural_key
+    from gnomon.publish import check_output_file
+    from gnomon.validate import input_file
+
+    files = sorted(args.frames, key=natural_key)
     for f in files:
-        if not f.is_file():
-            raise GnomonError(f"{f}: not found")
+        input_file(f, "frame")
+    if args.out is not None:
+        check_output_file(args.out, "--out")
     video = len(files) == 1 and files[0].suffix.lower() in VIDEO_SUFFIXES
     if not video and len(files) < 2:
         raise GnomonError(f"{files[0]}: one image is not a sequence; give every frame (or a video)")

@@ -37,6 +37,10 @@ def run(args: argparse.Namespace) -> int:
     from gnomon.fieldlog import load_field_log
     from gnomon.frames import FrameSource
 
+    from gnomon.publish import check_output_file
+
+    if args.out is not None:
+        check_output_file(args.out, "--out")
     log = load_field_log(args.field_log)
     source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
     log, report = pipeline.resolve_reference_planes(log, source)

@@ -74,6 +74,14 @@ def run(args: argparse.Namespace) -> int:
     from gnomon.reference_lines import PlaneInCamera
     from gnomon.regions import hull_mask, propose_regions
 
+    from gnomon import validate
+    from gnomon.publish import check_output_folder
+
+    if args.out is not None:
+        check_output_folder(args.out)
+    if args.tolerance is not None:
+        validate.number(args.tolerance, "--tolerance", positive=True)
+    validate.number(args.margin, "--margin", minimum=0, maximum=10_000, integer=True)
     log = load_field_log(args.field_log)
     source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
     log, planes_report = pipeline.resolve_reference_planes(log, source)

@@ -79,19 +79,9 @@ def run(args: argparse.Namespace) -> int:
 
     check_output_folder(args.out)
     validate.number(args.seed, "--seed", minimum=0, maximum=2**32 - 1, integer=True)
-    validate.number(args.width, "--width", minimum=16, maximum=20000, integer=True)
-    validate.number(args.height, "--height", minimum=16, maximum=20000, integer=True)
-    if args.frames is not None:
-        validate.number(args.frames, "--frames", minimum=2, maximum=100_000, integer=True)
-    validate.number(args.noise, "--noise", minimum=0.0, maximum=1000.0)
-    validate.number(args.blur, "--blur", minimum=0.0, maximum=100.0)
-    validate.number(args.gamma, "--gamma", minimum=0.1, maximum=10.0)
-    validate.number(args.jpeg_quality, "--jpeg-quality", minimum=0, maximum=100, integer=True)
-    validate.number(args.lamp_radius, "--lamp-radius", minimum=0.0, maximum=1000.0)
-    validate.number(args.stick_radius, "--stick-radius", positive=True, maximum=1000.0)
-    validate.number(args.pole_radius, "--pole-radius", positive=True, maximum=100.0)
-    validate.number(args.clouds, "--clouds", minimum=0, maximum=10, integer=True)
-    validate.number(args.pencil_photos, "--pencil-photos", minimum=0, maximum=100, integer=True)
+    # finite numbers here; their ranges are the scene configuration's to check (config.validate)
+    for name in ("noise", "blur", "gamma", "lamp_radius", "stick_radius", "pole_radius"):
+        validate.number(getattr(args, name), "--" + name.replace("_", "-"))
     if args.scene == "chessboard":
         return run_chessboard(args)
     from gnomon.simulate import DeskLampConfig, TwoPlaneConfig, simulate_desk_lamp, simulate_two_plane
