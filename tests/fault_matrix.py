@@ -489,13 +489,14 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
                                                       "--quiet"), needle="--seed", check=absent(d / "o")))
     for arg, val in (("--noise", "nan"), ("--width", "0"), ("--frames", "1"), ("--gamma", "inf"),
                      ("--blur", "-1"), ("--jpeg-quality", "101")):
+        needle = "image size" if arg == "--width" else arg  # the scene configuration names the size
         d = fresh("sim" + arg)
         out.append(Case(oth, f"simulate {arg} {val}", gnomon("simulate", "desk_lamp", "--out", str(d / "o"),
-                                                             f"{arg}={val}", "--quiet"), needle=arg,
+                                                             f"{arg}={val}", "--quiet"), needle=needle,
                         check=absent(d / "o")))
     for args, needle in ((("--lat", "nan", "--lon", "8", "--time", "2026-06-01T12:00Z"), "--lat"),
                          (("--lat", "47", "--lon", "inf", "--time", "2026-06-01T12:00Z"), "--lon"),
-                         (("--lat", "95", "--lon", "8", "--time", "2026-06-01T12:00Z"), "--lat"),
+                         (("--lat", "95", "--lon", "8", "--time", "2026-06-01T12:00Z"), "latitude"),
                          (("--lat", "47", "--lon", "8", "--time", "2026-06-01T12:00Z", "--heading", "nan"),
                           "--heading"),
                          (("--lat", "47", "--lon", "8", "--time", "2026-06-01T12:00Z", "--pressure", "-5"),

@@ -554,3 +554,18 @@ def test_fuzz_field_log_bytes(fuzz_base, raw: bytes) -> None:
         path = log.parent / "fuzz.toml"
         path.write_bytes(content)
         _parse_ok_or_gnomon_error(path)
+
+
+def test_ctrl_c_inside_an_import(monkeypatch, capsys) -> None:
+    """numpy turns a Ctrl-C during its import into an ImportError: still an interruption, not a traceback."""
+    import gnomon.commands.sun as sun_command
+
+    def interrupted_import(args) -> int:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise ImportError("Original error was: PyCapsule_Import could not import module 'datetime'") from exc
+
+    monkeypatch.setattr(sun_command, "run", interrupted_import)
+    assert main(["sun", "--lat", "47", "--lon", "8", "--time", "2026-06-01T12:00Z"]) == 130
+    assert capsys.readouterr().err.strip() == "gnomon: interrupted"

@@ -97,6 +97,17 @@ def _stdout_closed() -> None:
         pass
 
 
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    seen = 0
+    e: BaseException | None = exc
+    while e is not None and seen < 20:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        e = e.__cause__ or e.__context__
+        seen += 1
+    return False
+
+
 def _os_error_line(exc: OSError) -> str:
     where = exc.filename if exc.filename is not None else "?"
     extra = f" -> {exc.filename2}" if getattr(exc, "filename2", None) else ""
@@ -123,6 +134,11 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         _stdout_closed()
         return 128 + getattr(signal, "SIGPIPE", 13)
+    except ImportError as exc:
+        if not _caused_by_interrupt(exc):  # numpy turns a Ctrl-C during its import into an ImportError
+            raise
+        print("gnomon: interrupted", file=sys.stderr)
+        return 130
     except OSError as exc:
         if exc.errno not in ENVIRONMENT_ERRNOS:
             raise
