@@ -467,7 +467,6 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
     shutil.copytree(fx["desk"].parent, d / "desk")
     pencil = d / "desk" / "pencil_log.toml"
     (d / "desk" / "lamp.toml").write_text("# a good lamp file, kept\n[light]\nposition = [1.0, 2.0, 3.0]\n")
-    good = digest_tree(d / "desk")
 
     def collinear(dd: dict) -> None:
         photos = dd["pencil"]["photos"]
