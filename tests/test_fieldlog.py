@@ -100,7 +100,7 @@ def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
 
     from gnomon.cli import main
     from gnomon.frames import FrameSource
-    from gnomon.pipeline import resolve_reference_planes
+    from gnomon.scan_setup import resolve_reference_planes
 
     from conftest import write_tiny_capture
 

@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 
 from gnomon.camera import OpenCVCamera, Pose
-from gnomon.fieldlog import PlaneSpec
-from gnomon.reference_lines import fit_line_robust, isochrone_crossings, measure_reference_lines
+from gnomon.reference_lines import (
+    PlaneInCamera,
+    ReferencePlane,
+    fit_line_robust,
+    isochrone_crossings,
+    measure_reference_lines,
+    region_mask,
+)
 from gnomon.shadow_planes import lamp_shadow_planes
 
 CAMERA = OpenCVCamera(160, 120, 150.0, 152.0, 80.3, 59.1, (-0.2, 0.08, 0.001, -0.002, 0.0))
@@ -50,9 +56,10 @@ def test_lines_recover_the_world_line_through_distortion() -> None:
     rng = np.random.default_rng(0)
     corrupt = rng.random(times.shape) < 0.01
     times[corrupt] += rng.normal(0, 10, corrupt.sum())  # wrong shadow times
-    spec = PlaneSpec("desk", np.zeros(3), np.array([0, 0, 1.0]), ((0, 0, 160, 15), (0, 100, 160, 120)))
+    spec = ReferencePlane("desk", PlaneInCamera.from_world(np.zeros(3), np.array([0, 0, 1.0]), POSE),
+                          region_mask((120, 160), [(0, 0, 160, 15), (0, 100, 160, 120)]))
     n_frames = 60
-    lines = measure_reference_lines(times, n_frames, spec, CAMERA, POSE)
+    lines = measure_reference_lines(times, n_frames, spec, CAMERA)
     found = np.flatnonzero(lines.found)
     assert len(found) > 40
     for t in found:
@@ -65,8 +72,9 @@ def test_lines_recover_the_world_line_through_distortion() -> None:
 
 def test_lamp_planes_contain_lamp_and_line() -> None:
     times = desk_times()
-    spec = PlaneSpec("desk", np.zeros(3), np.array([0, 0, 1.0]), ((0, 0, 160, 15), (0, 100, 160, 120)))
-    lines = measure_reference_lines(times, 60, spec, CAMERA, POSE)
+    spec = ReferencePlane("desk", PlaneInCamera.from_world(np.zeros(3), np.array([0, 0, 1.0]), POSE),
+                          region_mask((120, 160), [(0, 0, 160, 15), (0, 100, 160, 120)]))
+    lines = measure_reference_lines(times, 60, spec, CAMERA)
     lamp_world = np.array([-300.0, 0.0, 500.0])
     lamp_cam = POSE.world_to_camera(lamp_world)
     planes, degenerate = lamp_shadow_planes([lines], lamp_cam)
@@ -93,10 +101,7 @@ def test_one_fit_over_a_mask_with_holes_and_a_gap() -> None:
     mask = region_mask(times.shape, rectangles=[(0, 95, 160, 120)], polygons=[poly])
     mask[10:30, 60:90] = False  # a marker punched out of the polygon
     assert mask[20, 20] and not mask[20, 70] and not mask[60, 80] and mask[100, 80]
-    plane_cam = PlaneSpec("desk", np.zeros(3), np.array([0, 0, 1.0]), ((0, 0, 1, 1),))
-    from gnomon.reference_lines import PlaneInCamera
-
-    plane = PlaneInCamera.from_world(plane_cam.point, plane_cam.normal, POSE)
+    plane = PlaneInCamera.from_world(np.zeros(3), np.array([0, 0, 1.0]), POSE)
     lines = lines_on_plane(times, 60, plane, mask, CAMERA, "desk")
     found = np.flatnonzero(lines.found & ~lines.extrapolated)
     assert len(found) > 40

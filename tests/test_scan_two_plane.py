@@ -127,7 +127,7 @@ def test_every_plane_from_its_own_markers(two_plane) -> None:
     print(normal, point, planes["wall"]["angle_to_first_deg"])
     assert np.degrees(np.arccos(min(1.0, abs(normal @ [0.0, -1.0, 0.0])))) < 0.2
     assert abs(point[1] - float(truth["wall_y"])) < 0.5  # mm, against a marker spacing of ~100 mm
-    np.testing.assert_allclose(result.field_log.pose.t, truth["tvec"], atol=1.0)
+    np.testing.assert_allclose(result.setup.pose.t, truth["tvec"], atol=1.0)
     acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], float(truth["camera_distance_mm"]))
     print(acc.table("two_plane, planes from their markers"))
     assert acc.rms_pct <= 0.15

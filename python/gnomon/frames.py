@@ -226,8 +226,8 @@ class FrameSource:
         self.image_files = tuple(image_files)
         self.video = video
         self.expected_count = expected_count
-        # Digest of every frame file's bytes, filled while decoding (videos: see frames_digest).
-        self.digest = hashlib.sha256()
+        # sha256 of every frame file's bytes, set when a pass has decoded them all (videos: see frames_digest).
+        self._digest: str | None = None
         if video is not None:
             cap = cv2.VideoCapture(str(video))
             try:
@@ -243,10 +243,21 @@ class FrameSource:
             self.count = len(self.image_files)
 
     def frames_digest(self) -> str:
-        """sha256 of the input: all image files' bytes (after a full pass), or the video file."""
+        """sha256 of the input: all image files' bytes in order, or the video file.
+
+        Taken from the last complete pass over the frames when there was one
+        (the files are then read once), else from the files themselves.
+        """
         if self.video is not None:
             return sha256_file(self.video)
-        return self.digest.hexdigest()
+        if self._digest is None:
+            h = hashlib.sha256()
+            for path in self.image_files:
+                with open(path, "rb") as fh:
+                    while block := fh.read(1 << 20):
+                        h.update(block)
+            return h.hexdigest()
+        return self._digest
 
     @property
     def name(self) -> str:
@@ -278,14 +289,18 @@ class FrameSource:
     def _decode(self) -> Iterator[Frame]:
         first: np.ndarray | None = None
         if self.video is None:
+            # One digest per pass: a partial pass (a peek at the first frame,
+            # read ahead by the reader thread) must not leave bytes behind.
+            digest = hashlib.sha256()
             for i, path in enumerate(self.image_files):
                 image, raw = decode_image_file(path)
-                self.digest.update(raw)
+                digest.update(raw)
                 self._check_size(i, path.name, image, first)
                 color = image if (i == 0 and image.ndim == 3) else None
                 if first is None:
                     first = image
                 yield Frame(i, to_grey(image), color[:, :, :3] if color is not None else None, path.name)
+            self._digest = digest.hexdigest()
             return
         cap = cv2.VideoCapture(str(self.video))
         try:

@@ -28,13 +28,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from gnomon.camera import CameraModel, Pose
-from gnomon.fieldlog import PlaneSpec
+from gnomon.fitting import fit_line_robust
 
 # Crossings a frame needs for a line.
 MIN_POINTS = 10
 
 __all__ = [
-    "PlaneInCamera", "ReferenceLines", "fit_line_robust", "isochrone_crossings", "lines_on_plane", "mask_crossings",
+    "PlaneInCamera", "ReferenceLines", "ReferencePlane", "fit_line_robust", "isochrone_crossings", "lines_on_plane", "mask_crossings",
     "measure_reference_lines", "ransac_line", "region_mask",
 ]
 # A frame's own fit sets the line's direction when its inliers span at least
@@ -84,6 +84,17 @@ class PlaneInCamera:
 
     def from_plane_coords(self, xy: np.ndarray) -> np.ndarray:
         return self.origin + xy[..., :1] * self.e1 + xy[..., 1:2] * self.e2
+
+
+@dataclass(frozen=True)
+class ReferencePlane:
+    """A bare reference plane: its name, the plane (camera frame), where the image sees it
+    bare and swept (``mask``, (H, W) bool) and its rectangles ``(u0, v0, u1, v1)`` (for display)."""
+
+    name: str
+    plane: PlaneInCamera
+    mask: np.ndarray
+    regions: tuple[tuple[int, int, int, int], ...] = ()
 
 
 @dataclass
@@ -178,31 +189,6 @@ def isochrone_crossings(times: np.ndarray, n_frames: int, unique: bool = True) -
     return frame, rows.astype(np.float64), along
 
 
-def fit_line_robust(xy: np.ndarray, k: float = 3.0, iterations: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Total-least-squares 2-D line with iterative rejection of outliers.
-
-    Residuals beyond ``k`` robust standard deviations (1.4826·MAD) are dropped
-    and the line refitted until the inlier set is stable. Returns
-    (centroid, unit direction, inlier mask).
-    """
-    mask = np.ones(len(xy), dtype=bool)
-    centre = xy.mean(axis=0)
-    direction = np.array([1.0, 0.0])
-    for _ in range(iterations):
-        pts = xy[mask]
-        centre = pts.mean(axis=0)
-        _, _, vt = np.linalg.svd(pts - centre, full_matrices=False)
-        direction, normal = vt[0], vt[1]
-        r = (xy - centre) @ normal
-        sigma = 1.4826 * np.median(np.abs(r[mask]))
-        scale = max(sigma, 1e-9 * (1.0 + float(np.abs(centre).max())))
-        new_mask = np.abs(r) <= k * scale
-        if new_mask.sum() < 2 or np.array_equal(new_mask, mask):
-            break
-        mask = new_mask
-    return centre, direction, mask
-
-
 def region_mask(
     shape: tuple[int, int],
     rectangles: Sequence[Sequence[int]] = (),
@@ -295,21 +281,15 @@ def ransac_line(xy: np.ndarray, tolerance: float, trials: int = 300, seed: int =
 def measure_reference_lines(
     times: np.ndarray,
     n_frames: int,
-    plane_spec: PlaneSpec,
+    reference: ReferencePlane,
     camera: CameraModel,
-    pose: Pose,
-    mask: np.ndarray | None = None,
 ) -> ReferenceLines:
     """The shadow line on one reference plane at every integer frame.
 
     ``times``: (H, W) shadow-time map of the whole image (frames, NaN = none).
-    The plane's regions (``mask``, or the union of ``plane_spec.regions``)
-    are used together: see :func:`lines_on_plane`.
+    The plane's regions (its ``mask``) are used together: see :func:`lines_on_plane`.
     """
-    plane = PlaneInCamera.from_world(plane_spec.point, plane_spec.normal, pose)
-    if mask is None:
-        mask = region_mask(times.shape, plane_spec.regions)
-    return lines_on_plane(times, n_frames, plane, mask, camera, plane_spec.name)
+    return lines_on_plane(times, n_frames, reference.plane, reference.mask, camera, reference.name)
 
 
 def _extent(along: np.ndarray) -> float:

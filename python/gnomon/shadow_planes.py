@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gnomon.fitting import fit_plane_robust
 from gnomon.reference_lines import ReferenceLines
 
 # When the line, seen from the lamp, shrinks to an angle below this (S almost
@@ -97,23 +98,6 @@ def sun_shadow_planes(lines: list[ReferenceLines], sun_dir_cam: np.ndarray) -> t
         planes[t, :3] = normal
         planes[t, 3] = normal @ best.point[t]
     return _orient(planes), degenerate
-
-
-def fit_plane_robust(points: np.ndarray, k: float = 3.0, iterations: int = 5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Total-least-squares plane with iterative rejection (1.4826·MAD); (centroid, unit normal, inliers)."""
-    mask = np.ones(len(points), dtype=bool)
-    centre, normal, sv = points.mean(axis=0), np.array([0.0, 0.0, 1.0]), np.zeros(3)
-    for _ in range(iterations):
-        centre = points[mask].mean(axis=0)
-        _, sv, vt = np.linalg.svd(points[mask] - centre, full_matrices=False)
-        normal = vt[2]
-        r = (points - centre) @ normal
-        scale = max(1.4826 * np.median(np.abs(r[mask])), 1e-9 * (1.0 + np.abs(centre).max()))
-        new = np.abs(r) <= k * scale
-        if new.sum() < 3 or np.array_equal(new, mask):
-            break
-        mask = new
-    return centre, normal, mask
 
 
 def two_plane_shadow_planes(lines: list[ReferenceLines], min_angle_deg: float = 2.0,

@@ -49,6 +49,9 @@ import numpy as np
 
 from gnomon import _kernel
 from gnomon.errors import FrameError
+from gnomon.frames import Frame, FrameSource
+from gnomon.progress import Progress
+from gnomon.uncertainty import image_noise_dn
 
 SUPPORTED_DTYPES = (np.dtype(np.uint8), np.dtype(np.uint16))
 
@@ -122,6 +125,202 @@ def decoding_lut(gamma: float | str, dtype) -> np.ndarray:
     return linear.astype(np.float32)
 
 
+# A frame whose global gain falls below this fraction of its recent history is a dip (a cloud, a flicker).
+CLOUD_DROP = 0.85
+GAIN_HISTORY = 9
+# Normalised linear irradiance is fed to the tracker as uint16 at this scale (headroom ×2).
+LINEAR_SCALE = 32768.0
+# Frame pairs at the start of a sequence used to estimate the image noise.
+NOISE_PAIRS = 4
+
+
+class IlluminationNormalizer:
+    """Per-frame linearisation, gain normalisation and cloud detection (streaming).
+
+    ``normalize(frame)`` returns the frame as uint16 normalised linear
+    irradiance (``LINEAR_SCALE`` = 1.0), or None for a frame to skip.
+    """
+
+    def __init__(self, lut: np.ndarray, step: int = 4):
+        self.lut = lut.astype(np.float32)
+        self.step = step
+        self.reference: np.ndarray | None = None
+        self.gains: list[float] = []
+        self.accepted: list[float] = []
+
+    def gain(self, linear: np.ndarray) -> float:
+        sub = linear[:: self.step, :: self.step]
+        if self.reference is None:
+            self.reference = sub.copy()
+            return 1.0
+        ok = self.reference > 0.02
+        return float(np.median(sub[ok] / self.reference[ok]))
+
+    def normalize(self, frame: np.ndarray) -> np.ndarray | None:
+        linear = self.lut[frame]
+        g = self.gain(linear)
+        self.gains.append(g)
+        if len(self.accepted) >= 3:
+            recent = float(np.median(self.accepted[-GAIN_HISTORY:]))
+            if g < CLOUD_DROP * recent:
+                return None
+        self.accepted.append(g)
+        return np.clip(linear * (LINEAR_SCALE / max(g, 1e-6)), 0, 65535).astype(np.uint16)
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """How frames become shadow times: plain values, resolved from the field log.
+
+    ``gamma``: the frames' encoding (:func:`decoding_lut`); ``min_contrast``:
+    DN of the input; ``window``: the half-width ``m`` of the kept windows;
+    ``normalize_illumination``: divide every frame by its global gain and skip
+    sudden dips (:class:`IlluminationNormalizer`); ``max_width`` (frames): the
+    widest dip always found; ``ambiguity``: the rival/contrast ratio from which
+    a pixel is ambiguous.
+    """
+
+    gamma: float | str = "srgb"
+    min_contrast: float = 20.0
+    window: int = 4
+    normalize_illumination: bool = False
+    max_width: int = 32
+    ambiguity: float = 0.6
+
+
+class ShadowTracker:
+    """The kernel tracker fed with one capture's grey frames: the one place that drives it.
+
+    ``shape`` (H, W) and ``dtype`` (uint8 or uint16) of the frames. With
+    ``settings.normalize_illumination`` the kernel sees normalised linear
+    irradiance (uint16, ``LINEAR_SCALE`` = 1.0) and :meth:`update` refuses
+    frames in a sudden dip.
+    """
+
+    def __init__(self, settings: TrackerSettings, shape: tuple[int, int], dtype: np.dtype):
+        self.settings = settings
+        self.input_lut = decoding_lut(settings.gamma, dtype)
+        self.normalizer = IlluminationNormalizer(self.input_lut) if settings.normalize_illumination else None
+        wide = self.normalizer is not None or np.dtype(dtype) != np.uint8
+        self._tracker = _kernel.TemporalTracker(shape[0], shape[1], dtype="uint16" if wide else "uint8",
+                                                window=settings.window, max_width=settings.max_width,
+                                                ambiguity=settings.ambiguity)
+
+    def update(self, grey: np.ndarray) -> bool:
+        """Feed one frame; False when it was skipped as an illumination dip."""
+        if self.normalizer is not None:
+            normalised = self.normalizer.normalize(grey)
+            if normalised is None:
+                return False
+            grey = normalised
+        self._tracker.update(grey)
+        return True
+
+    def finish(self) -> tuple[ShadowTimes, np.ndarray]:
+        """The shadow times and the decoding table (DN fed to the kernel → linear) they were measured with."""
+        if self.normalizer is None:
+            times = ShadowTimes.from_kernel(self._tracker.finish(self.settings.min_contrast, self.input_lut))
+            return times, self.input_lut
+        lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
+        times = ShadowTimes.from_kernel(self._tracker.finish(0.0, lut))
+        # The contrast test stays in the input's DN: back through the encoding.
+        code = lambda lin: np.searchsorted(self.input_lut, lin.astype(np.float32))  # noqa: E731
+        contrast_dn = (code(times.imax / LINEAR_SCALE) - code(times.imin / LINEAR_SCALE)).astype(np.float32)
+        valid = contrast_dn >= self.settings.min_contrast
+        times.enter[~valid] = np.nan
+        times.leave[~valid] = np.nan
+        times.valid = valid
+        times.contrast = contrast_dn
+        return times, lut
+
+
+@dataclass
+class TrackedSequence:
+    """One tracking pass over a capture.
+
+    ``used``: capture index of each frame the tracker saw (its frame ``i`` is
+    capture frame ``used[i]``); ``skipped_dips``: capture frames refused as
+    illumination dips; ``first_grey``/``first_color``: the first frame (grey,
+    and BGR when the capture is in colour); ``noise_dn``: image noise (DN of
+    the input); ``lut``: the decoding table of the values fed to the kernel;
+    ``input_lut``: the capture's decoding table.
+    """
+
+    times: ShadowTimes
+    used: np.ndarray
+    skipped_dips: list[int]
+    first_grey: np.ndarray
+    first_color: np.ndarray | None
+    noise_dn: float
+    lut: np.ndarray
+    input_lut: np.ndarray
+
+    @property
+    def n_frames(self) -> int:
+        """Frames fed to the tracker."""
+        return len(self.used)
+
+
+def track_source(
+    source: FrameSource,
+    settings: TrackerSettings,
+    shape: tuple[int, int],
+    *,
+    skip: np.ndarray | None = None,
+    on_frame: Callable[[Frame], None] | None = None,
+    progress: bool = False,
+    where: str = "[camera]",
+) -> TrackedSequence:
+    """One streaming pass over a capture's frames through the kernel tracker.
+
+    ``shape``: the (H, W) every frame must have (``where`` names its origin in
+    errors); ``skip``: (N,) bool, capture frames the tracker must not see;
+    ``on_frame(frame)`` is called for every frame (skipped ones too), e.g. to
+    record it. Raises :class:`FrameError` for a frame of another size, a
+    source with fewer frames than expected, or fewer than two usable frames.
+    """
+    tracker: ShadowTracker | None = None
+    first: Frame | None = None
+    previous: np.ndarray | None = None
+    noise: list[float] = []
+    used: list[int] = []
+    dips: list[int] = []
+    seen = 0
+    with Progress("tracking", source.count, enabled=progress) as bar:
+        for frame in source:
+            seen += 1
+            if first is None:
+                _check_first(frame, shape, where)
+                first, tracker = frame, ShadowTracker(settings, shape, frame.grey.dtype)
+            if previous is not None and len(noise) < NOISE_PAIRS:
+                # before any illumination drift has accumulated
+                noise.append(image_noise_dn(previous, frame.grey))
+            previous = frame.grey
+            if on_frame is not None:
+                on_frame(frame)
+            bar.update(frame.index + 1)
+            if skip is not None and skip[frame.index]:
+                continue
+            assert tracker is not None
+            (used if tracker.update(frame.grey) else dips).append(frame.index)
+    if tracker is None or first is None:
+        raise FrameError(f"{source.name}: no frames")
+    if source.expected_count is not None and seen < source.expected_count:
+        raise FrameError(f"{source.name}: only {seen} frames, expected {source.expected_count}")
+    if len(used) < 2:
+        raise FrameError(f"{source.name}: fewer than two usable frames (sun below the horizon or clouds)")
+    times, lut = tracker.finish()
+    noise_dn = float(np.median(noise)) if noise else 1.0
+    return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, lut, tracker.input_lut)
+
+
+def _check_first(frame: Frame, shape: tuple[int, int], where: str) -> None:
+    if frame.grey.shape != shape:
+        g = frame.grey
+        raise FrameError(f"frame 0 ({frame.name}): size {g.shape[1]}x{g.shape[0]} differs from the "
+                         f"camera's {shape[1]}x{shape[0]} ({where})")
+
+
 def track(
     frames: Iterable[np.ndarray],
     *,
@@ -144,8 +343,8 @@ def track(
     Raises :class:`gnomon.errors.FrameError` for a frame of another shape or
     dtype (naming it), or when there is no frame at all.
     """
-    tracker = None
-    dtype = None
+    settings = TrackerSettings(gamma, float(min_contrast), window, False, max_width, ambiguity)
+    tracker: ShadowTracker | None = None
     for i, frame in enumerate(frames):
         frame = np.asarray(frame)
         if tracker is None:
@@ -154,11 +353,7 @@ def track(
                     f"frame 0: expected a 2-D uint8 or uint16 grey image, "
                     f"got a {frame.dtype} array of shape {frame.shape}"
                 )
-            dtype = frame.dtype
-            tracker = _kernel.TemporalTracker(
-                frame.shape[0], frame.shape[1], dtype=dtype.name, window=window,
-                max_width=max_width, ambiguity=ambiguity,
-            )
+            tracker = ShadowTracker(settings, (frame.shape[0], frame.shape[1]), frame.dtype)
         try:
             tracker.update(frame)
         except ValueError as exc:
@@ -167,8 +362,7 @@ def track(
             progress(i)
     if tracker is None:
         raise FrameError("no frames to track")
-    lut = decoding_lut(gamma, dtype)
-    return ShadowTimes.from_kernel(tracker.finish(float(min_contrast), lut))
+    return tracker.finish()[0]
 
 
 @dataclass

@@ -31,23 +31,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import cv2
 
-    from gnomon import atomic, pipeline, toml_io
+    from gnomon import atomic, toml_io
     from gnomon.check import MarkerMark, PlaneDrawing, setup_preview
     from gnomon.errors import FieldLogError
     from gnomon.fieldlog import load_field_log
-    from gnomon.frames import FrameSource
+    from gnomon.scan_setup import first_frame, frame_source, resolve_reference_planes
 
     from gnomon.publish import check_output_file
 
     if args.out is not None:
         check_output_file(args.out, "--out")
     log = load_field_log(args.field_log)
-    source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
-    log, report = pipeline.resolve_reference_planes(log, source)
+    source = frame_source(log)
+    log, report = resolve_reference_planes(log, source)
     if log.pose is None:
         raise FieldLogError(f"{log.path}: no [camera.pose] and no plane with markers or a chessboard: "
                             "nothing places the planes")
-    first = pipeline._first_frame(source)
+    first = first_frame(source)
     camera = log.camera
     shape = first.shape[:2]
     measured = {e["plane"]: e for e in report}

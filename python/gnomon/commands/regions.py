@@ -67,12 +67,13 @@ def draw_regions(first: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import atomic, pipeline
+    from gnomon import atomic
     from gnomon.errors import FieldLogError
     from gnomon.fieldlog import load_field_log
-    from gnomon.frames import FrameSource
     from gnomon.reference_lines import PlaneInCamera
     from gnomon.regions import hull_mask, propose_regions
+    from gnomon.scan_setup import frame_source, resolve_reference_planes, tracker_settings
+    from gnomon.tracking import track_source
 
     from gnomon import validate
     from gnomon.publish import check_output_folder
@@ -83,8 +84,8 @@ def run(args: argparse.Namespace) -> int:
         validate.number(args.tolerance, "--tolerance", positive=True)
     validate.number(args.margin, "--margin", minimum=0, maximum=10_000, integer=True)
     log = load_field_log(args.field_log)
-    source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
-    log, planes_report = pipeline.resolve_reference_planes(log, source)
+    source = frame_source(log)
+    log, planes_report = resolve_reference_planes(log, source)
     if log.pose is None:
         raise FieldLogError(f"{log.path}: no [camera.pose] and no plane with markers or a chessboard: "
                             "the planes cannot be placed")
@@ -99,7 +100,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: nothing to start from; give it markers, "
                                 "a chessboard or rough regions")
-    tracked = pipeline._track(log, source, None, not args.quiet)
+    tracked = track_source(source, tracker_settings(log), shape, progress=not args.quiet,
+                           where=f"{log.path}: [camera]")
     times = tracked.times
     maps = [times.enter, times.leave] if log.scan.edge == "both" else [
         times.enter if log.scan.edge == "enter" else times.leave]

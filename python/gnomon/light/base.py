@@ -1,0 +1,168 @@
+"""The light-model interface every light shares.
+
+A light model answers the few questions the scan asks about the light, all in
+plain values resolved from the field log beforehand (camera frame, world
+units, frames of the tracker):
+
+* which capture frames the tracker must not see (:meth:`LightModel.skipped_frames`),
+  and the capture time of a frame (:meth:`LightModel.frame_time`);
+* what the tracking pass means for it (:meth:`LightModel.after_tracking`);
+* which shadow edges to reconstruct (:meth:`LightModel.edges`) and, for each,
+  the shadow planes Π(t) in the camera frame (:meth:`LightModel.shadow_planes`);
+* its entries in ``report.json`` (:meth:`LightModel.report`) and its part of
+  the recording (:meth:`LightModel.record_setup`, :meth:`LightModel.shadow_plane_polygon`,
+  :meth:`LightModel.record`).
+
+Lights whose planes come from the shadow lines measured on the reference
+planes implement only :meth:`LightModel.planes_from_lines`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from datetime import datetime
+from typing import Any, ClassVar, Protocol
+
+import numpy as np
+
+from gnomon.camera import CameraModel
+from gnomon.reference_lines import ReferenceLines, ReferencePlane, measure_reference_lines
+from gnomon.tracking import ShadowTimes
+from gnomon.uncertainty import line_time_sigma
+
+__all__ = ["EdgePlanes", "EdgeTimes", "LightModel", "Recorder", "ReferenceGeometry", "Screening",
+           "skipped_frames_warning"]
+
+
+class Recorder(Protocol):
+    """The part of :class:`gnomon.recording.ScanRecording` a light model uses."""
+
+    def log_lamp(self, position_world: np.ndarray, sigma: float | None = None) -> None: ...
+
+    def log_sun(self, index: int, direction_world: np.ndarray, anchor_world: np.ndarray, length: float,
+                capture_time: Any = None) -> None: ...
+
+
+@dataclass(frozen=True)
+class EdgeTimes:
+    """One shadow edge's per-pixel times, as the tracker measured them.
+
+    ``times`` (H, W) float32 tracker frames (NaN = none); ``slope`` (H, W) the
+    irradiance change per frame at the crossing (linear units, for the
+    under-sampling test); ``sigma_t`` (H, W) the 1σ of each time (frames).
+    """
+
+    name: str  # "enter" | "leave" | "centre"
+    times: np.ndarray
+    slope: np.ndarray
+    sigma_t: np.ndarray
+
+
+@dataclass(frozen=True)
+class EdgePlanes:
+    """The shadow planes of one edge, ready to triangulate.
+
+    ``planes`` (N, 4) rows ``[nx, ny, nz, d]`` (camera frame, world units; NaN
+    row = none); row k is the plane at tracker time ``k / time_scale``.
+    ``sigma_t_line`` (N,) the 1σ (in rows) each plane's own measurement adds to
+    the pixel times. ``lines``: the reference lines they came from (may be empty).
+    """
+
+    planes: np.ndarray
+    degenerate: int
+    lines: list[ReferenceLines]
+    sigma_t_line: np.ndarray
+    time_scale: int = 1
+    measured: bool = True  # one plane per tracker frame, measured from the reference lines (else computed)
+
+
+@dataclass
+class Screening:
+    """Which triangulated points a light model accepts as its own shadow: ``keep`` (H, W) bool
+    (None = all), the points refused by reason, and notes for the warnings."""
+
+    keep: np.ndarray | None = None
+    rejected: dict[str, int] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class ReferenceGeometry:
+    """What measuring the shadow lines on the reference planes needs."""
+
+    camera: CameraModel
+    planes: tuple[ReferencePlane, ...]
+    n_frames: int  # frames fed to the tracker
+
+    def lines(self, times: np.ndarray) -> list[ReferenceLines]:
+        """The shadow line on every reference plane, at every tracker frame."""
+        return [measure_reference_lines(times, self.n_frames, p, self.camera) for p in self.planes]
+
+
+def best_line_sigma(lines: list[ReferenceLines]) -> np.ndarray:
+    """Per frame, the time σ of the best-measured line (several planes constrain one shadow plane)."""
+    per_plane = np.stack([line_time_sigma(ln) for ln in lines])
+    with np.errstate(invalid="ignore"):
+        sigma = np.nanmin(np.where(np.isfinite(per_plane), per_plane, np.inf), axis=0)
+    sigma[~np.isfinite(sigma)] = np.nan
+    return sigma
+
+
+def skipped_frames_warning(frames: list[int], why: str) -> str:
+    more = " …" if len(frames) > 8 else ""
+    return f"{len(frames)} frames skipped as {why} (frames {frames[:8]}{more})"
+
+
+class LightModel:
+    """The light of one scan (see the module docstring). Subclasses set ``kind``."""
+
+    kind: ClassVar[str] = ""
+
+    def skipped_frames(self, n_frames: int) -> np.ndarray:
+        """(n_frames,) bool: capture frames the tracker must not see."""
+        return np.zeros(n_frames, dtype=bool)
+
+    def frame_time(self, index: int) -> datetime | np.datetime64 | None:
+        """The capture time of capture frame ``index`` (UTC), when the light needs clock time."""
+        return None
+
+    def after_tracking(self, used: np.ndarray, skipped_dips: list[int]) -> list[str]:
+        """Told which capture frames the tracker saw (in order); returns warnings."""
+        if skipped_dips:
+            return [skipped_frames_warning(skipped_dips, "sudden illumination dips")]
+        return []
+
+    def edges(self, enter: EdgeTimes, leave: EdgeTimes, wanted: str) -> list[EdgeTimes]:
+        """The edges to reconstruct; ``wanted``: "enter", "leave" or "both"."""
+        return [e for e in (enter, leave) if wanted in (e.name, "both")]
+
+    def shadow_planes(self, edge: EdgeTimes, geometry: ReferenceGeometry) -> EdgePlanes:
+        """Π(t) for one edge: from the shadow lines measured on the reference planes."""
+        lines = geometry.lines(edge.times)
+        planes, degenerate = self.planes_from_lines(lines)
+        return EdgePlanes(planes, degenerate, lines, best_line_sigma(lines))
+
+    def planes_from_lines(self, lines: list[ReferenceLines]) -> tuple[np.ndarray, int]:
+        """(N, 4) camera-frame planes, one per tracker frame, and the frames dropped as degenerate."""
+        raise NotImplementedError
+
+    def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int) -> Screening:
+        """The triangulated points (H, W, 3, camera frame) this light's shadow can explain; all by default."""
+        return Screening()
+
+    def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:
+        """Top-level ``report.json`` entries; ``planes_cam``: every reconstructed edge's planes.
+        Appends to ``warnings`` what the report shows that the user should know."""
+        return {"light": {"kind": self.kind, "position": None}}
+
+    def record_setup(self, recorder: Recorder) -> None:
+        """Log the light itself before the frames."""
+
+    def shadow_plane_polygon(self, ends_world: list[np.ndarray]) -> np.ndarray | None:
+        """A polygon (K, 3, world) showing one frame's shadow plane, from each line's two end points."""
+        if len(ends_world) >= 2:
+            return np.array([ends_world[0][0], ends_world[0][1], ends_world[1][1], ends_world[1][0]])
+        return None
+
+    def record(self, recorder: Recorder, points_world: np.ndarray, stride: int) -> None:
+        """Log the light over time, after the surface is known."""

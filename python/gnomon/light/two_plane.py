@@ -1,0 +1,59 @@
+"""Two reference planes (desk and wall): no light position needed.
+
+Each frame's shadow plane is the plane through the shadow's crossings on both
+reference planes (:func:`gnomon.shadow_planes.two_plane_shadow_planes`). All
+shadow planes of a point light pass through it, so the report also gives the
+light's position as the point closest to them all (or the line it lies on when
+the planes share one direction).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from gnomon.camera import Pose
+from gnomon.light.base import LightModel
+from gnomon.reference_lines import ReferenceLines
+from gnomon.shadow_planes import two_plane_shadow_planes
+from gnomon.validity import MIN_LAMP_CONDITIONING, light_point_or_line
+
+__all__ = ["TwoPlaneLight"]
+
+
+class TwoPlaneLight(LightModel):
+    """``pose``: world → camera (to report the estimated light position in the world frame)."""
+
+    kind = "two-plane"
+
+    def __init__(self, pose: Pose):
+        self.pose = pose
+
+    def planes_from_lines(self, lines: list[ReferenceLines]) -> tuple[np.ndarray, int]:
+        return two_plane_shadow_planes(lines)
+
+    def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:
+        light: dict[str, Any] = {"kind": self.kind, "position": None}
+        planes = np.concatenate(planes_cam)
+        if np.isfinite(planes[:, 0]).sum() < 3:
+            return {"light": light}
+        est = light_point_or_line(planes)
+        light["estimated_position_conditioning"] = est.conditioning
+        if est.degenerate:
+            # The planes share one direction (a stick moved parallel to itself): they fix the
+            # lamp only along a line through the least-squares point, along that direction.
+            light["estimated_position"] = None
+            light["estimated_line"] = {
+                "point": self.pose.camera_to_world(est.point).tolist(),
+                "direction": (self.pose.R.T @ est.direction).tolist(),
+                "reason": (f"the shadow planes all contain nearly one direction (singular-value ratio "
+                           f"{est.conditioning:.4f} < {MIN_LAMP_CONDITIONING}): the lamp lies on a line, "
+                           "not at a point"),
+            }
+            warnings.append(f"lamp estimate is degenerate: the shadow planes share one direction (ratio "
+                            f"{est.conditioning:.4f}); report.json gives the line the lamp lies on, not a point")
+        else:
+            light["estimated_position"] = self.pose.camera_to_world(est.point).tolist()
+            light["estimated_position_plane_rms"] = est.plane_rms
+        return {"light": light}

@@ -1,0 +1,209 @@
+"""A field log resolved, once, into the plain values a scan needs.
+
+:func:`resolve_scan` reads the field log (and, for planes with markers or a
+chessboard, one photo) and returns a :class:`ScanSetup`: the camera, its pose,
+the reference planes in the camera frame, the tracker settings, the light
+model and the reconstruction settings. Nothing after it reads the field log.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gnomon.aruco import plane_pose_from_aruco, plane_pose_from_charuco
+from gnomon.calibration import fit_camera_to_frames, read_grey
+from gnomon.camera import CameraModel, Pose
+from gnomon.errors import FieldLogError, FrameError
+from gnomon.fieldlog import FieldLog, PlaneSpec, check_geometry
+from gnomon.frames import FrameSource, to_grey
+from gnomon.light import LightModel, light_from_field_log
+from gnomon.markers import PlanePose, fit_plane_pose, plane_pose_from_chessboard, plane_pose_from_markers
+from gnomon.reference_lines import PlaneInCamera, ReferencePlane
+from gnomon.tracking import TrackerSettings, decoding_lut
+
+__all__ = ["ScanInputs", "ScanSetup", "first_frame", "frame_source", "resolve_reference_planes", "resolve_scan",
+           "tracker_settings"]
+
+
+@dataclass(frozen=True)
+class ScanInputs:
+    """Where a scan's inputs came from, for its report."""
+
+    field_log: Path
+    camera_file: Path | None = None
+    calibration: dict[str, Any] = field(default_factory=dict)  # the camera file's calibration summary
+    reference_planes: list[dict[str, Any]] = field(default_factory=list)  # planes measured from markers
+
+
+@dataclass(frozen=True)
+class ScanSetup:
+    """Everything a scan needs, in plain values (camera frame, world units).
+
+    ``edge``: which shadow edges to reconstruct ("enter", "leave", "both");
+    ``max_depth_jump``: relative depth step that cuts the mesh and marks
+    outliers; ``units``: the world units ("mm" or "m").
+    """
+
+    camera: CameraModel
+    pose: Pose
+    planes: tuple[ReferencePlane, ...]
+    tracker: TrackerSettings
+    light: LightModel
+    edge: str
+    max_depth_jump: float
+    units: str
+    inputs: ScanInputs
+    warnings: tuple[str, ...] = ()
+
+
+def frame_source(log: FieldLog) -> FrameSource:
+    """The field log's frames (image files or a video)."""
+    c = log.capture
+    return FrameSource(c.image_files, c.video, c.frame_count)
+
+
+def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
+    """Resolve the field log into a :class:`ScanSetup` (measuring marker planes on their photo)."""
+    for plane in log.planes:
+        if not plane.has_regions:
+            raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: no 'regions' or 'mask' (where the plane is "
+                                f"bare and swept); `gnomon regions {log.path}` proposes them")
+    log, planes_report = resolve_reference_planes(log, source)
+    assert log.pose is not None  # resolve_reference_planes sets it
+    pose = log.pose
+    warnings: list[str] = []
+    light = light_from_field_log(log, pose, source.count, warnings)
+    shape = (log.camera.height, log.camera.width)
+    planes = tuple(ReferencePlane(p.name, PlaneInCamera.from_world(p.point, p.normal, pose), p.region_mask(shape),
+                                  p.regions) for p in log.planes)
+    s = log.scan
+    tracker = tracker_settings(log)
+    inputs = ScanInputs(log.path, log.camera_file, dict(log.calibration), planes_report)
+    return ScanSetup(log.camera, pose, planes, tracker, light, s.edge, s.max_depth_jump, log.capture.units,
+                     inputs, tuple(warnings))
+
+
+def tracker_settings(log: FieldLog) -> TrackerSettings:
+    """How the field log's frames become shadow times."""
+    s = log.scan
+    return TrackerSettings(log.capture.gamma, s.min_contrast, s.window, s.normalize_illumination)
+
+
+def first_frame(source: FrameSource) -> np.ndarray:
+    """The capture's first frame (colour when it has colour)."""
+    for frame in source:
+        return frame.color if frame.color is not None else frame.grey
+    raise FrameError(f"{source.name}: no frames")
+
+
+def _plane_pose_from_aruco(log: FieldLog, plane: PlaneSpec, image: np.ndarray, camera: CameraModel,
+                           where: str) -> PlanePose:
+    """A plane's pose from its ArUco markers or ChArUco board, in the world frame (no pixel hints)."""
+    grey = to_grey(image)
+    if plane.aruco is not None:
+        linear = decoding_lut(log.capture.gamma, grey.dtype)[grey] if grey.dtype in (np.uint8, np.uint16) else None
+        return plane_pose_from_aruco(
+            grey, camera, dict(plane.aruco.markers), plane.aruco.dictionary, plane.aruco.size,
+            linear=linear, to_world=plane.plane_to_world, source=where,
+        )
+    c = plane.charuco
+    assert c is not None
+    return plane_pose_from_charuco(grey, camera, c.dictionary, c.squares, c.square, c.marker, origin=c.origin,
+                                   to_world=plane.plane_to_world, source=where)
+
+
+def _measured(plane: PlaneSpec) -> bool:
+    """The plane carries something to measure its pose from."""
+    return bool(plane.markers or plane.chessboard or plane.aruco or plane.charuco)
+
+
+def _measure_plane(log: FieldLog, plane: PlaneSpec, image: np.ndarray, name: str) -> PlanePose:
+    """The pose of a plane's own 2-D frame in the camera, from its markers or board in ``image``."""
+    where = f"{log.path}: [[planes]] {plane.name}: {name}"
+    # A plane's own photo may be a still at another resolution of the same sensor.
+    camera, _ = fit_camera_to_frames(log.camera, image.shape[1], image.shape[0], f"{log.path}: [camera]", name)
+    if plane.aruco is not None or plane.charuco is not None:
+        return _plane_pose_from_aruco(log, plane, image, camera, where)
+    if plane.markers:
+        names = [f"{plane.name} marker {m.id}" for m in plane.markers]
+        pixels = np.array([m.pixel_hint for m in plane.markers])
+        if all(m.exact for m in plane.markers):
+            return fit_plane_pose(camera, plane.marker_world(), pixels, names=names, method="pixels", source=where)
+        exact = np.array([m.exact for m in plane.markers])
+        return plane_pose_from_markers(image, camera, plane.marker_world(), pixels, names=names, source=where,
+                                       exact=exact)
+    assert plane.chessboard is not None and plane.square is not None
+    return plane_pose_from_chessboard(image, camera, plane.chessboard, plane.square, source=where)
+
+
+def _measure_planes(log: FieldLog, source: FrameSource) -> list[tuple[PlaneSpec, PlanePose]]:
+    """Every plane with markers or a chessboard, measured on its ``image`` or the capture's first frame."""
+    first = None
+    measured = []
+    for plane in (p for p in log.planes if _measured(p)):
+        if plane.image is not None:
+            image, name = read_grey(plane.image), plane.image.name
+        else:
+            first = first_frame(source) if first is None else first
+            image = first
+            name = log.capture.image_files[0].name if log.capture.image_files else f"{log.capture.video} frame 0"
+        measured.append((plane, _measure_plane(log, plane, image, name)))
+    return measured
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle between two unit normals, ignoring their sense."""
+    return float(np.degrees(np.arccos(min(1.0, abs(float(a @ b))))))
+
+
+def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldLog, list[dict[str, Any]]]:
+    """Measure the planes that carry markers or a chessboard, each from its own.
+
+    A plane's markers are known in its own 2-D frame (``plane_xy``, placed in
+    3-D by the plane's ``point``, ``normal`` and ``x_axis``), so finding them
+    in the image gives that frame's pose in the camera; a chessboard gives its
+    own frame's pose. The photo is the plane's ``image`` or the capture's
+    first frame. Without a ``[camera.pose]`` the first such plane's frame is
+    the world frame and every other measured plane is placed in it from its
+    own pose (its declared ``point``/``normal`` then only define its own
+    frame); no relative pose needs typing. With a ``[camera.pose]`` the planes
+    check it (residuals and the angle between measured and declared planes go
+    into report.json).
+    """
+    measured = _measure_planes(log, source)
+    if not measured:
+        return log, []
+    declared = log.pose is not None
+    pose = log.pose if log.pose is not None else measured[0][1].pose
+    report = []
+    placed = {}
+    for plane, pp in measured:
+        entry = {"plane": plane.name, **pp.to_report(), "pixels": pp.pixels.tolist()}
+        if declared:
+            entry["angle_to_declared_deg"] = _angle_deg(pose.R @ plane.normal, pp.normal_cam)
+        else:
+            # The plane in the world frame, from its own pose: its frame's origin and normal.
+            origin_cam = pp.pose.world_to_camera(plane.point)
+            normal_cam = pp.pose.R @ plane.normal
+            placed[plane.name] = (pose.camera_to_world(origin_cam), pose.R.T @ normal_cam,
+                                  None if plane.x_axis is None else pose.R.T @ (pp.pose.R @ plane.x_axis))
+            entry["world_point"] = placed[plane.name][0].tolist()
+            entry["world_normal"] = placed[plane.name][1].tolist()
+        report.append(entry)
+    if not declared:
+        planes = []
+        for p in log.planes:
+            if p.name in placed and _measured(p):
+                point, normal, x_axis = placed[p.name]
+                p = dataclasses.replace(p, point=point, normal=normal / np.linalg.norm(normal), x_axis=x_axis)
+            planes.append(p)
+        log = dataclasses.replace(log, pose=pose, planes=tuple(planes))
+        check_geometry(log, pose)
+        if len(measured) >= 2:
+            report[1]["angle_to_first_deg"] = _angle_deg(measured[0][1].normal_cam, measured[1][1].normal_cam)
+    return log, report
