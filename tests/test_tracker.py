@@ -3,12 +3,23 @@ decoding LUTs, and input errors."""
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import numpy as np
 import pytest
 
 from gnomon import _kernel
-from gnomon.errors import FrameError
+from gnomon.errors import (
+    FrameError,
+    GnomonError,
+    KernelArrayError,
+    KernelFramesError,
+    KernelLutError,
+    KernelParameterError,
+)
 from gnomon.tracking import NumpyTracker, ShadowTimes, decoding_lut, track
+
+KEYS = tuple(f.name for f in fields(ShadowTimes))
 
 LIT, SHADOW = 200.0, 40.0
 
@@ -97,14 +108,15 @@ def test_kernel_and_numpy_tracker_agree(dtype):
             assert kernel.frames_seen == reference.frames_seen == len(frames)
             got = kernel.finish(top / 10, lut)
             want = reference.finish(top / 10, lut)
-            assert set(got) == set(want)
-            for key in got:
-                assert got[key].shape == shape and got[key].dtype == want[key].dtype, key
-                if key == "valid":
-                    assert np.array_equal(got[key], want[key])
+            assert isinstance(got, _kernel.ShadowTimes) and got.shape == shape
+            for key in KEYS:
+                g, w = getattr(got, key), getattr(want, key)
+                assert g.shape == shape and g.dtype == w.dtype, key
+                if g.dtype == bool:
+                    assert np.array_equal(g, w), key
                 else:
-                    np.testing.assert_allclose(got[key], want[key], rtol=0, atol=1e-5, err_msg=key)
-                    assert np.array_equal(np.isnan(got[key]), np.isnan(want[key])), key
+                    np.testing.assert_allclose(g, w, rtol=0, atol=1e-5, err_msg=key)
+                    assert np.array_equal(np.isnan(g), np.isnan(w)), key
 
 
 def test_finish_is_a_preview():
@@ -118,8 +130,8 @@ def test_finish_is_a_preview():
         if i in (3, 17, 30):
             preview = streaming.finish(20.0)
             expect = run_kernel(frames[: i + 1], max_width=7)
-            np.testing.assert_array_equal(preview["enter"], expect.enter)
-            np.testing.assert_array_equal(preview["leave"], expect.leave)
+            np.testing.assert_array_equal(preview.enter, expect.enter)
+            np.testing.assert_array_equal(preview.leave, expect.leave)
     final = ShadowTimes.from_kernel(streaming.finish(20.0))
     np.testing.assert_array_equal(final.enter, run_kernel(frames, max_width=7).enter)
 
@@ -204,38 +216,42 @@ def test_track_feeds_the_kernel_and_reports_progress():
 
 
 @pytest.mark.parametrize("make", [_kernel.TemporalTracker, NumpyTracker])
-def test_wrong_frames_raise_value_error(make):
+def test_wrong_frames_raise_gnomon_errors(make):
+    """Each kernel error variant is its own GnomonError (and ValueError) subclass."""
     tracker = make(4, 5, "uint8")
-    with pytest.raises(ValueError, match="uint8.*uint16"):
+    with pytest.raises(KernelArrayError, match="uint8.*uint16"):
         tracker.update(np.zeros((4, 5), np.uint16))
-    with pytest.raises(ValueError, match=r"\(4, 5\).*\(5, 4\)"):
+    with pytest.raises(KernelArrayError, match=r"\(4, 5\).*\(5, 4\)"):
         tracker.update(np.zeros((5, 4), np.uint8))
-    with pytest.raises(ValueError):
+    with pytest.raises(KernelArrayError):
         tracker.update(np.zeros((4, 5, 1), np.uint8))
     assert tracker.frames_seen == 0
-    with pytest.raises(ValueError):
+    with pytest.raises(KernelFramesError):
         tracker.finish(10.0)  # no frames yet
     tracker.update(np.zeros((4, 5), np.uint8))
-    with pytest.raises(ValueError, match="256"):
+    with pytest.raises(KernelArrayError, match="256"):
         tracker.finish(10.0, np.zeros(255, np.float32))
-    with pytest.raises(ValueError, match="float32"):
+    with pytest.raises(KernelArrayError, match="float32"):
         tracker.finish(10.0, np.zeros(256, np.float64))
-    with pytest.raises(ValueError):
+    with pytest.raises(KernelLutError):
         tracker.finish(10.0, np.linspace(1, 0, 256, dtype=np.float32))  # decreasing
+    for cls in (KernelArrayError, KernelFramesError, KernelLutError, KernelParameterError):
+        assert issubclass(cls, GnomonError) and issubclass(cls, ValueError)
+    assert issubclass(KernelFramesError, FrameError)
 
 
 def test_kernel_tracker_arguments():
-    with pytest.raises(ValueError, match="uint8"):
+    with pytest.raises(KernelParameterError, match="uint8"):
         _kernel.TemporalTracker(4, 5, "float32")
-    with pytest.raises(ValueError, match="window"):
+    with pytest.raises(KernelParameterError, match="window"):
         _kernel.TemporalTracker(4, 5, window=0)
-    with pytest.raises(ValueError, match="max_width"):
+    with pytest.raises(KernelParameterError, match="max_width"):
         _kernel.TemporalTracker(4, 5, max_width=1)
-    with pytest.raises(ValueError, match="window"):
+    with pytest.raises(KernelParameterError, match="window"):
         _kernel.TemporalTracker(4, 5, window=9, max_width=8)
-    with pytest.raises(ValueError, match="ambiguity"):
+    with pytest.raises(KernelParameterError, match="ambiguity"):
         _kernel.TemporalTracker(4, 5, ambiguity=0.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(KernelParameterError):
         _kernel.TemporalTracker(0, 5)
     t = _kernel.TemporalTracker(4, 5, "uint16", window=3, max_width=8, ambiguity=0.5)
     assert (t.shape, t.dtype, t.window, t.max_width, t.frames_seen) == ((4, 5), "uint16", 3, 8, 0)
@@ -247,7 +263,7 @@ def test_kernel_tracker_arguments():
     assert t.frames_seen == 1
     with pytest.raises(ValueError, match="65536"):
         t.finish(1.0, decoding_lut(2.2, np.uint8))
-    assert t.finish(1.0, decoding_lut(2.2, np.uint16))["valid"].dtype == bool
+    assert t.finish(1.0, decoding_lut(2.2, np.uint16)).valid.dtype == bool
 
 
 _PATH_SCRIPT = """
@@ -258,7 +274,9 @@ t = _kernel.TemporalTracker(*frames.shape[1:], "uint8", window=3, max_width=5)
 for f in frames:
     t.update(f)
 r = t.finish(10.0)
-np.savez(sys.argv[2], path=_kernel.simd_path(), **{k: np.asarray(v) for k, v in r.items()})
+names = ("imax", "imin", "contrast", "threshold", "enter", "leave", "enter_slope", "leave_slope", "rival",
+         "valid", "ambiguous", "clipped")
+np.savez(sys.argv[2], path=_kernel.simd_path(), **{k: np.asarray(getattr(r, k)) for k in names})
 """
 
 
@@ -322,8 +340,8 @@ def track_both(values: np.ndarray, *, min_contrast=20.0, max_width=16, ambiguity
         kernel.update(f)
         reference.update(f)
     got, want = kernel.finish(min_contrast), reference.finish(min_contrast)
-    for key in got:
-        np.testing.assert_array_equal(got[key], want[key], err_msg=key)
+    for key in KEYS:
+        np.testing.assert_array_equal(getattr(got, key), getattr(want, key), err_msg=key)
     return ShadowTimes.from_kernel(got)
 
 

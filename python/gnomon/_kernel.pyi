@@ -1,8 +1,11 @@
 """Type stub of ``gnomon._kernel``, the Rust kernel (crates gnomon-core, gnomon-py).
 
 Arrays are borrowed without copying when C-contiguous (otherwise copied);
-the GIL is released during every kernel call. Bad dtypes, shapes or
-parameters raise ``ValueError`` naming what was expected and what was given.
+the GIL is released during every kernel call. Errors are the classes of
+:mod:`gnomon.errors` (``GnomonError`` and ``ValueError`` subclasses), one per
+kernel error, each naming what was expected and what was given: a bad array
+``KernelArrayError``, a bad parameter ``KernelParameterError``, a bad decoding
+table ``KernelLutError``, no (or too many) frames ``KernelFramesError``.
 """
 
 from typing import Literal
@@ -19,6 +22,46 @@ def simd_path() -> Literal["avx2", "sse2", "portable"]:
 
 def simd_paths() -> list[Literal["avx2", "sse2", "portable"]]:
     """Every instruction set this CPU can run the hot loops on, best first."""
+
+class ShadowTimes:
+    """The tracker's per-pixel results; read-only, every array (H, W).
+
+    ``imax``, ``imin``, ``contrast`` (DN: the deepest dip's lit level, darkest
+    sample and depth, 0 = no dip), ``threshold`` (linear irradiance, the
+    decoding table's units), ``enter``, ``leave`` (frames, NaN = none or
+    invalid), ``enter_slope``, ``leave_slope`` (linear units per frame),
+    ``rival`` (DN, the deepest other dip): float32; ``valid`` (a dip,
+    ``contrast >= min_contrast``, not ambiguous), ``ambiguous`` (``rival >=
+    ambiguity * contrast``), ``clipped`` (the dip's levels or an interpolated
+    sample at 0 or the dtype's maximum): bool.
+    """
+
+    @property
+    def imax(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def imin(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def contrast(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def threshold(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def enter(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def leave(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def enter_slope(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def leave_slope(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def rival(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def valid(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def ambiguous(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def clipped(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def shape(self) -> tuple[int, int]: ...
 
 class TemporalTracker:
     """Streaming per-pixel shadow tracker: one shadow event (the deepest dip) per
@@ -43,20 +86,11 @@ class TemporalTracker:
     ) -> None: ...
     def update(self, frame: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
         """Add the next frame: a (height, width) array of the tracker's dtype."""
-    def finish(
-        self, min_contrast: float, lut: npt.NDArray[np.float32] | None = None
-    ) -> dict[str, np.ndarray]:
-        """Per-pixel results for the frames seen so far; the tracker is unchanged.
+    def finish(self, min_contrast: float, lut: npt.NDArray[np.float32] | None = None) -> ShadowTimes:
+        """Per-pixel results for the frames seen so far (see :class:`ShadowTimes`); the tracker is unchanged.
 
         ``min_contrast`` in DN. ``lut``: float32 decoding table DN → linear
         irradiance (256 or 65536 finite, non-decreasing entries), identity if None.
-        Keys: ``imax``, ``imin``, ``contrast`` (DN: the deepest dip's lit level,
-        darkest sample and depth, 0 = no dip), ``threshold`` (linear), ``enter``,
-        ``leave`` (frames, NaN = none/invalid), ``enter_slope``, ``leave_slope``
-        (linear units per frame), ``rival`` (DN, the deepest other dip): float32
-        (H, W); ``valid`` (a dip, ``contrast >= min_contrast``, not ambiguous),
-        ``ambiguous`` (``rival >= ambiguity * contrast``), ``clipped`` (the dip's
-        levels or an interpolated sample at 0 or the dtype's maximum): bool (H, W).
         """
     @property
     def frames_seen(self) -> int: ...

@@ -22,3 +22,26 @@ class FrameError(GnomonError):
 
 class OutputError(GnomonError):
     """An output that cannot be written: no space, file too large, read-only, permission (names the path)."""
+
+
+class KernelError(GnomonError, ValueError):
+    """The Rust kernel refused its input (one subclass per ``gnomon-core`` ``KernelError`` variant).
+
+    Also a :class:`ValueError`: the kernel's inputs are values of the wrong kind or range.
+    """
+
+
+class KernelParameterError(KernelError):
+    """A kernel parameter outside its documented range (``InvalidParameter``), or an unknown dtype."""
+
+
+class KernelArrayError(KernelError):
+    """An array of the wrong dtype or shape handed to the kernel (``LengthMismatch``)."""
+
+
+class KernelLutError(KernelError):
+    """A decoding table that is not finite and non-decreasing (``InvalidLut``)."""
+
+
+class KernelFramesError(KernelError, FrameError):
+    """No frames before ``finish``, or more frames than one tracker can index (``NoFrames``, ``TooManyFrames``)."""

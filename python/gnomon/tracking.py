@@ -43,12 +43,12 @@ baseline.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable
 
 import numpy as np
 
 from gnomon import _kernel
-from gnomon.errors import FrameError
+from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, KernelLutError, KernelParameterError
 from gnomon.frames import Frame, FrameSource
 from gnomon.progress import Progress
 from gnomon.uncertainty import image_noise_dn
@@ -87,9 +87,9 @@ class ShadowTimes:
     clipped: np.ndarray
 
     @classmethod
-    def from_kernel(cls, result: Mapping[str, np.ndarray]) -> "ShadowTimes":
-        """Wrap the dict returned by ``TemporalTracker.finish`` (or :meth:`NumpyTracker.finish`)."""
-        return cls(**{f.name: np.asarray(result[f.name]) for f in fields(cls)})
+    def from_kernel(cls, result: _kernel.ShadowTimes | ShadowTimes) -> ShadowTimes:
+        """The (writable) arrays of ``TemporalTracker.finish``'s result (or :meth:`NumpyTracker.finish`'s)."""
+        return cls(**{f.name: np.asarray(getattr(result, f.name)) for f in fields(cls)})
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -406,11 +406,11 @@ class NumpyTracker:
                  max_width: int = 32, ambiguity: float = 0.6):
         self._dtype = _check_dtype(dtype)
         if not 2 <= max_width <= 128:
-            raise ValueError(f"max_width: must be in 2..=128, got {max_width}")
+            raise KernelParameterError(f"max_width: must be in 2..=128, got {max_width}")
         if not 1 <= window <= min(64, max_width):
-            raise ValueError(f"window: must be in 1..={min(64, max_width)}, got {window}")
+            raise KernelParameterError(f"window: must be in 1..={min(64, max_width)}, got {window}")
         if not 0 < ambiguity <= 1:
-            raise ValueError(f"ambiguity: must be in (0, 1], got {ambiguity}")
+            raise KernelParameterError(f"ambiguity: must be in (0, 1], got {ambiguity}")
         self._shape = (int(height), int(width))
         self._m, self._w, self._ambiguity = int(window), int(max_width), float(ambiguity)
         n = self._shape[0] * self._shape[1]
@@ -426,7 +426,7 @@ class NumpyTracker:
         """Add the next frame: a 2-D array of the tracker's dtype and shape."""
         frame = np.asarray(frame)
         if frame.dtype != self._dtype or frame.shape != self._shape:
-            raise ValueError(
+            raise KernelArrayError(
                 f"frame: expected a {self._dtype} array of shape {self._shape}, "
                 f"got a {frame.dtype} array of shape {frame.shape}"
             )
@@ -498,21 +498,21 @@ class NumpyTracker:
             s.enter_window[p] = stack[np.clip(enter[None, :] + offsets, 0, last) - f0, cols].T
             s.leave_window[p] = stack[np.clip(leave[None, :] + offsets, 0, last) - f0, cols].T
 
-    def finish(self, min_contrast: float, lut: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def finish(self, min_contrast: float, lut: np.ndarray | None = None) -> ShadowTimes:
         """Per-pixel results for the frames seen so far, as the kernel's ``finish``."""
         if self.frames_seen == 0:
-            raise ValueError("no frames were given to the tracker")
+            raise KernelFramesError("no frames were given to the tracker")
         top = np.iinfo(self._dtype).max
         if lut is None:
             lut = np.arange(top + 1, dtype=np.float32)
         lut = np.asarray(lut)
         if lut.dtype != np.float32 or lut.shape != (top + 1,):
-            raise ValueError(
+            raise KernelArrayError(
                 f"lut: expected a float32 array of shape ({top + 1},), "
                 f"got a {lut.dtype} array of shape {lut.shape}"
             )
         if not np.all(np.isfinite(lut)) or np.any(np.diff(lut) < 0):
-            raise ValueError("invalid decoding LUT: must be finite and non-decreasing")
+            raise KernelLutError("invalid decoding LUT: must be finite and non-decreasing")
         s = self._state.copy()
         last = self.frames_seen - 1
         while s.evaluated <= last:
@@ -530,21 +530,21 @@ class NumpyTracker:
         enter, enter_slope, enter_clip = self._solve(s.enter_at, s.enter_window, threshold, valid, lut, True)
         leave, leave_slope, leave_clip = self._solve(s.leave_at, s.leave_window, threshold, valid, lut, False)
         clipped = has_dip & ((hi == top) | (lo == 0)) | enter_clip | leave_clip
-        image = lambda a: a.reshape(self._shape)
-        return {
-            "imax": image(hi.astype(np.float32)),
-            "imin": image(lo.astype(np.float32)),
-            "contrast": image(contrast),
-            "threshold": image(threshold),
-            "enter": image(enter),
-            "leave": image(leave),
-            "enter_slope": image(enter_slope),
-            "leave_slope": image(leave_slope),
-            "rival": image(rival),
-            "valid": image(valid),
-            "ambiguous": image(ambiguous),
-            "clipped": image(clipped),
-        }
+        shape = self._shape
+        return ShadowTimes(
+            imax=hi.astype(np.float32).reshape(shape),
+            imin=lo.astype(np.float32).reshape(shape),
+            contrast=contrast.reshape(shape),
+            threshold=threshold.reshape(shape),
+            enter=enter.reshape(shape),
+            leave=leave.reshape(shape),
+            enter_slope=enter_slope.reshape(shape),
+            leave_slope=leave_slope.reshape(shape),
+            rival=rival.reshape(shape),
+            valid=valid.reshape(shape),
+            ambiguous=ambiguous.reshape(shape),
+            clipped=clipped.reshape(shape),
+        )
 
     def _solve(self, at, window, threshold, valid, lut, falling: bool):
         """Crossing nearest the window centre: time (frames), slope (NaN if none) and

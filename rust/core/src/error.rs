@@ -1,8 +1,9 @@
 //! The one error type of the kernel.
 //!
 //! Every function that takes user data returns `Result<_, KernelError>`; the
-//! binding crate maps it to Python's `ValueError` with the `Display` text, so
-//! each message names what was expected and what was given.
+//! binding crate maps each variant to its own Python exception class (in
+//! `gnomon.errors`, all `GnomonError`s) with the `Display` text, so each
+//! message names what was expected and what was given.
 
 use std::fmt;
 

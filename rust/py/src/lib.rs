@@ -1,9 +1,11 @@
 //! `gnomon._kernel`: thin PyO3 bindings of `gnomon-core`.
 //!
-//! Arrays are borrowed (copied only when not C-contiguous), the GIL is
-//! released around every kernel call, and `KernelError`s and bad arrays become
-//! `ValueError`s naming what was expected and what was given. No numerics
-//! here: see `gnomon-core`.
+//! Arrays are borrowed (copied only when not C-contiguous) and the GIL is
+//! released around every kernel call. Errors are the exception classes of
+//! `gnomon.errors`, one per `KernelError` variant (all `GnomonError`s and
+//! `ValueError`s), each message naming what was expected and what was given:
+//! bad arrays raise `KernelArrayError`. The tracker's results are a typed
+//! `ShadowTimes` object. No numerics here: see `gnomon-core`.
 
 use gnomon_core::{KernelError, Sample, ShadowTimes, TemporalTracker as Tracker, TrackerParams};
 use numpy::ndarray::{Array2, Array3, ArrayView, Dimension, Ix1, Ix2, Ix3};
@@ -11,12 +13,22 @@ use numpy::{
     Element, IntoPyArray, PyArray, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray,
     PyUntypedArray, PyUntypedArrayMethods,
 };
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
 
-fn value_error(err: KernelError) -> PyErr {
-    PyValueError::new_err(err.to_string())
+pyo3::import_exception!(gnomon.errors, KernelParameterError);
+pyo3::import_exception!(gnomon.errors, KernelArrayError);
+pyo3::import_exception!(gnomon.errors, KernelLutError);
+pyo3::import_exception!(gnomon.errors, KernelFramesError);
+
+/// Each `KernelError` variant as its `gnomon.errors` exception class.
+fn kernel_error(err: KernelError) -> PyErr {
+    let text = err.to_string();
+    match err {
+        KernelError::InvalidParameter { .. } => KernelParameterError::new_err(text),
+        KernelError::LengthMismatch { .. } => KernelArrayError::new_err(text),
+        KernelError::InvalidLut { .. } => KernelLutError::new_err(text),
+        KernelError::NoFrames | KernelError::TooManyFrames => KernelFramesError::new_err(text),
+    }
 }
 
 fn shape_text(shape: &[usize]) -> String {
@@ -88,7 +100,7 @@ fn borrow_array<'py, T: Element, D: Dimension>(
     };
     let array = obj
         .cast::<PyArray<T, D>>()
-        .map_err(|_| PyValueError::new_err(expected()))?;
+        .map_err(|_| KernelArrayError::new_err(expected()))?;
     let matches = array.ndim() == shape.len()
         && array
             .shape()
@@ -96,11 +108,11 @@ fn borrow_array<'py, T: Element, D: Dimension>(
             .zip(shape)
             .all(|(&got, want)| want.accepts(got));
     if !matches {
-        return Err(PyValueError::new_err(expected()));
+        return Err(KernelArrayError::new_err(expected()));
     }
     array
         .try_readonly()
-        .map_err(|err| PyValueError::new_err(format!("{what}: {err}")))
+        .map_err(|err| KernelArrayError::new_err(format!("{what}: {err}")))
 }
 
 /// Run `f` on the view's elements as one row-major slice (copied if the view
@@ -122,7 +134,7 @@ fn image<'py, T: Element>(
     width: usize,
 ) -> PyResult<Bound<'py, PyArray2<T>>> {
     let array = Array2::from_shape_vec((height, width), data)
-        .map_err(|err| PyValueError::new_err(format!("internal shape error: {err}")))?;
+        .map_err(|err| pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}")))?;
     Ok(array.into_pyarray(py))
 }
 
@@ -138,6 +150,80 @@ fn mask<'py>(
         height,
         width,
     )
+}
+
+/// The tracker's per-pixel results: (H, W) arrays, read-only attributes.
+#[pyclass(module = "gnomon._kernel", name = "ShadowTimes", frozen)]
+struct PyShadowTimes {
+    /// Brightest level of the deepest dip (DN of the frames fed).
+    #[pyo3(get)]
+    imax: Py<PyArray2<f32>>,
+    /// Darkest sample of the dip (DN).
+    #[pyo3(get)]
+    imin: Py<PyArray2<f32>>,
+    /// `imax - imin` (DN), 0 = no dip.
+    #[pyo3(get)]
+    contrast: Py<PyArray2<f32>>,
+    /// Mid-level in linear irradiance.
+    #[pyo3(get)]
+    threshold: Py<PyArray2<f32>>,
+    /// Entering-edge time (frames), NaN = none.
+    #[pyo3(get)]
+    enter: Py<PyArray2<f32>>,
+    /// Leaving-edge time (frames), NaN = none.
+    #[pyo3(get)]
+    leave: Py<PyArray2<f32>>,
+    /// Linear irradiance change per frame at the entering crossing.
+    #[pyo3(get)]
+    enter_slope: Py<PyArray2<f32>>,
+    /// Linear irradiance change per frame at the leaving crossing.
+    #[pyo3(get)]
+    leave_slope: Py<PyArray2<f32>>,
+    /// Depth of the deepest other dip (DN), 0 = none.
+    #[pyo3(get)]
+    rival: Py<PyArray2<f32>>,
+    /// A dip with `contrast >= min_contrast` that is not ambiguous.
+    #[pyo3(get)]
+    valid: Py<PyArray2<bool>>,
+    /// `rival >= ambiguity * contrast`.
+    #[pyo3(get)]
+    ambiguous: Py<PyArray2<bool>>,
+    /// The dip's levels or an interpolated sample at 0 or the dtype's maximum.
+    #[pyo3(get)]
+    clipped: Py<PyArray2<bool>>,
+}
+
+#[pymethods]
+impl PyShadowTimes {
+    /// `(height, width)`.
+    #[getter]
+    fn shape(&self, py: Python<'_>) -> (usize, usize) {
+        let s = self.enter.bind(py).shape();
+        (s[0], s[1])
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        let (h, w) = self.shape(py);
+        format!("ShadowTimes(height={h}, width={w})")
+    }
+}
+
+fn shadow_times(py: Python<'_>, times: ShadowTimes) -> PyResult<PyShadowTimes> {
+    let (h, w) = (times.height, times.width);
+    Ok(PyShadowTimes {
+        imax: image(py, times.imax, h, w)?.unbind(),
+        imin: image(py, times.imin, h, w)?.unbind(),
+        contrast: image(py, times.contrast, h, w)?.unbind(),
+        threshold: image(py, times.threshold, h, w)?.unbind(),
+        enter: image(py, times.enter, h, w)?.unbind(),
+        leave: image(py, times.leave, h, w)?.unbind(),
+        enter_slope: image(py, times.enter_slope, h, w)?.unbind(),
+        leave_slope: image(py, times.leave_slope, h, w)?.unbind(),
+        rival: image(py, times.rival, h, w)?.unbind(),
+        valid: mask(py, times.valid, h, w)?.unbind(),
+        ambiguous: mask(py, times.ambiguous, h, w)?.unbind(),
+        clipped: mask(py, times.clipped, h, w)?.unbind(),
+    })
 }
 
 enum AnyTracker {
@@ -163,7 +249,7 @@ fn update_any<T: Sample + Element>(
     let frame = borrow_array::<T, Ix2>(frame, "frame", T::DTYPE, &shape)?;
     let view = frame.as_array();
     py.detach(|| with_slice(&view, |data| tracker.update(data)))
-        .map_err(value_error)
+        .map_err(kernel_error)
 }
 
 fn finish_any<T: Sample>(
@@ -181,7 +267,7 @@ fn finish_any<T: Sample>(
             py.detach(|| with_slice(&view, |table| tracker.finish(min_contrast, Some(table))))
         }
     };
-    result.map_err(value_error)
+    result.map_err(kernel_error)
 }
 
 #[pymethods]
@@ -202,10 +288,10 @@ impl TemporalTracker {
             ambiguity,
         };
         let inner = match dtype {
-            "uint8" => AnyTracker::U8(Tracker::new(height, width, params).map_err(value_error)?),
-            "uint16" => AnyTracker::U16(Tracker::new(height, width, params).map_err(value_error)?),
+            "uint8" => AnyTracker::U8(Tracker::new(height, width, params).map_err(kernel_error)?),
+            "uint16" => AnyTracker::U16(Tracker::new(height, width, params).map_err(kernel_error)?),
             other => {
-                return Err(PyValueError::new_err(format!(
+                return Err(KernelParameterError::new_err(format!(
                     "dtype: expected \"uint8\" or \"uint16\", got {other:?}"
                 )))
             }
@@ -223,31 +309,17 @@ impl TemporalTracker {
 
     /// Per-pixel results for the frames seen so far (the tracker is unchanged).
     #[pyo3(signature = (min_contrast, lut = None))]
-    fn finish<'py>(
+    fn finish(
         &self,
-        py: Python<'py>,
+        py: Python<'_>,
         min_contrast: f32,
-        lut: Option<&Bound<'py, PyAny>>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+        lut: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<PyShadowTimes> {
         let times = match &self.inner {
             AnyTracker::U8(t) => finish_any(py, t, min_contrast, lut)?,
             AnyTracker::U16(t) => finish_any(py, t, min_contrast, lut)?,
         };
-        let (h, w) = (times.height, times.width);
-        let dict = PyDict::new(py);
-        dict.set_item("imax", image(py, times.imax, h, w)?)?;
-        dict.set_item("imin", image(py, times.imin, h, w)?)?;
-        dict.set_item("contrast", image(py, times.contrast, h, w)?)?;
-        dict.set_item("threshold", image(py, times.threshold, h, w)?)?;
-        dict.set_item("enter", image(py, times.enter, h, w)?)?;
-        dict.set_item("leave", image(py, times.leave, h, w)?)?;
-        dict.set_item("enter_slope", image(py, times.enter_slope, h, w)?)?;
-        dict.set_item("leave_slope", image(py, times.leave_slope, h, w)?)?;
-        dict.set_item("rival", image(py, times.rival, h, w)?)?;
-        dict.set_item("valid", mask(py, times.valid, h, w)?)?;
-        dict.set_item("ambiguous", mask(py, times.ambiguous, h, w)?)?;
-        dict.set_item("clipped", mask(py, times.clipped, h, w)?)?;
-        Ok(dict)
+        shadow_times(py, times)
     }
 
     #[getter]
@@ -365,9 +437,9 @@ fn triangulate<'py>(
                 })
             })
         })
-        .map_err(value_error)?;
+        .map_err(kernel_error)?;
     let points = Array3::from_shape_vec((h, w, 3), points)
-        .map_err(|err| PyValueError::new_err(format!("internal shape error: {err}")))?;
+        .map_err(|err| pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}")))?;
     Ok((points.into_pyarray(py), mask(py, valid, h, w)?))
 }
 
@@ -390,6 +462,7 @@ fn simd_paths() -> Vec<&'static str> {
 #[pymodule]
 fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<TemporalTracker>()?;
+    m.add_class::<PyShadowTimes>()?;
     m.add_function(wrap_pyfunction!(triangulate, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
