@@ -1,4 +1,4 @@
-"""The lamp from pencil shadows (METHOD.md §2), on synthetic photos.
+"""The lamp from pencil shadows (docs/method.md §7), on synthetic photos.
 
 The photos are made here, independently of gnomon's geometry: the shadow tip
 is the desk point on the line from the lamp through the pencil's top, and

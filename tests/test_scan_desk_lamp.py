@@ -1,6 +1,6 @@
 """End to end on the synthetic desk scene, against the simulator's ground truth.
 
-The bar (issue 2 / DESIGN.md): depth RMS ≤ 0.1 % of the camera distance over
+The bar (issue 2): depth RMS ≤ 0.1 % of the camera distance over
 the swept pixels and coverage ≥ 95 % of them, with realistic nuisance (noise
 σ ≈ 1.5 DN, blur, gamma, lens distortion, JPEG quality 90). The scene is the
 default one (800×600, 240 frames, ~20 s to render and scan), with another seed.

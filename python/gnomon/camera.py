@@ -1,6 +1,6 @@
 """Camera models and poses.
 
-Conventions (DESIGN.md): the camera frame is OpenCV's (x right, y down, z
+Conventions: the camera frame is OpenCV's (x right, y down, z
 forward); pixel centres sit at integer coordinates, so pixel (u, v) = (0, 0)
 is the centre of the top-left pixel.
 

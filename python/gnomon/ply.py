@@ -1,6 +1,6 @@
 """PLY files: binary little-endian writer and a reader for what we (and others) write.
 
-Layouts written by Gnomon (DESIGN.md, "Outputs of `gnomon scan`")::
+Layouts written by Gnomon (the outputs of `gnomon scan` and `gnomon merge`)::
 
     points.ply   element vertex N: float x y z [float nx ny nz] [uchar red green blue]
                  [float sigma] [float u v]

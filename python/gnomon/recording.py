@@ -1,4 +1,4 @@
-"""The rerun recording of a run (DESIGN.md, "Rerun recording layout").
+"""The rerun recording of a run: its layout of entities and timelines.
 
 Every scan, calibrate and merge run leaves a ``.rrd`` file that explains itself
 in the rerun viewer and can be read back as data (:mod:`gnomon.review`). The

@@ -106,7 +106,7 @@ def two_plane_shadow_planes(lines: list[ReferenceLines], min_angle_deg: float = 
 
     Bouguet & Perona's two-plane mode: at each frame the shadow plane contains
     the shadow line on the desk and the one on the wall, so it is the
-    least-squares plane through their points (METHOD.md §4) — here the 3-D
+    least-squares plane through their points (docs/method.md §3) — here the 3-D
     crossings themselves, so a plane whose line is seen in one short region
     still contributes its points (the other plane's line fixes the rest).
     A frame needs ``min_points`` crossings on at least two planes; it is

@@ -17,7 +17,7 @@ Frames and angles
 * **ENU**: local East-North-Up, a right-handed frame at the site. The sun
   direction is the unit vector *towards* the sun:
   ``(cos e·sin A, cos e·cos A, sin e)`` for azimuth A and elevation e.
-* **World frame for sun scans** (DESIGN.md): world z is up and the world x
+* **World frame for sun scans**: world z is up and the world x
   axis points at compass heading ``heading_deg`` (clockwise from north), so
   world y = z × x is 90° anticlockwise of x, seen from above. Heading 90°
   (x east) makes the world frame ENU itself; heading 0° gives x north,

@@ -1,6 +1,6 @@
 """Light models: the desk lamp located from the shadows of a standing pencil.
 
-Bouguet & Perona (ICCV 1998), METHOD.md §2. A pencil of known height h stands
+Bouguet & Perona (ICCV 1998); docs/method.md §7. A pencil of known height h stands
 vertically on a calibrated plane (the desk). In each photo the user marks the
 pencil's base b̄ and the tip t̄ₛ of its shadow (pixels). Both back-project
 onto the plane, to B and Tₛ; the pencil's top is ``T = B + h·n`` (n the unit

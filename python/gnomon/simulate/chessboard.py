@@ -1,6 +1,6 @@
 """Synthetic chessboard views with known intrinsics, distortion and poses.
 
-The ground truth for the calibration suite. Per DESIGN.md the simulator shares
+The ground truth for the calibration suite. By design the simulator shares
 no geometry with the code it checks: the camera models here (OpenCV's
 5-coefficient model and Tsai's κ1 model) are our own implementations of the
 published formulas — forward projection, and the inverse (distorted pixel →

@@ -8,7 +8,7 @@ sundial's and sweeps the ground and the facade.
 
 World frame (metres)
 --------------------
-Tied to local East-North-Up by a heading (DESIGN.md, :mod:`gnomon.sun`):
+Tied to local East-North-Up by a heading (:mod:`gnomon.sun`):
 world z is up, world x points at compass heading ``HEADING_DEG`` = 295°
 (WNW) and y = z × x at 205° (SSW). The facade is the plane y = 0 (the
 building behind it, y < 0, its outward normal +y facing 205°, so it is in

@@ -1,6 +1,6 @@
 """Synthetic frames of reference planes carrying printed 2×2 checker markers.
 
-Ground truth for :mod:`gnomon.markers`. Per DESIGN.md nothing here comes from
+Ground truth for :mod:`gnomon.markers`. By design nothing here comes from
 the code it checks: rays come from the simulator's own camera models
 (:mod:`gnomon.simulate.chessboard`), are cast onto the planes by our own
 intersection code, and the markers' true pixels are our own projections.

@@ -1,6 +1,6 @@
 """The ``two_plane`` scene: a desk and a wall meeting in a corner, an unknown lamp.
 
-Bouguet & Perona's dual-space set-up (IJCV 1999; METHOD.md §4): the shadow
+Bouguet & Perona's dual-space set-up (IJCV 1999; docs/method.md §3): the shadow
 plane of each frame is the plane through the shadow lines on two known
 planes, so the light source need not be known. The simulator knows it (the
 ground truth has it), the field log does not.

@@ -1,5 +1,5 @@
 //! Per-pixel triangulation: each pixel's camera ray meets the shadow plane of
-//! its shadow time (METHOD.md §4), the plane interpolated between frames.
+//! its shadow time (docs/method.md §4), the plane interpolated between frames.
 
 use nalgebra::Vector3;
 use rayon::prelude::*;
