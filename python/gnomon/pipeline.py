@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,6 +65,9 @@ class ScanOptions:
     view: bool = False  # stream to a viewer
     progress: bool = True
     frame_stride: int = 10  # frames kept in the recording
+    # The pass over the frames: gnomon.tracking.track_source, or a drop-in with its signature
+    # (gnomon.tiles.TiledTracker tracks image tiles on a Dask cluster).
+    track: Callable[..., TrackedSequence] | None = None
 
 
 @dataclass
@@ -313,17 +316,21 @@ def _fusion_warnings(fused: _Fused) -> list[str]:
 
 
 def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None = None, *,
-         progress: bool = False, frame_stride: int = 10) -> ScanResult:
-    """Reconstruct a surface from a capture, in memory (nothing is written but the recording)."""
+         progress: bool = False, frame_stride: int = 10,
+         track: Callable[..., TrackedSequence] = track_source) -> ScanResult:
+    """Reconstruct a surface from a capture, in memory (nothing is written but the recording).
+
+    ``track``: the pass over the frames (:func:`~gnomon.tracking.track_source`, or a drop-in such
+    as :class:`gnomon.tiles.TiledTracker`)."""
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     warnings = list(setup.warnings)
     _record_setup(recorder, setup)
     on_frame = None if recorder is None else _frame_logger(recorder, setup)
     with _timed(timings, "tracking_s"):
-        tracked = track_source(source, setup.tracker, (setup.camera.height, setup.camera.width),
-                               skip=setup.light.skipped_frames(source.count), on_frame=on_frame,
-                               progress=progress, where=f"{setup.inputs.field_log}: [camera]")
+        tracked = track(source, setup.tracker, (setup.camera.height, setup.camera.width),
+                        skip=setup.light.skipped_frames(source.count), on_frame=on_frame,
+                        progress=progress, where=f"{setup.inputs.field_log}: [camera]")
     _check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
     with _timed(timings, "ray_map_s"):
@@ -446,7 +453,8 @@ def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | 
     setup = resolve_scan(log, source)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
         with _recording(staging, opts, f"scan {log.path.name}") as recorder:
-            result = scan(setup, source, recorder, progress=opts.progress, frame_stride=opts.frame_stride)
+            result = scan(setup, source, recorder, progress=opts.progress, frame_stride=opts.frame_stride,
+                          track=opts.track or track_source)
             write_scan(staging, result, t0)
     result.out_dir = Path(out_dir)
     return result
@@ -534,6 +542,7 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
         },
         "timings_s": timings,
         "reference_planes": inputs.reference_planes,
+        **({"tracking": tracked.info} if tracked.info else {}),
     }
 
 

@@ -42,7 +42,7 @@ baseline.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from collections.abc import Callable, Iterable
 
 import numpy as np
@@ -197,12 +197,17 @@ class ShadowTracker:
     frames in a sudden dip.
     """
 
-    def __init__(self, settings: TrackerSettings, shape: tuple[int, int], dtype: np.dtype):
+    def __init__(self, settings: TrackerSettings, shape: tuple[int, int], dtype: np.dtype,
+                 crop: tuple[slice, slice] | None = None):
         self.settings = settings
         self.input_lut = decoding_lut(settings.gamma, dtype)
         self.normalizer = IlluminationNormalizer(self.input_lut) if settings.normalize_illumination else None
         wide = self.normalizer is not None or np.dtype(dtype) != np.uint8
-        self._tracker = _kernel.TemporalTracker(shape[0], shape[1], dtype="uint16" if wide else "uint8",
+        # ``crop`` (rows, columns): track only this part of each frame; the normalisation still sees the
+        # whole frame, so a tile's shadow times equal the same pixels' in an untiled pass.
+        self.crop = crop
+        h, w = np.empty(shape, dtype=bool)[crop].shape if crop is not None else shape
+        self._tracker = _kernel.TemporalTracker(h, w, dtype="uint16" if wide else "uint8",
                                                 window=settings.window, max_width=settings.max_width,
                                                 ambiguity=settings.ambiguity)
 
@@ -213,7 +218,7 @@ class ShadowTracker:
             if normalised is None:
                 return False
             grey = normalised
-        self._tracker.update(grey)
+        self._tracker.update(grey if self.crop is None else np.ascontiguousarray(grey[self.crop]))
         return True
 
     def finish(self) -> tuple[ShadowTimes, np.ndarray]:
@@ -243,7 +248,8 @@ class TrackedSequence:
     illumination dips; ``first_grey``/``first_color``: the first frame (grey,
     and BGR when the capture is in colour); ``noise_dn``: image noise (DN of
     the input); ``lut``: the decoding table of the values fed to the kernel;
-    ``input_lut``: the capture's decoding table.
+    ``input_lut``: the capture's decoding table; ``info``: how the pass ran
+    when that is worth reporting (a tiled pass: tiles, workers, memory).
     """
 
     times: ShadowTimes
@@ -254,6 +260,7 @@ class TrackedSequence:
     noise_dn: float
     lut: np.ndarray
     input_lut: np.ndarray
+    info: dict = field(default_factory=dict)
 
     @property
     def n_frames(self) -> int:
@@ -270,11 +277,15 @@ def track_source(
     on_frame: Callable[[Frame], None] | None = None,
     progress: bool = False,
     where: str = "[camera]",
+    crop: tuple[slice, slice] | None = None,
 ) -> TrackedSequence:
     """One streaming pass over a capture's frames through the kernel tracker.
 
     ``shape``: the (H, W) every frame must have (``where`` names its origin in
     errors); ``skip``: (N,) bool, capture frames the tracker must not see;
+    ``crop``: (rows, columns) slices, track only that tile (the shadow times
+    are then the tile's; everything per frame is still measured on the whole
+    frame, see :class:`ShadowTracker`);
     ``on_frame(frame)`` is called for every frame (skipped ones too), e.g. to
     record it. Raises :class:`FrameError` for a frame of another size, a
     source with fewer frames than expected, or fewer than two usable frames.
@@ -291,7 +302,7 @@ def track_source(
             seen += 1
             if first is None:
                 _check_first(frame, shape, where)
-                first, tracker = frame, ShadowTracker(settings, shape, frame.grey.dtype)
+                first, tracker = frame, ShadowTracker(settings, shape, frame.grey.dtype, crop)
             if previous is not None and len(noise) < NOISE_PAIRS:
                 # before any illumination drift has accumulated
                 noise.append(image_noise_dn(previous, frame.grey))
