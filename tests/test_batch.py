@@ -302,3 +302,63 @@ def test_batch_file_names_scans_and_merges(tmp_path):
     assert (m.name, m.scan_a, m.scan_b, m.weights, m.beta) == ("nov12+d2", "nov12", "d2", "sigmoid", 4.0)
     assert m.out == (tmp_path / "out" / "nov12+d2").resolve()
 
+
+_UNTILED = """
+import json, sys
+from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.tiles import current_rss_bytes, peak_rss_bytes, reset_peak_rss
+reset_peak_rss()
+start = current_rss_bytes()
+run_scan(sys.argv[1], sys.argv[2], ScanOptions(progress=False))
+print(json.dumps({"start": start, "peak": peak_rss_bytes()}))
+"""
+
+
+@pytest.mark.parametrize("normalize", [False, True], ids=["plain", "normalize_illumination"])
+def test_tiled_scan_equals_untiled_with_less_memory_per_worker(cluster, tmp_path, normalize):
+    """2x2 tiles tracked on the two workers, stitched: the untiled scan's outputs, byte for byte,
+    and every worker's peak memory below the untiled scan's, in total and above its starting
+    point. With illumination normalisation (whose gain is a whole-frame statistic) the capture
+    is the minimal one: equality is the point there, not memory."""
+    cluster.ensure_workers(2)
+    if normalize:
+        log = write_tiny_capture(tmp_path / "cap", extra={"scan": {"normalize_illumination": True}})
+        w, h = 48, 36
+    else:
+        log = write_tiny_capture(tmp_path / "cap", width=400, height=300, n_frames=24)
+        w, h = 400, 300
+    from gnomon.cli import main
+
+    if normalize:
+        run_scan(log, tmp_path / "untiled", ScanOptions(progress=False))
+    else:  # in a fresh process, to measure its memory
+        untiled = subprocess.run([sys.executable, "-c", _UNTILED, str(log), str(tmp_path / "untiled")],
+                                 capture_output=True, text=True, env=_env(), timeout=BATCH_TIMEOUT_S, check=True)
+        mem = json.loads(untiled.stdout.strip().splitlines()[-1])
+    assert main(["scan", str(log), "--out", str(tmp_path / "tiled"), "--tiles", "2x2",
+                 "--scheduler", cluster.address, "--quiet"]) == 0
+    _assert_same_outputs(tmp_path / "tiled", tmp_path / "untiled")
+
+    info = json.loads((tmp_path / "tiled" / "report.json").read_text())["tracking"]
+    assert info["tiles"] == "2x2"
+    assert sorted(map(tuple, info["tile_bounds"])) == [(0, h // 2, 0, w // 2), (0, h // 2, w // 2, w),
+                                                        (h // 2, h, 0, w // 2), (h // 2, h, w // 2, w)]
+    assert len(set(info["workers"])) == 2
+    if normalize:
+        return
+    for peak, start in zip(info["worker_peak_rss_bytes"], info["worker_rss_at_start_bytes"], strict=True):
+        assert peak < mem["peak"], (peak, mem)
+        assert peak - start < mem["peak"] - mem["start"], (peak, start, mem)
+
+
+def test_tiles_flag_errors_are_one_line(tmp_path, capsys):
+    from gnomon.cli import main
+
+    log = write_tiny_capture(tmp_path / "cap")
+    for args, message in ((["--tiles", "2by2"], "--tiles '2by2': expected ROWSxCOLS"),
+                          (["--scheduler", "tcp://127.0.0.1:1"], "add --tiles RxC"),
+                          (["--tiles", "100x1", "--workers", "1"], "more tiles than pixels")):
+        assert main(["scan", str(log), "--out", str(tmp_path / "out"), "--quiet", *args]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "out").exists()
