@@ -36,6 +36,7 @@ def left_right(tmp_path_factory):
     return root, left, right
 
 
+@pytest.mark.slow
 def test_both_edges_of_a_wide_stick_beat_one(tmp_path: Path) -> None:
     result, truth = scan(tmp_path, DeskLampConfig(seed=7, stick_radius=6.0))  # a 12 mm stick
     dist = float(truth["camera_distance_mm"])
@@ -64,6 +65,7 @@ def sigma_calibration(result, truth) -> list[tuple[float, float, int]]:
     return rows
 
 
+@pytest.mark.slow
 def test_sigma_predicts_the_error_desk(tmp_path: Path) -> None:
     result, truth = scan(tmp_path, DeskLampConfig(seed=13, pencil_photos=0))
     rows = sigma_calibration(result, truth)
@@ -73,6 +75,7 @@ def test_sigma_predicts_the_error_desk(tmp_path: Path) -> None:
         assert predicted / 1.5 <= observed <= predicted * 1.5
 
 
+@pytest.mark.slow
 def test_merge_left_right(left_right) -> None:
     root, (left, truth), (right, truth_r) = left_right
     np.testing.assert_array_equal(truth["depth"], truth_r["depth"])  # one camera, one scene

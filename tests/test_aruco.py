@@ -162,6 +162,7 @@ def test_field_log_reads_aruco_and_charuco(tmp_path):
     assert plane.charuco.squares == (7, 5) and plane.charuco.origin == (-100.0, 80.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "extra, needle",
     [

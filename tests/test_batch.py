@@ -167,6 +167,7 @@ def _run_batch_here(args: list, capsys) -> subprocess.CompletedProcess:
     return subprocess.CompletedProcess(args, code, out, err)
 
 
+@pytest.mark.slow
 def test_batch_on_scheduler_equals_sequential_and_isolates_a_broken_log(cluster, captures, sequential, tmp_path,
                                                                         capsys):
     cluster.ensure_workers(2)
@@ -227,6 +228,7 @@ def test_batch_on_scheduler_equals_sequential_and_isolates_a_broken_log(cluster,
     _assert_same_outputs(out / "tiny_b", sequential["tiny_b"])  # same pixels, same scan
 
 
+@pytest.mark.slow
 def test_worker_killed_mid_scan_is_retried_with_the_same_outputs(cluster, tmp_path):
     """Frame 5 of the capture is a FIFO that nobody writes: the scan blocks there, so the kill
     certainly lands in the middle of it. The real frame replaces the FIFO's name first; the
@@ -268,6 +270,7 @@ def test_worker_killed_mid_scan_is_retried_with_the_same_outputs(cluster, tmp_pa
     assert not list(out.glob(".*partial*")), "the killed attempt's staging folder is gone"
 
 
+@pytest.mark.slow
 def test_batch_plan_errors_are_one_line_before_any_cluster_starts(tmp_path, capsys):
     from gnomon.cli import main
 

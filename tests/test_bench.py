@@ -3,6 +3,8 @@ and `--scan` input errors."""
 
 from __future__ import annotations
 
+import pytest
+
 from gnomon import _kernel
 from gnomon.bench import format_table, run_bench
 from gnomon.cli import main
@@ -17,6 +19,7 @@ def test_small_bench_reports_the_simd_path_and_both_trackers():
     assert f"SIMD path {r.simd_path}" in text and "speed-up" in text
 
 
+@pytest.mark.slow
 def test_scan_bench_names_a_missing_field_log(tmp_path, capsys):
     missing = tmp_path / "nope.toml"
     assert main(["bench", "--scan", str(missing)]) == 2

@@ -58,6 +58,7 @@ def error_lines(err: str) -> list[str]:
     return [line for line in err.splitlines() if line.startswith("gnomon: error:")]
 
 
+@pytest.mark.slow
 def test_calibrate_camera_zhang(views, tmp_path, capsys):
     folder, cam, images = views
     out = tmp_path / "camera.toml"
@@ -78,6 +79,7 @@ def test_calibrate_camera_zhang(views, tmp_path, capsys):
     assert info["method"] == "zhang" and info["skipped"] == ["blank.png"] and info["n_views"] == 12
 
 
+@pytest.mark.slow
 def test_calibrate_camera_directory_and_tsai(views, tmp_path, capsys):
     folder, cam, images = views
     out = tmp_path / "tsai.toml"
@@ -97,6 +99,7 @@ def test_calibrate_camera_directory_and_tsai(views, tmp_path, capsys):
     assert np.hypot(c2.cx - cam.cx, c2.cy - cam.cy) < 2.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "extra,message",
     [
@@ -118,6 +121,7 @@ def test_bad_options_exit_2_with_one_line(views, tmp_path, capsys, extra, messag
     assert not (tmp_path / "c.toml").exists()
 
 
+@pytest.mark.slow
 def test_bad_images_exit_2_with_one_line(views, tmp_path, capsys):
     folder, _, images = views
     small = tmp_path / "small.png"

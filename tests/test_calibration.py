@@ -111,6 +111,7 @@ def rendered(tmp_path_factory):
     return folder, cam, truth, odd / "small.png"
 
 
+@pytest.mark.slow
 def test_detection_matches_the_rendered_truth(rendered):
     folder, cam, truth, _ = rendered
     obj = calibration.board_points(9, 6, 25.0)
@@ -127,6 +128,7 @@ def test_detection_matches_the_rendered_truth(rendered):
     assert np.abs(e).max() < 0.35
 
 
+@pytest.mark.slow
 def test_calibrate_images_acceptance_skips_a_blank_image_with_a_warning(rendered):
     folder, cam, _, _ = rendered
     paths = calibration.expand_image_args([folder])
@@ -146,6 +148,7 @@ def test_calibrate_images_acceptance_skips_a_blank_image_with_a_warning(rendered
     assert cal.rms_px < 0.15  # detection noise only (≈0.05 px)
 
 
+@pytest.mark.slow
 def test_calibrate_images_errors(rendered, tmp_path):
     folder, _, truth, small = rendered
     views = [folder / v["image"] for v in truth["views"]]
@@ -163,6 +166,7 @@ def test_calibrate_images_errors(rendered, tmp_path):
         calibration.calibrate_images([], (9, 6), 25.0)
 
 
+@pytest.mark.slow
 def test_calibrate_images_tsai_single_view(rendered):
     folder, cam, truth, _ = rendered
     cal = calibration.calibrate_images([folder / truth["views"][0]["image"]], (9, 6), 25.0, model="tsai", pixel_pitch_mm=(0.006, 0.006))
@@ -177,6 +181,7 @@ def test_calibrate_images_tsai_single_view(rendered):
 # --------------------------------------------------------------------------- the camera file
 
 
+@pytest.mark.slow
 def test_camera_file_round_trip_opencv(rendered, tmp_path):
     folder, _, _, _ = rendered
     cal = calibration.calibrate_images(calibration.expand_image_args([folder]), (9, 6), 25.0)

@@ -50,6 +50,7 @@ def _err_up_to_half_turn(found, truth):
     return min(np.abs(found - truth).max(), np.abs(found[::-1] - truth).max())
 
 
+@pytest.mark.slow
 def test_boards_are_found_in_either_orientation(turned_views):
     for img, truth, turned in turned_views:
         for board in ((COLS, ROWS), (ROWS, COLS)):
@@ -59,6 +60,7 @@ def test_boards_are_found_in_either_orientation(turned_views):
                 assert _err_up_to_half_turn(found, truth) < 0.5
 
 
+@pytest.mark.slow
 def test_a_board_found_with_its_sides_swapped_is_reordered_without_mirroring(turned_views):
     for img, truth, _ in turned_views:
         ok, corners = cv2.findChessboardCornersSB(img, (ROWS, COLS), flags=cv2.CALIB_CB_EXHAUSTIVE)

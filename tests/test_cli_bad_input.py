@@ -41,6 +41,7 @@ def edit_log(path: Path, edit) -> None:
     toml_io.dump(data, path)
 
 
+@pytest.mark.slow
 def test_tiny_capture_scans(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "cap")
     out = tmp_path / "out"
@@ -55,6 +56,7 @@ def test_tiny_capture_scans(tmp_path: Path, capsys) -> None:
     np.testing.assert_allclose(np.median(finite), 500.0, rtol=0.01)
 
 
+@pytest.mark.slow
 def test_missing_frames_folder(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "cap")
     edit_log(log, lambda d: d["capture"].update(frames="nowhere/*.png"))
@@ -62,6 +64,7 @@ def test_missing_frames_folder(tmp_path: Path, capsys) -> None:
     assert_clean_failure(*run_scan(log, out, capsys), out, "frames folder", "nowhere")
 
 
+@pytest.mark.slow
 def test_unreadable_image(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "cap")
     (tmp_path / "cap" / "frames" / "frame_0005.png").write_bytes(b"not a png at all")
@@ -69,6 +72,7 @@ def test_unreadable_image(tmp_path: Path, capsys) -> None:
     assert_clean_failure(*run_scan(log, out, capsys), out, "frame_0005.png", "cannot be decoded")
 
 
+@pytest.mark.slow
 def test_frames_of_different_sizes(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "cap")
     cv2.imwrite(str(tmp_path / "cap" / "frames" / "frame_0007.png"), np.zeros((20, 30), np.uint8))
@@ -76,6 +80,7 @@ def test_frames_of_different_sizes(tmp_path: Path, capsys) -> None:
     assert_clean_failure(*run_scan(log, out, capsys), out, "frame 7", "frame_0007.png", "30x20")
 
 
+@pytest.mark.slow
 def test_frames_not_matching_the_camera(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "cap")
     edit_log(log, lambda d: d["camera"].update(width=64))
@@ -83,6 +88,7 @@ def test_frames_not_matching_the_camera(tmp_path: Path, capsys) -> None:
     assert_clean_failure(*run_scan(log, out, capsys), out, "frame 0", "camera's 64x36")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "edit, needle",
     [
@@ -98,6 +104,7 @@ def test_field_log_mistakes(tmp_path: Path, capsys, edit, needle: str) -> None:
     assert_clean_failure(*run_scan(log, out, capsys), out, needle, str(log))
 
 
+@pytest.mark.slow
 def test_video_that_ends_early(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "cap")
     frames = sorted((tmp_path / "cap" / "frames").glob("*.png"))
@@ -112,6 +119,7 @@ def test_video_that_ends_early(tmp_path: Path, capsys) -> None:
     assert_clean_failure(*run_scan(log, out, capsys), out, "sweep.avi", "ended after 8 frames, expected 24")
 
 
+@pytest.mark.slow
 def test_console_script_exit_code(tmp_path: Path) -> None:
     log = write_tiny_capture(tmp_path / "cap")
     edit_log(log, lambda d: d["light"].update(kind="torch"))

@@ -70,6 +70,7 @@ def test_not_toml(tmp_path: Path) -> None:
     assert "not valid TOML" in str(info.value) and str(bad) in str(info.value)
 
 
+@pytest.mark.slow
 def test_a_tsai_camera_file_flows_into_the_scan(tmp_path: Path) -> None:
     """A camera file from `gnomon calibrate camera --model tsai` is used by `gnomon scan`."""
     import numpy as np
@@ -94,6 +95,7 @@ def test_a_tsai_camera_file_flows_into_the_scan(tmp_path: Path) -> None:
     assert result.report["calibration"]["method"] == "tsai coplanar"
 
 
+@pytest.mark.slow
 def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
     """[[planes]] chessboard = "9x6", image = ...: the board's frame becomes the world frame."""
     import numpy as np

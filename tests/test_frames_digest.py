@@ -9,6 +9,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 from gnomon import toml_io
 from gnomon.cli import main
@@ -34,6 +35,7 @@ def test_a_peek_at_the_first_frame_does_not_change_the_digest(tiny_capture: Path
     assert source.frames_digest() == expected
 
 
+@pytest.mark.slow
 def test_a_chessboard_scan_reports_the_digest_of_its_frames(tmp_path: Path) -> None:
     """The chessboard is found in the capture's first frame (the peek), then the scan reads every frame."""
     assert main(["simulate", "chessboard", "--out", str(tmp_path / "cb"), "--width", "640", "--height", "480"]) == 0

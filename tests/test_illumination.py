@@ -12,6 +12,7 @@ import tomllib
 
 import cv2
 import numpy as np
+import pytest
 
 from gnomon import toml_io
 from gnomon.accuracy import depth_accuracy
@@ -19,6 +20,7 @@ from gnomon.pipeline import ScanOptions, run_scan
 from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
 
+@pytest.mark.slow
 def test_normalisation_undoes_exposure_drift(tmp_path) -> None:
     simulate_desk_lamp(tmp_path, DeskLampConfig(seed=21, pencil_photos=0))
     frames = sorted((tmp_path / "frames").glob("*.jpg"))

@@ -319,6 +319,7 @@ def test_field_log_missing_pencil_table(tmp_path):
     assert "missing required table [pencil]" in _one_line_error(excinfo)
 
 
+@pytest.mark.slow
 def test_tips_found_against_the_empty_desk(tmp_path) -> None:
     """[pencil] empty = ...: photos give only a base hint; the shadow tips are found automatically."""
     import tomllib

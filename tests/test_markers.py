@@ -49,6 +49,7 @@ def plane_args(sc, name):
     return plane, ab, [m.name for m in plane.markers]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["desk", "wall"])
 def test_plane_from_four_markers_acceptance(scene, name):
     sc, img, hints, _ = scene
@@ -76,6 +77,7 @@ def test_plane_from_four_markers_acceptance(scene, name):
     assert rep["n_points"] == 4 and set(rep["residuals_px"]) == set(names)
 
 
+@pytest.mark.slow
 def test_plane_from_markers_in_world_coordinates_gives_the_camera_pose(scene):
     sc, img, hints, _ = scene
     plane, ab, names = plane_args(sc, "desk")
@@ -88,6 +90,7 @@ def test_plane_from_markers_in_world_coordinates_gives_the_camera_pose(scene):
     assert np.allclose(pp.pose.R @ pp.normal_world, pp.normal_cam, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_second_plane_through_the_first_planes_pose(scene):
     """Desk markers fix the world frame; the wall, known in that frame, follows."""
     sc, img, hints, _ = scene
@@ -99,6 +102,7 @@ def test_second_plane_through_the_first_planes_pose(scene):
     assert angle_deg(n, n_true) < 0.2 and abs(d / d_true - 1) < 0.002
 
 
+@pytest.mark.slow
 def test_markers_with_a_tsai_camera(tmp_path):
     truth = simcb.TruthTsai(640, 480, 3.2, 8e-3, 319.5, 239.5, 0.006, 0.006, 1.0)
     sc = simmk.desk_and_wall_scene(truth)
@@ -113,6 +117,7 @@ def test_markers_with_a_tsai_camera(tmp_path):
 # --------------------------------------------------------------------------- bad input
 
 
+@pytest.mark.slow
 def test_marker_not_found_near_its_hint(scene):
     sc, img, hints, _ = scene
     plane, ab, names = plane_args(sc, "desk")
@@ -133,6 +138,7 @@ def test_an_edge_is_not_a_marker():
         markers.find_marker(img, (80.0, 60.0), name="e1")
 
 
+@pytest.mark.slow
 def test_too_few_or_collinear_markers(scene):
     sc, img, hints, _ = scene
     plane, ab, names = plane_args(sc, "desk")
@@ -159,6 +165,7 @@ def board_view():
     return truth, rays, R
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cols,rows,symmetric", [(9, 6, False), (8, 6, True)])
 def test_plane_from_chessboard(board_view, cols, rows, symmetric):
     truth, rays, R = board_view

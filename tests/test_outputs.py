@@ -50,6 +50,7 @@ def _non_manifold_vertices(faces: np.ndarray) -> int:
     return sum(len(s) > 1 for s in fans.values())
 
 
+@pytest.mark.slow
 def test_points_have_unit_normals_towards_the_camera(desk_scan) -> None:
     scan = desk_scan / "scan"
     v = _vertices(scan / "points.ply")
@@ -76,6 +77,7 @@ def test_points_have_unit_normals_towards_the_camera(desk_scan) -> None:
     assert np.degrees(np.arccos(mean[2] / np.linalg.norm(mean))) < 1.0
 
 
+@pytest.mark.slow
 def test_mesh_ply_normals_agree_with_the_faces(desk_scan) -> None:
     scan = desk_scan / "scan"
     data = plyfile.PlyData.read(str(scan / "mesh.ply"))
@@ -89,6 +91,7 @@ def test_mesh_ply_normals_agree_with_the_faces(desk_scan) -> None:
     assert np.all(np.einsum("ij,ij->i", n, _camera_centre(scan) - xyz) > 0)
 
 
+@pytest.mark.slow
 def test_mesh_has_no_non_manifold_vertex(desk_scan) -> None:
     data = plyfile.PlyData.read(str(desk_scan / "scan" / "mesh.ply"))
     faces = np.stack(data["face"].data["vertex_indices"]).astype(np.int64)
@@ -98,6 +101,7 @@ def test_mesh_has_no_non_manifold_vertex(desk_scan) -> None:
     assert _non_manifold_vertices(np.array([[0, 1, 2], [0, 3, 4]])) == 1
 
 
+@pytest.mark.slow
 def test_obj_loads_with_its_texture_and_stl_with_its_faces(desk_scan) -> None:
     scan = desk_scan / "scan"
     ref = plyfile.PlyData.read(str(scan / "mesh.ply"))

@@ -65,6 +65,7 @@ def test_foreign_files_are_kept_and_stale_outputs_removed(tmp_path: Path) -> Non
     assert (out / "a.txt").read_text() == "run 2\n"
 
 
+@pytest.mark.slow
 def test_a_reader_sees_all_old_or_all_new(tmp_path: Path) -> None:
     """While runs publish over each other, every folder a reader opens holds one run's files."""
     out = tmp_path / "out"
@@ -187,6 +188,7 @@ def test_rrd_on_another_filesystem_is_copied(tmp_path: Path, monkeypatch) -> Non
     assert sorted(os.listdir(rrd.parent)) == ["rec.rrd"]
 
 
+@pytest.mark.slow
 def test_rrd_naming_a_folder_is_refused_before_the_scan(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "cap")
     (tmp_path / "recs").mkdir()
@@ -196,6 +198,7 @@ def test_rrd_naming_a_folder_is_refused_before_the_scan(tmp_path: Path, capsys) 
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_rescan_with_no_rrd_drops_the_old_recording(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "cap")
     out = tmp_path / "out"
@@ -216,6 +219,7 @@ def _can_mount_tmpfs(where: Path) -> bool:
     return r.returncode == 0
 
 
+@pytest.mark.slow
 def test_out_is_a_mount_point(tmp_path: Path, capsys) -> None:
     """--out is its own filesystem (a Docker volume, a USB drive): stage inside it."""
     out = tmp_path / "mnt"

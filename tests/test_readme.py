@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 import re
 from pathlib import Path
 
@@ -25,6 +27,7 @@ def test_ci_runs_the_readme_test_command_verbatim() -> None:
     assert tests in ci
 
 
+@pytest.mark.slow
 def test_shipped_field_logs_run(tmp_path) -> None:
     """The example captures in field_logs/ are runnable as they are."""
     import shutil

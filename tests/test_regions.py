@@ -40,6 +40,7 @@ def proposed(two_plane_small: Path):
     return log, out, dict(np.load(two_plane_small / "ground_truth.npz"))
 
 
+@pytest.mark.slow
 def test_proposed_regions_are_bare_plane(proposed) -> None:
     _, out, truth = proposed
     for name, oid in (("desk", DESK), ("wall", WALL)):
@@ -58,6 +59,7 @@ def test_proposed_regions_are_bare_plane(proposed) -> None:
     assert drawing.shape[:2] == truth["object_id"].shape
 
 
+@pytest.mark.slow
 def test_a_scan_with_the_proposed_regions(proposed, tmp_path: Path) -> None:
     """As accurate as with the simulator's own regions (bands it knows are bare), and covering as much."""
     from gnomon.accuracy import depth_accuracy
@@ -81,6 +83,7 @@ def test_a_scan_with_the_proposed_regions(proposed, tmp_path: Path) -> None:
     assert ours.coverage >= theirs.coverage - 0.01
 
 
+@pytest.mark.slow
 def test_preview_draws_the_corner_where_it_is(two_plane_small: Path, tmp_path: Path) -> None:
     """The yellow line where the measured planes meet lies on the true corner's image."""
     from gnomon.check import COLOURS  # noqa: F401  (the preview's palette)
@@ -105,6 +108,7 @@ def test_preview_draws_the_corner_where_it_is(two_plane_small: Path, tmp_path: P
     assert np.percentile(d, 95) < 1.5  # px: the line is drawn 1 px wide, antialiased
 
 
+@pytest.mark.slow
 def test_init_writes_a_template_that_loads_once_filled(two_plane_small: Path, tmp_path: Path) -> None:
     frames = sorted((two_plane_small / "frames").glob("*"))
     work = tmp_path / "capture"
@@ -132,6 +136,7 @@ def test_init_writes_a_template_that_loads_once_filled(two_plane_small: Path, tm
     assert main(["init", *map(str, sorted((work / "frames").glob("*")))]) == 2
 
 
+@pytest.mark.slow
 def test_a_plane_without_regions_cannot_be_scanned(two_plane_small: Path, tmp_path: Path) -> None:
     from gnomon.pipeline import ScanOptions, run_scan
 

@@ -77,6 +77,7 @@ def scanned(tmp_path_factory) -> Path:
 # ------------------------------------------------------------------ frames
 
 
+@pytest.mark.slow
 def test_zero_byte_frame(cap: Path, capsys) -> None:
     (cap.parent / "frames" / "frame_0005.png").write_bytes(b"")
     one_line(scan(cap, cap.parent / "out"), capsys, "frame_0005.png", "empty")
@@ -90,12 +91,14 @@ def _png_header(width: int, height: int) -> bytes:
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b"")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["frame_0000.png", "frame_0003.png"])
 def test_png_header_claiming_60000_squared(cap: Path, capsys, name: str) -> None:
     (cap.parent / "frames" / name).write_bytes(_png_header(60000, 60000))
     one_line(scan(cap, cap.parent / "out"), capsys, name)
 
 
+@pytest.mark.slow
 def test_frames_sorted_naturally(tmp_path: Path, capsys) -> None:
     """frame_0 … frame_23 are scanned in capture order, as frame_0000 … frame_0023 are."""
     ref_log = write_tiny_capture(tmp_path / "ref")
@@ -112,6 +115,7 @@ def test_frames_sorted_naturally(tmp_path: Path, capsys) -> None:
 # ------------------------------------------------------------------ text files
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("content, needle", [
     (bytes(range(256)), "binary"),
     ("[capture]\n# caf\xe9\n".encode("latin-1"), "UTF-8"),
@@ -122,11 +126,13 @@ def test_field_log_not_text(tmp_path: Path, capsys, content: bytes, needle: str)
     one_line(scan(log, tmp_path / "out"), capsys, "field_log.toml", needle)
 
 
+@pytest.mark.slow
 def test_field_log_is_a_folder(tmp_path: Path, capsys) -> None:
     (tmp_path / "field_log.toml").mkdir()
     one_line(scan(tmp_path / "field_log.toml", tmp_path / "out"), capsys, "field_log.toml", "folder")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["binary", "latin-1", "folder"])
 @pytest.mark.parametrize("which", ["camera", "light"])
 def test_camera_and_light_files_not_text(cap: Path, capsys, kind: str, which: str) -> None:
@@ -145,12 +151,14 @@ def test_camera_and_light_files_not_text(cap: Path, capsys, kind: str, which: st
     one_line(scan(cap, cap.parent / "out"), capsys, f"{which}.toml")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("frames, needle", [("", "empty"), ("/", "root"), ("/nonexistent-gnomon/*.png", "not found")])
 def test_frames_glob_empty_or_absolute(cap: Path, capsys, frames: str, needle: str) -> None:
     edit(cap, lambda d: d["capture"].update(frames=frames))
     one_line(scan(cap, cap.parent / "out"), capsys, "frames", needle)
 
 
+@pytest.mark.slow
 def test_absolute_frames_glob_that_exists_scans(cap: Path, capsys) -> None:
     edit(cap, lambda d: d["capture"].update(frames=str(cap.parent / "frames" / "*.png")))
     assert scan(cap, cap.parent / "out", "--no-rrd") == 0, capsys.readouterr().err
@@ -159,6 +167,7 @@ def test_absolute_frames_glob_that_exists_scans(cap: Path, capsys) -> None:
 # ------------------------------------------------------------------ numbers and geometry
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("section, key, value, needle", [
     ("scan", "window", 65, "window"),
     ("capture", "gamma", float("inf"), "gamma"),
@@ -175,17 +184,20 @@ def test_implausible_numbers(cap: Path, capsys, section: str, key: str, value, n
     assert not (cap.parent / "out").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("board", ["0x0", "2x5", "-3x4"])
 def test_plane_chessboard_too_small(cap: Path, capsys, board: str) -> None:
     edit(cap, lambda d: d["planes"][0].update(chessboard=board, square=25.0))
     one_line(scan(cap, cap.parent / "out"), capsys, "chessboard")
 
 
+@pytest.mark.slow
 def test_two_planes_with_one_name(cap: Path, capsys) -> None:
     edit(cap, lambda d: d["planes"].append(dict(d["planes"][0])))
     one_line(scan(cap, cap.parent / "out"), capsys, "'desk'", "own name")
 
 
+@pytest.mark.slow
 def test_timezone_that_does_not_exist(cap: Path, capsys) -> None:
     edit(cap, lambda d: d.update(site={"latitude": 47.0, "longitude": 8.0, "timezone": "Mars/Olympus"}))
     one_line(scan(cap, cap.parent / "out"), capsys, "Mars/Olympus")
@@ -203,11 +215,13 @@ def _sun_log(tmp_path: Path) -> Path:
     return edit(log, to_sun)
 
 
+@pytest.mark.slow
 def test_horizontal_pole(tmp_path: Path, capsys) -> None:
     log = edit(_sun_log(tmp_path), lambda d: d["pole"].update(top=[3.0, 0.0, 0.2]))
     one_line(scan(log, tmp_path / "out"), capsys, "[pole]")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fps", [1e300, 1e-300])
 def test_implausible_frame_rate(tmp_path: Path, capsys, fps: float) -> None:
     log = edit(_sun_log(tmp_path), lambda d: d["capture"].update(fps=fps))
@@ -217,6 +231,7 @@ def test_implausible_frame_rate(tmp_path: Path, capsys, fps: float) -> None:
 # ------------------------------------------------------------------ output paths
 
 
+@pytest.mark.slow
 def test_out_is_a_file_or_under_one(cap: Path, capsys) -> None:
     f = cap.parent / "taken"
     f.write_text("keep")
@@ -225,6 +240,7 @@ def test_out_is_a_file_or_under_one(cap: Path, capsys) -> None:
     assert f.read_text() == "keep"
 
 
+@pytest.mark.slow
 def test_read_only_output(cap: Path, capsys, tmp_path: Path) -> None:
     ro = tmp_path / "ro"
     ro.mkdir()
@@ -249,16 +265,19 @@ def test_review_export_to_a_folder(tmp_path: Path, capsys) -> None:
     one_line(main(["review", str(rec), "--export", str(tmp_path)]), capsys, "--export", "folder")
 
 
+@pytest.mark.slow
 def test_bench_json_to_a_folder(tmp_path: Path, capsys) -> None:
     one_line(main(["bench", "--no-memory", "--json", str(tmp_path)]), capsys, "--json", "folder")
 
 
+@pytest.mark.slow
 def test_demo_out_is_a_file(tmp_path: Path, capsys) -> None:
     (tmp_path / "f").write_text("keep")
     one_line(main(["demo", "--small", "--quiet", "--out", str(tmp_path / "f")]), capsys, "is a file")
     assert (tmp_path / "f").read_text() == "keep"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args, needle", [
     (["--seed", "-1"], "--seed"), (["--noise", "nan"], "--noise"), (["--frames", "1"], "--frames"),
     (["--gamma", "inf"], "--gamma"),
@@ -279,6 +298,7 @@ def test_sun_numbers(capsys, args: list[str], needle: str) -> None:
 # ------------------------------------------------------------------ merge
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("beta", ["nan", "inf", "-5"])
 def test_merge_beta(scanned: Path, tmp_path: Path, capsys, beta: str) -> None:
     code = main(["merge", str(scanned), str(scanned), "--out", str(tmp_path / "m"), "--weights", "sigmoid",
@@ -287,12 +307,14 @@ def test_merge_beta(scanned: Path, tmp_path: Path, capsys, beta: str) -> None:
     assert not (tmp_path / "m").exists()
 
 
+@pytest.mark.slow
 def test_merge_into_an_input(scanned: Path, capsys) -> None:
     before = {p.name: p.read_bytes() for p in scanned.iterdir() if p.is_file()}
     one_line(main(["merge", str(scanned), str(scanned), "--out", str(scanned), "--no-rrd"]), capsys, "input")
     assert {p.name: p.read_bytes() for p in scanned.iterdir() if p.is_file()} == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spoil, needle", [
     (lambda b: (b / "depth.npy").write_bytes((b / "depth.npy").read_bytes()[:100]), "depth.npy"),
     (lambda b: (b / "depth.npy").write_bytes(b""), "depth.npy"),
@@ -310,6 +332,7 @@ def test_merge_spoilt_input(scanned: Path, tmp_path: Path, capsys, spoil, needle
     assert not (tmp_path / "m").exists()
 
 
+@pytest.mark.slow
 def test_merge_point_pixels_out_of_range(scanned: Path, tmp_path: Path, capsys) -> None:
     import shutil
 
@@ -344,6 +367,7 @@ def test_calibrate_camera_arguments(tmp_path: Path, capsys, args: list[str], nee
     assert good.read_text() == "# a good camera file\n"
 
 
+@pytest.mark.slow
 def test_degenerate_lamp_does_not_overwrite(tmp_path: Path, capsys) -> None:
     """Pencil shadows all on one line leave the lamp anywhere along it: lamp.toml is kept without --force."""
     from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
@@ -388,6 +412,7 @@ def test_broken_pipe_is_quiet() -> None:
     assert "Traceback" not in err and err.strip() == "", err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
 def test_signal_mid_scan_leaves_nothing(tmp_path: Path, sig: signal.Signals) -> None:
     log = write_tiny_capture(tmp_path / "cap", n_frames=400, width=160, height=120)
@@ -407,6 +432,7 @@ def test_signal_mid_scan_leaves_nothing(tmp_path: Path, sig: signal.Signals) -> 
     no_leftovers(tmp_path)
 
 
+@pytest.mark.slow
 def test_file_size_limit(tmp_path: Path) -> None:
     """`ulimit -f`: EFBIG on the first output that outgrows it; one line naming it; nothing published."""
     log = write_tiny_capture(tmp_path / "cap", n_frames=30, width=160, height=120)
@@ -424,6 +450,7 @@ def test_file_size_limit(tmp_path: Path) -> None:
     no_leftovers(tmp_path)
 
 
+@pytest.mark.slow
 def test_full_disk_does_not_hang(tmp_path: Path) -> None:
     """A full filesystem (a small tmpfs as --out's parent): one line naming the output, no hang, no leftovers.
     The recording is the last output written: a size where every other output fits checks it too."""
@@ -466,6 +493,7 @@ KILL_AT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stage", ["roll-forward", "after-exchange"])
 def test_kill_during_publication_never_mixes(tmp_path: Path, stage: str) -> None:
     """SIGKILL in the middle of publishing over an earlier scan: the folder is whole-old or, once the next

@@ -227,6 +227,7 @@ def test_command_bad_file_is_a_user_error(tmp_path):
         args.func(args)
 
 
+@pytest.mark.slow
 def test_cli_exit_code_2_on_bad_file(tmp_path):
     """Through gnomon.cli.main when every sub-command module exists (skipped until then)."""
     import importlib

@@ -31,6 +31,7 @@ def desk_scan(tmp_path_factory):
     return root, result, truth
 
 
+@pytest.mark.slow
 def test_accuracy_and_coverage(desk_scan) -> None:
     root, result, truth = desk_scan
     dist = float(truth["camera_distance_mm"])
@@ -43,6 +44,7 @@ def test_accuracy_and_coverage(desk_scan) -> None:
     assert abs(acc.mean) <= 0.1 * 0.001 * dist + 3 * acc.rms / np.sqrt(acc.measured_pixels)
 
 
+@pytest.mark.slow
 def test_outputs_agree_with_each_other(desk_scan) -> None:
     root, result, truth = desk_scan
     out = root / "scan"
@@ -63,6 +65,7 @@ def test_outputs_agree_with_each_other(desk_scan) -> None:
     assert np.mean(err > 0.01 * dist) <= 0.001
 
 
+@pytest.mark.slow
 def test_shadow_planes_match_the_true_ones(desk_scan) -> None:
     """The measured planes (camera frame) against the simulator's world planes."""
     root, result, truth = desk_scan
@@ -80,6 +83,7 @@ def test_shadow_planes_match_the_true_ones(desk_scan) -> None:
     assert np.median(offset_error) < 0.0005 * float(truth["camera_distance_mm"])
 
 
+@pytest.mark.slow
 def test_edges_disagree_as_their_sigma_says(desk_scan) -> None:
     # The two edges are independent measurements of one depth: where both were
     # fused, their difference over its predicted σ must have an RMS near 1

@@ -43,6 +43,7 @@ def accuracy(result, truth):
     return depth_accuracy(result.depth, truth["depth"], truth["swept"], float(truth["camera_distance"]), "m")
 
 
+@pytest.mark.slow
 def test_accuracy_heading_from_the_gnomon(facade) -> None:
     root, truth = facade
     # No heading given: the scan measures it from the gnomon's shadow.
@@ -64,6 +65,7 @@ def test_accuracy_heading_from_the_gnomon(facade) -> None:
     assert sun["skipped_cloud"] and set(sun["skipped_cloud"]) <= clouds
 
 
+@pytest.mark.slow
 def test_illumination_normalisation_matters(facade) -> None:
     root, truth = facade
     on = accuracy(run_scan(root / "capture" / "field_log.toml", root / "scan_on", OPTS), truth)
@@ -73,6 +75,7 @@ def test_illumination_normalisation_matters(facade) -> None:
     assert off.rms > 5 * on.rms or off.coverage < on.coverage - 0.1
 
 
+@pytest.mark.slow
 def test_shadow_time_is_the_penumbra_centre(facade) -> None:
     """Mean signed offset of the located shadow plane ≤ 0.1 % of the pole-to-surface distance."""
     root, truth = facade
@@ -105,6 +108,7 @@ def scan_cli(log: Path, out: Path, capsys) -> tuple[int, str, str]:
     return code, cap.out, cap.err.strip()
 
 
+@pytest.mark.slow
 def test_sun_scan_without_timestamps(small_facade, capsys) -> None:
     log = edited_log(small_facade, "no_times.toml", lambda d: (d["capture"].pop("timestamps"),
                                                                d["capture"].pop("time_pattern")))
@@ -112,6 +116,7 @@ def test_sun_scan_without_timestamps(small_facade, capsys) -> None:
     assert code == 2 and err.count("\n") == 0 and "timestamps" in err and str(log) in err
 
 
+@pytest.mark.slow
 def test_timestamps_out_of_order(small_facade, capsys) -> None:
     # Names sorted by minute first: the frames' times are no longer increasing.
     frames = sorted((small_facade / "capture" / "frames").glob("*.jpg"))
@@ -129,6 +134,7 @@ def test_timestamps_out_of_order(small_facade, capsys) -> None:
     assert "order" in err.lower() or "not after" in err.lower()
 
 
+@pytest.mark.slow
 def test_sun_below_the_horizon(small_facade, capsys) -> None:
     # 10:40–13:59 UTC is night at 150° W: every frame → a clear error
     log = edited_log(small_facade, "night.toml", lambda d: d["site"].update(longitude=-150.0))

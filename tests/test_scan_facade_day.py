@@ -31,6 +31,7 @@ def day(tmp_path_factory):
     return root, truth, result, acc
 
 
+@pytest.mark.slow
 def test_the_day_is_harder(day) -> None:
     _, truth, _, _ = day
     elevation = truth["sun_elevation_deg"]
@@ -41,6 +42,7 @@ def test_the_day_is_harder(day) -> None:
     assert truth["swept"].sum() > 0.1 * truth["swept"].size
 
 
+@pytest.mark.slow
 def test_no_point_leaves_before_it_enters(day) -> None:
     _, _, result, _ = day
     times = result.times
@@ -49,6 +51,7 @@ def test_no_point_leaves_before_it_enters(day) -> None:
         assert int((points & ~(times.leave > times.enter)).sum()) == 0
 
 
+@pytest.mark.slow
 def test_refusals_are_never_silent(day) -> None:
     _, _, result, acc = day
     rejected = result.report["edges"]["centre"]["rejected"]
@@ -58,6 +61,7 @@ def test_refusals_are_never_silent(day) -> None:
     assert any("refused" in w and "%" in w for w in result.warnings), result.warnings
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="needs the tracker's one dip per pixel (issue 10 item 1) and its dip "
                    "depth: the lamp post's thin shadow, alone on a pixel, is triangulated on the pole's plane; "
                    "only a dip deeper than the pole's antumbra can be there tells it apart")
@@ -66,6 +70,7 @@ def test_gross_errors_are_rare(day) -> None:
     assert acc.gross_rate <= 0.01, acc
 
 
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="needs the tracker's one dip per pixel (issue 10 item 1): the steepest "
                    "fall and rise over the whole day come from the clouds and the evening")
 def test_coverage_of_the_day(day) -> None:

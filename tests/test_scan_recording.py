@@ -19,12 +19,14 @@ def scanned(desk_scan):
     return desk_scan
 
 
+@pytest.mark.slow
 def test_rrd_verify_passes(scanned) -> None:
     proc = subprocess.run([sys.executable, "-m", "rerun", "rrd", "verify", str(scanned / "scan" / "scan.rrd")],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
 
 
+@pytest.mark.slow
 def test_export_gives_points_ply_bit_for_bit(scanned, capsys) -> None:
     out = scanned / "exported.ply"
     assert main(["review", str(scanned / "scan" / "scan.rrd"), "--export", str(out)]) == 0
@@ -35,6 +37,7 @@ def test_export_gives_points_ply_bit_for_bit(scanned, capsys) -> None:
     np.testing.assert_array_equal(a["rgb"], b["rgb"])
 
 
+@pytest.mark.slow
 def test_summary_lists_the_layout(scanned, capsys) -> None:
     s = summarize(scanned / "scan" / "scan.rrd").to_dict()
     entities = set(s["entities"])
@@ -49,6 +52,7 @@ def test_summary_lists_the_layout(scanned, capsys) -> None:
     assert "world/points" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_compare_with_itself_is_zero(scanned, capsys) -> None:
     rec = str(scanned / "scan" / "scan.rrd")
     assert main(["review", rec, "--compare", rec, "--json"]) == 0
@@ -56,6 +60,7 @@ def test_compare_with_itself_is_zero(scanned, capsys) -> None:
     assert result["compare"]["max"] == 0.0
 
 
+@pytest.mark.slow
 def test_calibration_and_merge_runs_leave_recordings(tmp_path, scanned, capsys) -> None:
     assert main(["simulate", "chessboard", "--out", str(tmp_path / "cb"), "--width", "640", "--height", "480"]) == 0
     assert main(["calibrate", "camera", str(tmp_path / "cb"), "--board", "9x6", "--square", "25",

@@ -25,12 +25,14 @@ def two_plane(tmp_path_factory):
     return root, result, dict(np.load(root / "capture" / "ground_truth.npz"))
 
 
+@pytest.mark.slow
 def test_the_field_log_gives_no_light(two_plane) -> None:
     root, _, _ = two_plane
     log = tomllib.loads((root / "capture" / "field_log.toml").read_text())
     assert log["light"] == {"kind": "two-plane"}
 
 
+@pytest.mark.slow
 def test_depth_and_coverage(two_plane) -> None:
     _, result, truth = two_plane
     acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], float(truth["camera_distance_mm"]))
@@ -39,6 +41,7 @@ def test_depth_and_coverage(two_plane) -> None:
     assert acc.coverage >= 0.90
 
 
+@pytest.mark.slow
 def test_lamp_by_product(two_plane) -> None:
     _, result, truth = two_plane
     estimated = np.array(result.report["light"]["estimated_position"])
@@ -50,6 +53,7 @@ def test_lamp_by_product(two_plane) -> None:
     assert error <= 0.02 * np.linalg.norm(lamp - centre)
 
 
+@pytest.mark.slow
 def test_markers_check_the_declared_planes(two_plane) -> None:
     _, result, _ = two_plane
     planes = {p["plane"]: p for p in result.report["reference_planes"]}
@@ -59,6 +63,7 @@ def test_markers_check_the_declared_planes(two_plane) -> None:
         assert p["angle_to_declared_deg"] < 0.2
 
 
+@pytest.mark.slow
 def test_sigma_predicts_the_error(two_plane) -> None:
     """Over bins of predicted σ, the observed RMS error is within 1.5× of it (issue 6)."""
     from test_accuracy_features import sigma_calibration
@@ -71,6 +76,7 @@ def test_sigma_predicts_the_error(two_plane) -> None:
         assert predicted / 1.5 <= observed <= predicted * 1.5
 
 
+@pytest.mark.slow
 def test_markers_set_the_camera_pose(two_plane, tmp_path) -> None:
     """Without [camera.pose], the printed markers give it; the scan is as good."""
     import shutil
@@ -92,6 +98,7 @@ def test_markers_set_the_camera_pose(two_plane, tmp_path) -> None:
     assert acc.rms_pct <= 0.15 and acc.coverage >= 0.90
 
 
+@pytest.mark.slow
 def test_every_plane_from_its_own_markers(two_plane) -> None:
     """No [camera.pose] and the wall given only in its own 2-D frame: the desk's
     markers set the world frame, the wall's markers (given as exact pixels, as

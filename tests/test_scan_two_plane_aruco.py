@@ -34,6 +34,7 @@ def aruco_scan(tmp_path_factory):
     return root, log, result, dict(np.load(root / "capture" / "ground_truth.npz"))
 
 
+@pytest.mark.slow
 def test_the_field_log_has_ids_and_no_pixels(aruco_scan) -> None:
     _, log, _, _ = aruco_scan
     for plane in log["planes"]:
@@ -42,6 +43,7 @@ def test_the_field_log_has_ids_and_no_pixels(aruco_scan) -> None:
         assert all(set(m) == {"id", "plane_xy"} for m in plane["aruco"]["markers"])
 
 
+@pytest.mark.slow
 def test_planes_and_camera_pose_from_aruco_markers(aruco_scan) -> None:
     _, _, result, truth = aruco_scan
     R, t = truth["R"], truth["t"].ravel()
@@ -66,6 +68,7 @@ def test_planes_and_camera_pose_from_aruco_markers(aruco_scan) -> None:
     assert np.degrees(np.linalg.norm(rvec - truth["rvec"].ravel())) < 0.1
 
 
+@pytest.mark.slow
 def test_depth_and_coverage(aruco_scan) -> None:
     _, _, result, truth = aruco_scan
     acc = depth_accuracy(result.depth, truth["depth"], truth["swept"], float(truth["camera_distance_mm"]))

@@ -48,6 +48,7 @@ def pixel_grid(w: int, h: int):
 # ------------------------------------------------------------------ geometry
 
 
+@pytest.mark.slow
 def test_depth_agrees_with_points_world(small):
     _, gt = small
     P = gt["points_world"].astype(np.float64)
@@ -62,6 +63,7 @@ def test_depth_agrees_with_points_world(small):
     assert 600 < float(gt["camera_distance_mm"]) < 700
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("distortion", [True, False])
 def test_cv2_projectpoints_lands_on_pixel_centres(small, distortion):
     """OpenCV's projection of the ground-truth points gives back the pixel centres:
@@ -80,6 +82,7 @@ def test_cv2_projectpoints_lands_on_pixel_centres(small, distortion):
     assert err.max() < 0.01
 
 
+@pytest.mark.slow
 def test_rodrigues_matches_opencv(small):
     _, gt = small
     R_cv, _ = cv2.Rodrigues(gt["rvec"])
@@ -132,6 +135,7 @@ def test_surface_points_lie_on_their_objects(small_scene):
     assert (np.einsum("...i,...i->...", n, view) < 1e-9).all()
 
 
+@pytest.mark.slow
 def test_fov_is_kept_when_the_size_changes():
     a = DeskLampScene(DeskLampConfig(width=160, height=120, frames=24)).lens
     b = DeskLampScene(DeskLampConfig(width=320, height=240, frames=24)).lens
@@ -144,6 +148,7 @@ def test_fov_is_kept_when_the_size_changes():
 # ------------------------------------------------------------------ the field log and files
 
 
+@pytest.mark.slow
 def test_field_log_parses_and_regions_are_bare_desk(small):
     result, gt = small
     text = result.field_log.read_text()
@@ -184,6 +189,7 @@ def test_field_log_parses_and_regions_are_bare_desk(small):
     assert not [p for p in result.out_dir.rglob("*") if p.name.endswith(".tmp")]
 
 
+@pytest.mark.slow
 def test_ground_truth_arrays(small):
     _, gt = small
     h, w = 240, 320
@@ -211,6 +217,7 @@ def test_ground_truth_arrays(small):
         np.testing.assert_allclose(planes[:, :3] @ gt["lamp"] - planes[:, 3], 0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_determinism_and_seed(tmp_path):
     a = simulate_desk_lamp(tmp_path / "a", TINY)
     b = simulate_desk_lamp(tmp_path / "b", TINY)
@@ -225,6 +232,7 @@ def test_determinism_and_seed(tmp_path):
     assert any(pa.read_bytes() != pc.read_bytes() for pa, pc in zip(a.frames, c.frames))
 
 
+@pytest.mark.slow
 def test_rerun_replaces_a_previous_capture(tmp_path):
     simulate_desk_lamp(tmp_path, DeskLampConfig(width=160, height=120, frames=30, jpeg_quality=0))
     r = simulate_desk_lamp(tmp_path, TINY)
@@ -239,6 +247,7 @@ def linearise(dn: np.ndarray, gamma: float) -> np.ndarray:
     return (dn / 255.0) ** gamma
 
 
+@pytest.mark.slow
 def test_frames_show_the_shadow_between_enter_and_leave(small, small_frames, small_scene):
     _, gt = small
     sc = small_scene
@@ -259,6 +268,7 @@ def test_frames_show_the_shadow_between_enter_and_leave(small, small_frames, sma
         assert sc.occlusion(k, restrict=False).max() == 0.0
 
 
+@pytest.mark.slow
 def test_penumbra_centre_is_the_tangent_plane(small, small_scene):
     """At enter_time / leave_time exactly half of the lamp's disc is hidden
     (the model's own occlusion, before blur), on the desk and on the objects."""
@@ -279,6 +289,7 @@ def test_penumbra_centre_is_the_tangent_plane(small, small_scene):
         assert (L - dark[y, x]) / (lit[y, x] - dark[y, x]) == pytest.approx(0.5, abs=0.01)
 
 
+@pytest.mark.slow
 def test_penumbra_half_way_in_the_frames(small, small_frames, small_scene):
     """In the rendered frames (gamma, noise, quantisation), desk pixels whose
     enter (leave) time falls on a frame are half-way between lit and shadowed
@@ -390,6 +401,7 @@ def test_right_lamp_is_the_mirror_image(small_scene, right_scene):
     assert (left.R @ (SL - C))[0] < -200 and (right.R @ (SR - C))[0] > 200
 
 
+@pytest.mark.slow
 def test_right_scan_fills_other_cast_shadows(small, right_scene):
     _, gt = small
     right = right_scene.ground_truth_arrays()
@@ -409,6 +421,7 @@ def test_right_scan_fills_other_cast_shadows(small, right_scene):
                                0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_right_capture_files(tmp_path, small):
     r = simulate_desk_lamp(tmp_path, RIGHT)
     log = tomllib.loads(r.field_log.read_text())
@@ -426,6 +439,7 @@ def test_right_capture_files(tmp_path, small):
         assert (gt["object_id"][v0:v1, u0:u1] == 0).all() and gt["swept"][v0:v1, u0:u1].all()
 
 
+@pytest.mark.slow
 def test_right_capture_has_its_own_noise(tmp_path, small, small_scene, right_scene):
     """Another recording, another noise draw: the two captures' noise is uncorrelated."""
     left_result, _ = small
@@ -501,6 +515,7 @@ def pencil_capture(tmp_path_factory):
     return simulate_desk_lamp(out, cfg), cfg
 
 
+@pytest.mark.slow
 def test_pencil_log_and_truth(pencil_capture):
     r, cfg = pencil_capture
     assert r.pencil_log == r.out_dir / "pencil_log.toml"
@@ -534,6 +549,7 @@ def test_pencil_log_and_truth(pencil_capture):
     assert info["pencil"]["photos"] == 4
 
 
+@pytest.mark.slow
 def test_pencil_photos_show_pencil_and_shadow(pencil_capture):
     r, cfg = pencil_capture
     gt = np.load(r.ground_truth)
@@ -555,6 +571,7 @@ def test_pencil_photos_show_pencil_and_shadow(pencil_capture):
         assert far.mean() > 0.9
 
 
+@pytest.mark.slow
 def test_pencil_photos_calibrate_the_lamp(pencil_capture):
     """gnomon.light (the pipeline) recovers the simulator's lamp from the pencil log."""
     from gnomon.light import calibrate_lamp_from_pencil, load_pencil_log
@@ -571,6 +588,7 @@ def test_pencil_photos_calibrate_the_lamp(pencil_capture):
     assert not cal.warnings
 
 
+@pytest.mark.slow
 def test_pencil_log_calibrates_either_lamp_closely(tmp_path):
     """The log's pixels (no rendering needed) pin both lamps to 0.1 % of their distance."""
     from gnomon.light import calibrate_lamp_from_pencil, load_pencil_log

@@ -65,6 +65,7 @@ def nlerp_sun(sun: np.ndarray, tau: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ geometry
 
 
+@pytest.mark.slow
 def test_depth_agrees_with_points_world(small):
     _, gt, _ = small
     P = gt["points_world"].astype(np.float64)
@@ -92,6 +93,7 @@ def test_depth_agrees_with_points_world(small):
     assert (np.einsum("ij,ij->i", n, P[hit] - C) < 1e-6).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("distortion", [True, False])
 def test_cv2_projectpoints_lands_on_pixel_centres(small, distortion):
     if distortion:
@@ -111,6 +113,7 @@ def test_cv2_projectpoints_lands_on_pixel_centres(small, distortion):
     assert np.allclose(cv2.Rodrigues(gt["rvec"])[0], gt["R"], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_fov_is_kept_when_the_size_changes():
     a = FacadeSunScene(FacadeSunConfig(width=160, height=120, frames=12)).lens
     b = FacadeSunScene(FacadeSunConfig(width=320, height=240, frames=12)).lens
@@ -121,6 +124,7 @@ def test_fov_is_kept_when_the_size_changes():
 # ------------------------------------------------------------------ the sun and the world frame
 
 
+@pytest.mark.slow
 def test_sun_direction_matches_pvlib(small):
     from pvlib.atmosphere import alt2pres
     from pvlib.solarposition import get_solarposition
@@ -169,6 +173,7 @@ def test_world_frame_heading():
 # ------------------------------------------------------------------ the shadow's ground truth
 
 
+@pytest.mark.slow
 def test_times_and_planes(small):
     _, gt, _ = small
     N = SMALL.frames
@@ -197,6 +202,7 @@ def test_times_and_planes(small):
         assert (g0 > -1e-5).all() and (g1 < 1e-5).all()
 
 
+@pytest.mark.slow
 def test_center_plane_contains_the_pole_axis_and_the_sun(small):
     """At center_time the plane through the pole's axis containing the sun's
     direction (interpolated along the chord between frames) passes through the
@@ -226,6 +232,7 @@ def test_center_plane_contains_the_pole_axis_and_the_sun(small):
     assert np.ptp(tc) > 0.6 * SMALL.frames
 
 
+@pytest.mark.slow
 def test_penumbra_and_occlusion(small, small_scene):
     sc = small_scene
     _, gt, _ = small
@@ -269,6 +276,7 @@ def test_building_shadows_are_soft_and_kept_out_of_swept(small_scene):
     assert fractional > 20
 
 
+@pytest.mark.slow
 def test_regions_are_bare_and_swept(small):
     result, gt, log = small
     planes = {p["name"]: p for p in log["planes"]}
@@ -295,6 +303,7 @@ def test_regions_are_bare_and_swept(small):
 # ------------------------------------------------------------------ frames, names and EXIF
 
 
+@pytest.mark.slow
 def test_file_names_and_exif_give_the_frame_times(small):
     result, gt, log = small
     cap = log["capture"]
@@ -315,6 +324,7 @@ def test_file_names_and_exif_give_the_frame_times(small):
     assert result.frame_times.equals(by_name)
 
 
+@pytest.mark.slow
 def test_field_log(small):
     result, gt, log = small
     text = result.field_log.read_text()
@@ -339,6 +349,7 @@ def test_field_log(small):
     assert not [p for p in result.out_dir.rglob("*") if p.name.endswith(".tmp")]
 
 
+@pytest.mark.slow
 def test_gnomon_observation_gives_the_heading(small):
     """The [gnomon] pixels back-projected onto the ground and the sun's azimuth
     at that frame's time give back the heading (independent code: OpenCV)."""
@@ -370,6 +381,7 @@ def linearise(dn, gamma):
     return (np.asarray(dn, np.float64) / 255.0) ** gamma
 
 
+@pytest.mark.slow
 def test_frames_show_the_pole_shadow(small, small_frames, small_scene):
     """In the encoded frames, swept pixels whose centre time is on a frame are
     darker than the sun-lit, pole-free render by about the direct light the
@@ -394,6 +406,7 @@ def test_frames_show_the_pole_shadow(small, small_frames, small_scene):
     assert np.percentile(inside, 95) < np.percentile(outside, 1)
 
 
+@pytest.mark.slow
 def test_illumination_drift_and_clouds(small, small_frames):
     _, gt, _ = small
     gain = gt["gain"]
@@ -412,6 +425,7 @@ def test_illumination_drift_and_clouds(small, small_frames):
     assert level[k] < 0.75 * np.median(level)
 
 
+@pytest.mark.slow
 def test_determinism_png_and_rerun(tmp_path):
     a = simulate_facade_sun(tmp_path / "a", TINY)
     b = simulate_facade_sun(tmp_path / "a", TINY)    # again, into the same folder
@@ -429,6 +443,7 @@ def test_determinism_png_and_rerun(tmp_path):
     assert all(pb.read_bytes() == pd_.read_bytes() for pb, pd_ in zip(b.frames, d.frames))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kwargs, message", [
     (dict(frames=3), "need 8 to"),
     (dict(width=20), "image size"),

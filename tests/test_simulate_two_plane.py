@@ -48,6 +48,7 @@ def plane_frame(plane: dict):
 # ------------------------------------------------------------------ geometry
 
 
+@pytest.mark.slow
 def test_depth_points_and_surfaces(capture):
     _, gt, _ = capture
     P = gt["points_world"].astype(np.float64)
@@ -70,6 +71,7 @@ def test_depth_points_and_surfaces(capture):
     assert np.median(rows[oid == WALL]) < np.median(rows[oid == DESK])
 
 
+@pytest.mark.slow
 def test_cv2_projectpoints_lands_on_pixel_centres(capture):
     _, gt, _ = capture
     h, w = gt["depth"].shape
@@ -85,6 +87,7 @@ def test_cv2_projectpoints_lands_on_pixel_centres(capture):
 # ------------------------------------------------------------------ the field log
 
 
+@pytest.mark.slow
 def test_field_log(capture):
     result, gt, log = capture
     text = result.field_log.read_text()
@@ -124,6 +127,7 @@ def test_field_log(capture):
     assert not [p for p in result.out_dir.rglob("*") if p.name.endswith(".tmp")]
 
 
+@pytest.mark.slow
 def test_regions_are_bare_swept_and_clear_of_markers(capture):
     _, gt, log = capture
     h, w = gt["depth"].shape
@@ -155,6 +159,7 @@ def test_regions_are_bare_swept_and_clear_of_markers(capture):
 # ------------------------------------------------------------------ markers
 
 
+@pytest.mark.slow
 def test_markers(capture, frames):
     _, gt, log = capture
     ids = []
@@ -193,6 +198,7 @@ def test_markers(capture, frames):
 # ------------------------------------------------------------------ the shadow planes
 
 
+@pytest.mark.slow
 def test_shadow_planes_contain_the_lamp_and_cut_both_planes(capture):
     _, gt, log = capture
     N = SMALL.frames
@@ -238,6 +244,7 @@ def test_shadow_planes_contain_the_lamp_and_cut_both_planes(capture):
         assert (g0 > -1e-3).all() and (g1 < 1e-3).all()
 
 
+@pytest.mark.slow
 def test_times_and_coverage(capture):
     _, gt, _ = capture
     N = SMALL.frames
@@ -256,6 +263,7 @@ def test_times_and_coverage(capture):
         assert np.corrcoef(u, gt["enter_time"][sel])[0, 1] > 0.9
 
 
+@pytest.mark.slow
 def test_penumbra_centre_on_both_planes(capture, scene):
     """At enter_time / leave_time half of the lamp is hidden, on desk, wall and objects."""
     _, gt, _ = capture
@@ -270,6 +278,7 @@ def test_penumbra_centre_on_both_planes(capture, scene):
                 assert sc.occlusion(t)[y, x] == pytest.approx(0.5, abs=1e-6)
 
 
+@pytest.mark.slow
 def test_frames_show_the_shadow_on_both_planes(capture, frames, scene):
     _, gt, _ = capture
     sc = scene
@@ -288,6 +297,7 @@ def test_frames_show_the_shadow_on_both_planes(capture, frames, scene):
             assert np.median(level[outside]) == pytest.approx(1.0, abs=0.03)
 
 
+@pytest.mark.slow
 def test_determinism(tmp_path):
     cfg = TwoPlaneConfig(width=160, height=120, frames=20, seed=2)
     a = simulate_two_plane(tmp_path / "a", cfg)

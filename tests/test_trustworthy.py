@@ -63,6 +63,7 @@ def _jpeg_capture(folder: Path) -> Path:
     return log
 
 
+@pytest.mark.slow
 def test_truncated_jpeg_is_an_error_naming_the_frame(tmp_path: Path, capsys) -> None:
     log = _jpeg_capture(tmp_path / "capture")
     out = tmp_path / "scan"
@@ -81,6 +82,7 @@ def test_truncated_jpeg_is_an_error_naming_the_frame(tmp_path: Path, capsys) -> 
     assert not out2.exists()
 
 
+@pytest.mark.slow
 def test_truncated_png_is_an_error_naming_the_frame(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "capture")
     victim = tmp_path / "capture" / "frames" / "frame_0003.png"
@@ -126,6 +128,7 @@ def _refill_frames(folder: Path, make) -> None:
         cv2.imwrite(str(png), make(i, image))
 
 
+@pytest.mark.slow
 def test_random_noise_frames_are_an_error(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "capture", width=96, height=72)
     rng = np.random.default_rng(1)
@@ -135,6 +138,7 @@ def test_random_noise_frames_are_an_error(tmp_path: Path, capsys) -> None:
     assert not (tmp_path / "scan").exists()
 
 
+@pytest.mark.slow
 def test_identical_frames_are_an_error(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "capture")
     first = cv2.imread(str(sorted((tmp_path / "capture" / "frames").glob("*.png"))[0]), cv2.IMREAD_UNCHANGED)
@@ -144,6 +148,7 @@ def test_identical_frames_are_an_error(tmp_path: Path, capsys) -> None:
     assert not (tmp_path / "scan").exists()
 
 
+@pytest.mark.slow
 def test_reference_regions_never_crossed_is_an_error(tmp_path: Path, capsys) -> None:
     # The band sweeps the middle rows only: the reference regions (6 rows at the
     # top and bottom) stay lit in every frame.
@@ -160,6 +165,7 @@ def test_reference_regions_never_crossed_is_an_error(tmp_path: Path, capsys) -> 
     assert code == 2 and "shadow line was found on the reference regions in 0" in err, err
 
 
+@pytest.mark.slow
 def test_reference_regions_rarely_crossed_is_an_error(tmp_path: Path, capsys) -> None:
     # The shadow reaches the reference rows in only 3 of its 24 frames: the planes
     # cover too little of the sweep for the depths between them to mean anything.

@@ -290,6 +290,7 @@ def test_target_nearly_parallel_to_the_image_plane_warns():
 # --------------------------------------------------------------------------- several views; Tsai vs Zhang
 
 
+@pytest.mark.slow
 def test_views_and_tsai_vs_zhang_on_the_same_views_acceptance():
     """12 chessboard views of a Tsai-model camera: both methods find the same focal length.
 
