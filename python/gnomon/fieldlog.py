@@ -294,10 +294,6 @@ class FieldLog:
     gnomon: GnomonSpec | None = None
     output: OutputSpec = field(default_factory=OutputSpec)
 
-    @property
-    def base_dir(self) -> Path:
-        return self.path.parent
-
 
 def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
     pattern = t.string("frames")

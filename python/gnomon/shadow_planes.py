@@ -134,18 +134,3 @@ def two_plane_shadow_planes(lines: list[ReferenceLines], min_angle_deg: float = 
         planes[t, :3] = normal
         planes[t, 3] = normal @ centre
     return _orient(planes), degenerate
-
-
-def light_point_from_planes(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The point closest (least squares) to every valid plane: the lamp, as a by-product.
-
-    All shadow planes of a point source pass through it. Returns the point
-    (camera frame) and the RMS distance of the planes from it.
-    """
-    valid = planes[np.isfinite(planes[:, 0])]
-    if len(valid) < 3:
-        raise ValueError("need at least three shadow planes to locate the light")
-    n, d = valid[:, :3], valid[:, 3]
-    point, *_ = np.linalg.lstsq(n, d, rcond=None)
-    rms = float(np.sqrt(np.mean((n @ point - d) ** 2)))
-    return point, np.asarray(rms)

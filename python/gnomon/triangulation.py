@@ -11,7 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from gnomon import _kernel
-from gnomon.camera import Pose
 
 # Rays within ~0.06° of grazing a shadow plane are dropped: depth error there
 # grows like 1/(n·r) and such points are noise, not surface.
@@ -29,10 +28,6 @@ class Triangulation:
     points_cam: np.ndarray
     depth: np.ndarray
     valid: np.ndarray
-
-    def points_world(self, pose: Pose) -> np.ndarray:
-        """Valid points in world coordinates, (N, 3) float64, in row-major pixel order."""
-        return pose.camera_to_world(self.points_cam[self.valid].astype(np.float64))
 
 
 def triangulate(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray) -> Triangulation:

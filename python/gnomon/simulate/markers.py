@@ -25,13 +25,12 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Sequence
 
 import cv2
 import numpy as np
 
-from gnomon.simulate.chessboard import SampleRays, TruthCamera, default_truth_camera, finish_image, truth_camera_table
+from gnomon.simulate.chessboard import SampleRays, TruthCamera, default_truth_camera, finish_image
 
 
 @functools.lru_cache(maxsize=256)
@@ -276,70 +275,3 @@ def desk_and_wall_scene(camera: TruthCamera | None = None, *, marker_size: float
         ),
     )
     return MarkerScene(camera=camera, R=R, t=t, planes=(desk, wall))
-
-
-def write_marker_scene(
-    out_dir: str | Path,
-    *,
-    scene: MarkerScene | None = None,
-    hint_error_px: float = 6.0,
-    supersample: int = 4,
-    noise_dn: float = 1.0,
-    seed: int = 0,
-) -> dict:
-    """Render ``frame.png`` and ``truth.toml`` for a marker scene into ``out_dir``.
-
-    ``truth.toml``: the camera (camera-file keys), its pose (world → camera,
-    rvec radians, tvec mm) and per plane its frame, normal and offset in the
-    camera frame and its markers (plane and world coordinates, true pixels,
-    and hints off by up to ``hint_error_px`` as a person would click them).
-    Returns the same content as a dict.
-    """
-    from gnomon import atomic, toml_io  # file formats only
-
-    scene = scene or desk_and_wall_scene()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    rays = SampleRays(scene.camera, supersample)
-    img = render(scene, rays, noise_dn=noise_dn, seed=seed)
-    ok, buf = cv2.imencode(".png", img)
-    atomic.write_bytes(out / "frame.png", buf.tobytes())
-    rng = np.random.default_rng(seed)
-    planes = []
-    for plane in scene.planes:
-        pix = scene.marker_pixels(plane)
-        ang = rng.uniform(0, 2 * np.pi, len(pix))
-        rad = rng.uniform(0, hint_error_px, len(pix))
-        hints = pix + np.stack([rad * np.cos(ang), rad * np.sin(ang)], axis=1)
-        n, d = scene.plane_in_camera(plane)
-        planes.append(
-            {
-                "name": plane.name,
-                "origin": list(plane.origin),
-                "x_axis": list(plane.x_axis),
-                "y_axis": list(plane.y_axis),
-                "normal_world": plane.normal.tolist(),
-                "normal_cam": n.tolist(),
-                "offset_cam": d,
-                "markers": [
-                    {
-                        "name": m.name,
-                        "plane_xy": list(m.ab),
-                        "world": plane.to_world(np.array(m.ab)).ravel().tolist(),
-                        "pixel": p.tolist(),
-                        "hint": [round(float(h[0]), 1), round(float(h[1]), 1)],
-                        "size": m.size,
-                    }
-                    for m, p, h in zip(plane.markers, pix, hints)
-                ],
-            }
-        )
-    truth = {
-        "image": "frame.png",
-        "units": "mm",
-        "camera": truth_camera_table(scene.camera),
-        "pose": {"rvec": cv2.Rodrigues(scene.R)[0].ravel().tolist(), "tvec": scene.t.tolist()},
-        "planes": planes,
-    }
-    toml_io.dump(truth, out / "truth.toml", header="Ground truth of a synthetic marker scene (mm; camera frame x right, y down, z forward).")
-    return truth
