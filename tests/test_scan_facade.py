@@ -145,3 +145,26 @@ def test_sun_below_the_horizon(small_facade, capsys) -> None:
     code, out, err = scan_cli(log, small_facade / "o4", capsys)
     assert code == 0, err
     assert "below the horizon" in out
+
+
+def test_sun_scan_is_georeferenced(small_facade) -> None:
+    """report.json gives the site and world → ENU; points_enu.ply holds the cloud in ENU metres."""
+    import gnomon
+    from gnomon import ply
+
+    s = gnomon.scan(small_facade / "capture" / "field_log.toml", out=small_facade / "scan_geo", rrd=False)
+    truth = np.load(small_facade / "capture" / "ground_truth.npz")
+    log = tomllib.loads((small_facade / "capture" / "field_log.toml").read_text())
+    site = s.report["site"]
+    assert (site["latitude_deg"], site["longitude_deg"], site["altitude_m"]) == (
+        log["site"]["latitude"], log["site"]["longitude"], log["site"]["altitude"])
+    # the simulator's own world ← ENU rotation (metres, world z up)
+    m = np.asarray(site["world_to_enu"])
+    np.testing.assert_allclose(m[:3, :3], truth["R_world_from_enu"].T, atol=1e-12)
+    enu = ply.read_ply(small_facade / "scan_geo" / "points_enu.ply")
+    assert "frame ENU" in enu["comments"] and "units m" in enu["comments"]
+    expected = s.points.astype(np.float64) @ truth["R_world_from_enu"]
+    np.testing.assert_allclose(enu["xyz"], expected, atol=1e-5)
+    # up is up: the normals' vertical component is unchanged, lengths stay 1
+    np.testing.assert_allclose(enu["normals"][:, 2], s.normals[:, 2], atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(enu["normals"], axis=1), 1.0, atol=1e-5)

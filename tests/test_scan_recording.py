@@ -77,3 +77,39 @@ def test_calibration_and_merge_runs_leave_recordings(tmp_path, scanned, capsys) 
         proc = subprocess.run([sys.executable, "-m", "rerun", "rrd", "verify", str(rec)],
                               capture_output=True, text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr
+
+
+def test_scan_warnings_are_on_the_frame_timeline(scanned) -> None:
+    """The default layout's Warnings view shows the TextLog on the `frame` timeline: every warning of
+    the report is there, at frame 0 (the run's start), so it is listed at every frame."""
+    from rerun.chunk import RrdReader
+
+    report = json.loads((scanned / "scan" / "report.json").read_text())
+    assert report["warnings"]  # this capture is under-sampled: the scan warns
+    found = []
+    for chunk in RrdReader(scanned / "scan" / "scan.rrd").stream():
+        if chunk.entity_path != "/log":
+            continue
+        batch = chunk.to_record_batch()
+        assert "frame" in batch.schema.names
+        frames = batch.column("frame").to_pylist()
+        texts = batch.column("TextLog:text").to_pylist()
+        found += [(f, t[0]) for f, t in zip(frames, texts) if t]
+    assert sorted(t for _, t in found) == sorted(report["warnings"])
+    assert all(f == 0 for f, _ in found)
+
+
+def test_scan_recording_has_coverage_and_depth_under_the_camera(scanned) -> None:
+    from gnomon.preview import COVERAGE_CLASSES
+    from rerun.chunk import RrdReader
+
+    seen = {}
+    for chunk in RrdReader(scanned / "scan" / "scan.rrd").stream():
+        batch = chunk.to_record_batch()
+        for name in batch.schema.names:
+            if ":" in name:
+                seen.setdefault(chunk.entity_path, set()).add(name)
+    assert "ViewCoordinates:xyz" in seen["/world"]
+    assert "DepthImage:buffer" in seen["/world/camera/depth"]
+    assert {"SegmentationImage:buffer", "AnnotationContext:context"} <= seen["/maps/coverage"]
+    assert len(COVERAGE_CLASSES) == 5

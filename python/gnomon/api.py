@@ -60,6 +60,10 @@ class Scan:
       ``normals`` (N, 3) float32 unit normals towards the camera, ``point_sigma`` (N,),
       ``pixels`` (N, 2) float32 (u, v).
 
+    ``coverage`` (H, W) uint8 class per pixel (:data:`gnomon.preview.COVERAGE_CLASSES`:
+    no shadow seen, point, no depth, under-sampled point, cropped), in memory only
+    (``preview.png`` shows it; None from :func:`load_scan`).
+
     ``mesh`` (:class:`ScanMesh`), ``K`` (3, 3), ``dist`` lens distortion (OpenCV
     k1 k2 p1 p2 k3; None for a Tsai camera), ``R``, ``t`` world → camera
     (``X_cam = R·X_world + t``), ``units``, ``report`` (report.json's content),
@@ -85,6 +89,7 @@ class Scan:
     report: dict[str, Any]
     warnings: list[str] = field(default_factory=list)
     folder: Path | None = None
+    coverage: np.ndarray | None = None
 
     @property
     def valid(self) -> np.ndarray:
@@ -119,24 +124,28 @@ def _from_result(result, folder: Path | None) -> Scan:
     """A :class:`Scan` from the pipeline's in-memory result."""
     s = result.surface
     K, dist, R, t = _camera_arrays(result.report)
-    h, w = s.depth.shape
+    w = s.depth.shape[1]
     mesh = ScanMesh(s.mesh.vertices, s.mesh.faces, s.mesh.normals, s.vertex_rgb, s.mesh.pixel_uv(w))
     return Scan(depth=s.depth, sigma=s.sigma, shadow_time=result.shadow_time, undersampled=result.undersampled,
                 rgb=s.rgb, points=s.points_world, colors=s.colors, normals=s.normals,
                 point_sigma=s.sigma[s.valid], pixels=s.uv, mesh=mesh, K=K, dist=dist, R=R, t=t,
                 units=str(result.report["units"]), report=result.report, warnings=list(result.warnings),
-                folder=folder)
+                folder=folder, coverage=result.coverage)
 
 
 def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, rrd: bool | None = None,
-         progress: bool = False, frame_stride: int = 10) -> Scan:
+         rrd_path: str | os.PathLike | None = None, view: bool = False, progress: bool = False,
+         frame_stride: int = 10) -> Scan:
     """Scan the capture a field log describes; return the result, and write it if ``out`` is given.
 
     ``field_log`` the capture's TOML field log (format: field_logs/README.md).
     ``out`` a folder for the files `gnomon scan` writes (points.ply, mesh.*,
-    depth.npz, …, published as a whole only on success); None keeps
-    everything in memory. ``rrd`` also write the rerun recording
-    (default: when ``out`` is given). ``progress`` a progress bar on stderr.
+    depth.npz, preview.png, report.json, …, published as a whole only on
+    success); None keeps everything in memory. ``rrd`` also write the rerun
+    recording (default: when ``out`` is given), to ``rrd_path`` (default
+    ``out/scan.rrd``); ``view`` also stream it to a rerun viewer;
+    ``frame_stride`` keep every n-th frame image in it. ``progress`` a
+    progress bar on stderr. `gnomon scan` is this function.
     """
     from gnomon.fieldlog import load_field_log
     from gnomon.pipeline import ScanOptions, run_scan
@@ -145,16 +154,16 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
 
     if out is not None:
         opts = ScanOptions(rrd=True if rrd is None else bool(rrd), progress=progress,
+                           rrd_path=None if rrd_path is None else Path(rrd_path), view=view,
                            frame_stride=max(1, int(frame_stride)))
         result = run_scan(field_log, out, opts)
         return _from_result(result, Path(out))
-    if rrd:
+    if rrd or rrd_path is not None or view:
         raise ValueError("a recording needs an output folder: give out=")
     log = load_field_log(field_log)
     source = frame_source(log)
     setup = resolve_scan(log, source)
     result = scan_in_memory(setup, source, None, progress=progress, frame_stride=frame_stride)
-    result.report["timings_s"]["total_s"] = result.report["timings_s"].get("total_s", 0.0)
     return _from_result(result, None)
 
 

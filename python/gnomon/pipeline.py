@@ -34,11 +34,14 @@ from gnomon.fieldlog import load_field_log
 from gnomon.frames import Frame, FrameSource, sha256_file
 from gnomon.fusion import fuse_depths
 from gnomon.light import EdgePlanes, EdgeTimes, ReferenceGeometry
+from gnomon.crop import crop_mask
 from gnomon.meshing import GridMesh, grid_mesh, grid_normals, remove_small_components, write_obj, write_stl
+from gnomon.preview import coverage_map, write_preview
 from gnomon.publish import OUTPUT_FILES, staged_outputs
-from gnomon.recording import ScanRecording
+from gnomon.recording import ScanRecording, playable_video
 from gnomon.reference_lines import ReferenceLines
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
+from gnomon.texture import LitColour, sample_indices
 from gnomon.tracking import ShadowTimes, TrackedSequence, track_source
 from gnomon.triangulation import supported_by_neighbours, triangulate
 from gnomon.validity import MIN_CONTRAST_SIGMAS, contrast_above_noise
@@ -103,6 +106,7 @@ class ScanResult:
     report: dict[str, Any]
     warnings: list[str] = field(default_factory=list)
     out_dir: Path | None = None
+    coverage: np.ndarray | None = None  # (H, W) uint8 classes (gnomon.preview.COVERAGE_CLASSES)
 
     @property
     def points_world(self) -> np.ndarray:
@@ -135,8 +139,12 @@ def _timed(timings: dict[str, float], key: str) -> Iterator[None]:
     timings[key] = time.perf_counter() - t
 
 
+# Colour frames kept during tracking for the scan's colours (gnomon.texture).
+COLOUR_SAMPLES = 5
+
+
 def _colors(first_color: np.ndarray | None, first_grey: np.ndarray) -> np.ndarray:
-    """Per-pixel RGB uint8 (H, W, 3) from the first (fully lit) frame."""
+    """Per-pixel RGB uint8 (H, W, 3) from the first frame (when no other frame was kept)."""
     rgb = first_color[:, :, ::-1] if first_color is not None else np.repeat(first_grey[:, :, None], 3, axis=2)
     if rgb.dtype == np.uint16:
         rgb = (rgb >> 8).astype(np.uint8)
@@ -315,6 +323,44 @@ def _fusion_warnings(fused: _Fused) -> list[str]:
     return warnings
 
 
+def _frame_hook(colour: LitColour, record: Any) -> Any:
+    """on_frame for the tracker: keep the colour samples, and record the frame."""
+    def on_frame(frame: Frame) -> None:
+        if colour.wants(frame.index):
+            colour.add(frame.index, frame.color[:, :, ::-1] if frame.color is not None else frame.grey)
+        if record is not None:
+            record(frame)
+    return on_frame
+
+
+def _lit_colours(colour: LitColour, tracked: TrackedSequence) -> np.ndarray:
+    """(H, W, 3) uint8: each pixel's colour from the kept frames it is lit in."""
+    if not colour.indices.size or not colour.wants(int(colour.indices[0])):
+        return _colors(tracked.first_color, tracked.first_grey)
+    used = tracked.used.astype(np.float64)
+    steps = np.arange(len(used), dtype=np.float64)
+    to_capture = lambda t: np.where(np.isfinite(t), np.interp(np.nan_to_num(t), steps, used), np.nan)  # noqa: E731
+    try:
+        return colour.finish(to_capture(tracked.times.enter), to_capture(tracked.times.leave))
+    except ValueError:  # no kept frame arrived (a video shorter than announced)
+        return _colors(tracked.first_color, tracked.first_grey)
+
+
+def _crop(fused: _Fused, setup: ScanSetup, ray_map: np.ndarray) -> np.ndarray:
+    """Apply ``[output] crop`` to the fused maps in place; returns the (H, W) pixels it removed."""
+    cropped = np.zeros(fused.keep.shape, dtype=bool)
+    if setup.crop is None:
+        return cropped
+    points = points_from_depth(ray_map, fused.depth)[fused.keep].astype(np.float64)
+    inside = crop_mask(setup.pose.camera_to_world(points), setup.crop, setup.pose.camera_centre_world)
+    cropped[fused.keep] = ~inside
+    fused.keep &= ~cropped
+    fused.depth[cropped] = np.nan
+    fused.sigma[cropped] = np.nan
+    fused.undersampled &= fused.keep
+    return cropped
+
+
 def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None = None, *,
          progress: bool = False, frame_stride: int = 10,
          track: Callable[..., TrackedSequence] = track_source) -> ScanResult:
@@ -325,11 +371,13 @@ def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None =
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     warnings = list(setup.warnings)
-    _record_setup(recorder, setup)
-    on_frame = None if recorder is None else _frame_logger(recorder, setup)
+    _record_setup(recorder, setup, source)
+    skip = setup.light.skipped_frames(source.count)
+    colour = LitColour(sample_indices(np.flatnonzero(~skip), COLOUR_SAMPLES))
+    on_frame = _frame_hook(colour, None if recorder is None else _frame_logger(recorder, setup))
     with _timed(timings, "tracking_s"):
         tracked = track(source, setup.tracker, (setup.camera.height, setup.camera.width),
-                        skip=setup.light.skipped_frames(source.count), on_frame=on_frame,
+                        skip=skip, on_frame=on_frame,
                         progress=progress, where=f"{setup.inputs.field_log}: [camera]")
     _check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
@@ -339,19 +387,32 @@ def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None =
         edges = _reconstruct_edges(setup, tracked, ray_map, warnings)
     with _timed(timings, "fusion_and_mesh_s"):
         fused = _fuse(edges, tracked, setup.max_depth_jump)
-        rgb = _colors(tracked.first_color, tracked.first_grey)
+        cropped = _crop(fused, setup, ray_map)
+        rgb = _lit_colours(colour, tracked)
         surface = build_surface(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, rgb,
                                 setup.max_depth_jump)
+    coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped)
     warnings += _fusion_warnings(fused)
     report = _report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
+    _report_outputs(report, setup, cropped)
     if recorder is not None:
         with _timed(timings, "recording_s"):
             _record(recorder, setup, edges, surface, fused.shadow_time, warnings, report, frame_stride,
-                    tracked.used)
+                    tracked.used, coverage)
     timings["total_s"] = time.perf_counter() - t0
     report["warnings"] = warnings
     return ScanResult(setup, tracked.times, edges, fused.shadow_time, fused.depth, fused.sigma, fused.keep,
-                      fused.undersampled, surface, report, warnings)
+                      fused.undersampled, surface, report, warnings, coverage=coverage)
+
+
+def _report_outputs(report: dict[str, Any], setup: ScanSetup, cropped: np.ndarray) -> None:
+    """The crop and, where the light knows it, the site (georeferencing) in the report."""
+    if setup.crop is not None:
+        report["output"] = {"crop": setup.crop.to_report(), "cropped_points": int(cropped.sum())}
+        report["coverage"]["cropped"] = int(cropped.sum())
+    site = setup.light.georeference(setup.units)
+    if site is not None:
+        report["site"] = site
 
 
 def write_scan(folder: Path, result: ScanResult, started: float | None = None) -> None:
@@ -360,9 +421,16 @@ def write_scan(folder: Path, result: ScanResult, started: float | None = None) -
     ``started``: the ``time.perf_counter()`` when the run began, for the report's total.
     """
     t = time.perf_counter()
-    write_surface(folder, result.surface, result.setup.units)
+    setup, surface = result.setup, result.surface
+    write_surface(folder, surface, setup.units)
     atomic.save_npy(folder / "undersampled.npy", result.undersampled)
     atomic.save_npy(folder / "shadow_time.npy", result.shadow_time.astype(np.float32))
+    write_depth_npz(folder / "depth.npz", surface.depth, surface.sigma, result.report["camera"], setup.units)
+    if result.coverage is not None:
+        write_preview(folder / "preview.png", surface.rgb, surface.depth, surface.sigma, result.coverage,
+                      units=setup.units)
+    if "site" in result.report:
+        write_enu_points(folder / "points_enu.ply", surface, result.report["site"])
     timings = result.report["timings_s"]
     timings["outputs_s"] = time.perf_counter() - t
     if started is not None:
@@ -421,8 +489,50 @@ def write_surface(folder: Path, surface: Surface, units: str) -> None:
     atomic.save_npy(folder / "sigma.npy", surface.sigma)
 
 
+def write_depth_npz(path: Path, depth: np.ndarray, sigma: np.ndarray, camera: dict[str, Any], units: str) -> None:
+    """depth.npz: the depth and σ maps with the camera that makes them usable.
+
+    ``depth``, ``sigma`` (H, W) float32 camera Z and its σ (world units, NaN =
+    none); ``K`` (3, 3) and ``dist`` (k1 k2 p1 p2 k3; OpenCV; the pinhole part
+    and zeros for a Tsai camera, whose own parameters are in ``camera_toml``);
+    ``R`` (3, 3), ``t`` (3,) and ``rvec`` world → camera (``X_cam = R·X_world +
+    t``); ``image_size`` (width, height); ``units`` the world units;
+    ``camera_toml`` the camera table as report.json gives it (JSON text).
+    """
+    import cv2
+
+    rvec = np.asarray(camera["pose"]["rvec"], dtype=np.float64)
+    if "fx" in camera:
+        K = np.array([[camera["fx"], 0.0, camera["cx"]], [0.0, camera["fy"], camera["cy"]], [0.0, 0.0, 1.0]])
+        dist = np.asarray(camera.get("dist", [0.0] * 5), dtype=np.float64)
+    else:
+        K, dist = np.full((3, 3), np.nan), np.zeros(5)
+    with atomic.atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, depth=depth.astype(np.float32), sigma=sigma.astype(np.float32), K=K, dist=dist,
+                     R=cv2.Rodrigues(rvec)[0], t=np.asarray(camera["pose"]["tvec"], dtype=np.float64), rvec=rvec,
+                     image_size=np.array(depth.shape[::-1], dtype=np.int64), units=np.array(units),
+                     camera_toml=np.array(json.dumps(camera, default=_json_default)))
+
+
+def write_enu_points(path: Path, surface: Surface, site: dict[str, Any]) -> None:
+    """points_enu.ply: the cloud in East-North-Up metres from the site (report.json's ``site``)."""
+    m = np.asarray(site["world_to_enu"], dtype=np.float64)
+    enu = surface.points_world.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+    comments = [f"gnomon {__version__}", ply.units_comment("m"), "frame ENU",
+                f"origin latitude {site['latitude_deg']!r} longitude {site['longitude_deg']!r} "
+                f"altitude {site['altitude_m']!r} (WGS84)"]
+    scale = float(np.linalg.norm(m[0, :3]))  # metres per world unit
+    # float32 keeps ~0.1 mm at 1 km from the site
+    ply.write_points_ply(path, enu.astype(np.float32), surface.colors, surface.sigma[surface.valid] * scale,
+                         surface.uv, comments=comments, normals=surface.normals @ (m[:3, :3] / scale).T)
+
+
 def record_surface(recorder, surface: Surface, shadow_time: np.ndarray | None, warnings: list[str],
-                   metrics: dict) -> None:
+                   metrics: dict, coverage: np.ndarray | None = None) -> None:
+    recorder.log_camera_depth(surface.depth)
+    if coverage is not None:
+        recorder.log_coverage(coverage)
     recorder.log_points(surface.points_world, surface.colors, surface.sigma[surface.valid], uv=surface.uv)
     recorder.log_mesh(surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb)
     recorder.log_maps(shadow_time if shadow_time is not None else np.full(surface.depth.shape, np.nan, np.float32),
@@ -452,7 +562,8 @@ def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | 
     source = frame_source(log)
     setup = resolve_scan(log, source)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
-        with _recording(staging, opts, f"scan {log.path.name}") as recorder:
+        full = source.video is not None and (opts.rrd or opts.view) and playable_video(source.video)
+        with _recording(staging, opts, f"scan {log.path.name}", image_scale=1.0 if full else 0.5) as recorder:
             result = scan(setup, source, recorder, progress=opts.progress, frame_stride=opts.frame_stride,
                           track=opts.track or track_source)
             write_scan(staging, result, t0)
@@ -460,18 +571,23 @@ def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | 
     return result
 
 
-def open_recorder(staging: Path, opts: ScanOptions, name: str, filename: str = "scan.rrd") -> ScanRecording | None:
-    """The run's recording (into ``staging``), or None when neither a file nor a viewer is wanted."""
+def open_recorder(staging: Path, opts: ScanOptions, name: str, filename: str = "scan.rrd", *,
+                  image_scale: float = 0.5) -> ScanRecording | None:
+    """The run's recording (into ``staging``), or None when neither a file nor a viewer is wanted.
+
+    ``image_scale`` 1 when the input video is stored as it is (its frames keep their size).
+    """
     if not (opts.rrd or opts.view):
         return None
     return ScanRecording(staging / filename if opts.rrd else None, recording_name=name,
-                         spawn_viewer=opts.view, frame_stride=opts.frame_stride)
+                         spawn_viewer=opts.view, frame_stride=opts.frame_stride, image_scale=image_scale)
 
 
 @contextmanager
-def _recording(staging: Path, opts: ScanOptions, name: str) -> Iterator[ScanRecording | None]:
+def _recording(staging: Path, opts: ScanOptions, name: str, *,
+               image_scale: float = 0.5) -> Iterator[ScanRecording | None]:
     """open_recorder, closed on success and aborted on failure."""
-    recorder = open_recorder(staging, opts, name)
+    recorder = open_recorder(staging, opts, name, image_scale=image_scale)
     try:
         yield recorder
     except BaseException:
@@ -482,11 +598,13 @@ def _recording(staging: Path, opts: ScanOptions, name: str) -> Iterator[ScanReco
         recorder.close()
 
 
-def _record_setup(recorder: ScanRecording | None, setup: ScanSetup) -> None:
+def _record_setup(recorder: ScanRecording | None, setup: ScanSetup, source: FrameSource) -> None:
     if recorder is None:
         return
     cam, pose = setup.camera, setup.pose
     recorder.log_camera(cam.K, cam.width, cam.height, pose.R, pose.t, setup.units)
+    if source.video is not None:
+        recorder.log_video(source.video, source.count)
     setup.light.record_setup(recorder)
 
 
@@ -583,7 +701,7 @@ def _edges_report(edges: list[EdgeResult], keep: np.ndarray) -> dict[str, Any]:
 
 def _record(recorder: ScanRecording, setup: ScanSetup, edges: list[EdgeResult], surface: Surface,
             shadow_time: np.ndarray, warnings: list[str], report: dict[str, Any], stride: int,
-            used: np.ndarray) -> None:
+            used: np.ndarray, coverage: np.ndarray | None = None) -> None:
     pose, camera, light = setup.pose, setup.camera, setup.light
     for ref in setup.planes:
         for i, (u0, v0, u1, v1) in enumerate(ref.regions):
@@ -606,7 +724,8 @@ def _record(recorder: ScanRecording, setup: ScanSetup, edges: list[EdgeResult], 
         if polygon is not None:
             recorder.log_shadow_plane(frame, polygon, when)
     light.record(recorder, surface.points_world, stride)
-    record_surface(recorder, surface, shadow_time, warnings, {"coverage": report["coverage"], "noise": report["noise"]})
+    record_surface(recorder, surface, shadow_time, warnings, {"coverage": report["coverage"], "noise": report["noise"]},
+                   coverage)
 
 
 def _json_default(o):

@@ -63,6 +63,8 @@ def _caption(panel: np.ndarray, text: str, bar: int) -> np.ndarray:
     out = np.zeros((panel.shape[0] + bar, panel.shape[1], 3), np.uint8)
     out[:panel.shape[0]] = panel
     scale = bar / 40
+    while scale > 0.2 and cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 1)[0][0] > panel.shape[1] - 8:
+        scale *= 0.9
     cv2.putText(out, text, (6, panel.shape[0] + int(bar * 0.68)), cv2.FONT_HERSHEY_SIMPLEX, scale,
                 (235, 235, 235), 1, cv2.LINE_AA)
     return out
@@ -94,8 +96,8 @@ def preview_image(rgb: np.ndarray, depth: np.ndarray, sigma: np.ndarray, coverag
     cov = lut[fit(np.asarray(coverage, np.uint8), nearest=True)]
     u = f" {units}" if units else ""
     share = {k: float(np.mean(coverage == k)) for k in COVERAGE_CLASSES}
-    legend = ", ".join(f"{COVERAGE_CLASSES[k][0]} {100 * share[k]:.0f}%" for k in (POINT, NO_DEPTH, UNDERSAMPLED,
-                                                                                   CROPPED) if share[k] > 0)
+    short = {POINT: "points", NO_DEPTH: "no depth", UNDERSAMPLED: "under-sampled", CROPPED: "cropped"}
+    legend = ", ".join(f"{short[k]} {100 * share[k]:.0f}%" for k in short if share[k] > 0)
     bar = max(18, size[1] // 12)
     panels = [
         _caption(colour, "colour", bar),

@@ -113,6 +113,7 @@ __all__ = [
     "default_blueprint",
     "display_available",
     "display_to_pixels",
+    "playable_video",
     "ENTITY",
 ]
 
@@ -187,6 +188,14 @@ def _finite_range(a: np.ndarray) -> tuple[float, float] | None:
     if hi <= lo:
         hi = lo + 1.0
     return lo, hi
+
+
+def playable_video(path: str | os.PathLike) -> bool:
+    """Whether rerun can store and play this video as an ``AssetVideo`` (codec and container)."""
+    try:
+        return len(_rr().AssetVideo(path=str(path)).read_frame_timestamps_nanos()) > 0
+    except Exception:  # unsupported codec or container, unreadable file
+        return False
 
 
 def _rr():

@@ -85,7 +85,7 @@ class RecordingSummary:
             "points     " + ("none" if self.point_count is None else f"{self.point_count}")
             + (f" ({self.units})" if self.units else "")
         )
-        lines.append(f"frames     {self.frames_stored} stored images")
+        lines.append(f"frames     {self.frames_stored} stored (images, or references into the input video)")
         lines.append("entities")
         for path, rows in self.entities.items():
             lines.append(f"  {path}  ({rows} rows)")
@@ -292,6 +292,8 @@ def summarize(path: str | Path) -> RecordingSummary:
                 ranges[tl] = [kind, lo, hi, rows]
         if ent == "/" + ENTITY["image"] and "EncodedImage:blob" in comps:
             frames_stored += batch.num_rows - batch.column(comps["EncodedImage:blob"]).null_count
+        if ent == "/" + ENTITY["image"] and "VideoFrameReference:timestamp" in comps:  # a video input
+            frames_stored += batch.num_rows - batch.column(comps["VideoFrameReference:timestamp"]).null_count
         if ent.startswith("/" + ENTITY["metrics"] + "/") and "Scalars:scalars" in comps:
             col = batch.column(comps["Scalars:scalars"])
             for r in range(batch.num_rows):

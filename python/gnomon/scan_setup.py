@@ -18,6 +18,7 @@ import numpy as np
 from gnomon.aruco import plane_pose_from_aruco, plane_pose_from_charuco
 from gnomon.calibration import fit_camera_to_frames, read_grey
 from gnomon.camera import CameraModel, Pose
+from gnomon.crop import Crop
 from gnomon.errors import FieldLogError, FrameError
 from gnomon.fieldlog import FieldLog, PlaneSpec, check_geometry
 from gnomon.frames import FrameSource, to_grey
@@ -26,8 +27,8 @@ from gnomon.markers import PlanePose, fit_plane_pose, plane_pose_from_chessboard
 from gnomon.reference_lines import PlaneInCamera, ReferencePlane
 from gnomon.tracking import TrackerSettings, decoding_lut
 
-__all__ = ["ScanInputs", "ScanSetup", "first_frame", "frame_source", "resolve_reference_planes", "resolve_scan",
-           "tracker_settings"]
+__all__ = ["ScanInputs", "ScanSetup", "crop_of", "first_frame", "frame_source", "resolve_reference_planes",
+           "resolve_scan", "tracker_settings"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +60,7 @@ class ScanSetup:
     units: str
     inputs: ScanInputs
     warnings: tuple[str, ...] = ()
+    crop: Crop | None = None  # [output] crop (world frame)
 
 
 def frame_source(log: FieldLog) -> FrameSource:
@@ -85,7 +87,21 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
     tracker = tracker_settings(log)
     inputs = ScanInputs(log.path, log.camera_file, dict(log.calibration), planes_report)
     return ScanSetup(log.camera, pose, planes, tracker, light, s.edge, s.max_depth_jump, log.capture.units,
-                     inputs, tuple(warnings))
+                     inputs, tuple(warnings), crop_of(log))
+
+
+def crop_of(log: FieldLog) -> Crop | None:
+    """The field log's ``[output]`` crop in world coordinates, or None."""
+    out = log.output
+    if not out.crops:
+        return None
+    box = out.crop_box
+    plane = next((p for p in log.planes if p.name == out.crop_above), None)
+    return Crop(box_min=None if box is None else box[0], box_max=None if box is None else box[1],
+                plane_name=None if plane is None else plane.name,
+                plane_point=None if plane is None else np.asarray(plane.point, dtype=np.float64),
+                plane_normal=None if plane is None else np.asarray(plane.normal, dtype=np.float64),
+                min_height=out.crop_min_height, max_height=out.crop_max_height)
 
 
 def tracker_settings(log: FieldLog) -> TrackerSettings:

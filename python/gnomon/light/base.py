@@ -126,6 +126,10 @@ class LightModel:
         """The capture time of capture frame ``index`` (UTC), when the light needs clock time."""
         return None
 
+    def georeference(self, units: str) -> dict[str, Any] | None:
+        """Where the world frame is on Earth (report.json's ``site``), when the light knows it."""
+        return None
+
     def after_tracking(self, used: np.ndarray, skipped_dips: list[int]) -> list[str]:
         """Told which capture frames the tracker saw (in order); returns warnings."""
         if skipped_dips:

@@ -29,6 +29,7 @@ import pandas as pd
 
 from gnomon.camera import CameraModel, Pose
 from gnomon.errors import GnomonError
+from gnomon.georef import georeference_report
 from gnomon.light.base import (
     EdgePlanes,
     EdgeTimes,
@@ -188,6 +189,11 @@ class SunLight(LightModel):
 
     def frame_time(self, index: int) -> datetime:
         return self.clock.times[index]
+
+    def georeference(self, units: str) -> dict[str, Any]:
+        site = self.clock.site
+        return georeference_report(site.latitude_deg, site.longitude_deg, site.altitude_m, self.clock.heading_deg,
+                                   units)
 
     def after_tracking(self, used: np.ndarray, skipped_dips: list[int]) -> list[str]:
         night = [int(i) for i in np.flatnonzero(self.clock.night)]

@@ -20,6 +20,9 @@ frames, ``.npz``). Scenes:
   another moving darkening, the evening's fading sun.
 """
 
+import sys as _sys
+import types as _types
+
 from gnomon.simulate.desk_lamp import (
     DeskLampConfig,
     DeskLampScene,
@@ -48,3 +51,16 @@ __all__ = [
     "simulate_desk_lamp",
     "simulate_two_plane",
 ]
+
+
+class _CallableModule(_types.ModuleType):
+    """``gnomon.simulate`` is this package and also the function :func:`gnomon.api.simulate`:
+    ``gnomon.simulate("desk_lamp", "capture", frames=120)`` renders a scene and returns its field log."""
+
+    def __call__(self, scene: str, out, *, progress: bool = False, **options):
+        from gnomon.api import simulate  # the scene dispatcher (it imports no scanning code)
+
+        return simulate(scene, out, progress=progress, **options)
+
+
+_sys.modules[__name__].__class__ = _CallableModule
