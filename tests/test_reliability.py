@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import gnomon
 from gnomon import toml_io
 from gnomon.cli import main
 from gnomon.errors import GnomonError
@@ -32,7 +33,9 @@ from gnomon.errors import GnomonError
 from conftest import write_tiny_capture
 
 ROOT = Path(__file__).resolve().parents[1]
-ENV = {**os.environ, "PYTHONPATH": str(ROOT / "python"), "CI": "1"}
+# Subprocesses import gnomon from where this process does (the checkout's
+# python/ in development, site-packages in an installed test run).
+ENV = {**os.environ, "PYTHONPATH": str(Path(gnomon.__file__).resolve().parent.parent), "CI": "1"}
 
 
 def one_line(code: int, capsys, *needles: str) -> str:
