@@ -124,12 +124,7 @@ def check_output_folder(out: str | os.PathLike, option: str = "--out") -> Path:
         if not os.access(path, os.W_OK | os.X_OK):
             raise OutputError(f"{option} {out}: the folder is not writable")
         return path
-    base = _first_existing(path.parent)
-    if not base.is_dir():
-        raise OutputError(f"{option} {out}: {base} is a file, not a folder")
-    if not os.access(base, os.W_OK | os.X_OK):
-        raise OutputError(f"{option} {out}: cannot create it in {base} (not writable)")
-    return path
+    return _creatable(path, out, option)
 
 
 def check_output_file(path: str | os.PathLike, option: str) -> Path:
@@ -141,12 +136,17 @@ def check_output_file(path: str | os.PathLike, option: str) -> Path:
         if not os.access(p.parent, os.W_OK | os.X_OK):
             raise OutputError(f"{option} {path}: its folder is not writable")
         return p
-    base = _first_existing(p.parent)
+    return _creatable(p, path, option)
+
+
+def _creatable(path: Path, given: str | os.PathLike, option: str) -> Path:
+    """``path`` (not yet existing) if its nearest existing ancestor is a writable folder, else a one-line error."""
+    base = _first_existing(path.parent)
     if not base.is_dir():
-        raise OutputError(f"{option} {path}: {base} is a file, not a folder")
+        raise OutputError(f"{option} {given}: {base} is a file, not a folder")
     if not os.access(base, os.W_OK | os.X_OK):
-        raise OutputError(f"{option} {path}: cannot create it in {base} (not writable)")
-    return p
+        raise OutputError(f"{option} {given}: cannot create it in {base} (not writable)")
+    return path
 
 
 # ------------------------------------------------------------ low-level steps
