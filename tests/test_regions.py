@@ -143,3 +143,29 @@ def test_a_plane_without_regions_cannot_be_scanned(two_plane_small: Path, tmp_pa
     path = _without_regions(two_plane_small, "bare.toml")
     with pytest.raises(GnomonError, match="gnomon regions"):
         run_scan(path, tmp_path / "scan", ScanOptions(progress=False, rrd=False))
+
+
+def test_shadow_plane_ransac_ignores_an_object_inside_a_region() -> None:
+    """One frame's crossings on a desk (z = 0) and a wall (y = 0): the shadow plane's lines on both, plus
+    an object's isochrone back-projected onto the desk (half of the desk's crossings, on a curve that a
+    line fit of the desk alone would follow). The joint fit keeps the lines' crossings and none of the curve."""
+    from gnomon.regions import ransac_shadow_plane
+
+    rng = np.random.default_rng(3)
+    n = np.array([0.9, 0.2, 0.3])
+    n /= np.linalg.norm(n)
+    d = 40.0  # shadow plane n·X = d (mm)
+    y_desk = np.linspace(5.0, 300.0, 120)
+    # desk (z = 0): n0 x + n1 y = d  → x = (d − n1 y) / n0
+    desk = np.stack([(d - n[1] * y_desk) / n[0], y_desk, np.zeros_like(y_desk)], axis=1)
+    z_wall = np.linspace(5.0, 250.0, 100)
+    wall = np.stack([(d - n[2] * z_wall) / n[0], np.zeros_like(z_wall), z_wall], axis=1)
+    line = np.concatenate([desk, wall])
+    line[:, 0] += rng.normal(0.0, 0.2, len(line))  # crossing noise (mm), within the 1 mm tolerance
+    s = np.linspace(0, 1, 120)  # the object's curve on the desk, 60–120 mm off the desk line
+    curve = np.stack([desk[:, 0] + 60 + 60 * np.sin(3 * s), 80 + 150 * s, np.zeros_like(s)], axis=1)
+    points = np.concatenate([line, curve])
+    label = np.concatenate([np.zeros(120), np.ones(100), np.zeros(120)]).astype(int)
+    inl = ransac_shadow_plane(points, label, np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]), np.array([1.0, 1.0]))
+    assert inl[:220].mean() > 0.99
+    assert not inl[220:].any()

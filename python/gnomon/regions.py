@@ -9,7 +9,12 @@ surface off the plane has no shadow time or another one. So:
 1. fit the plane's lines over a *seed* — the area inside its markers (their
    convex hull in the image), or the regions the field log already gives —
    with the robust line fit of :mod:`gnomon.reference_lines` (objects inside
-   the seed are outliers of each frame's line);
+   the seed are outliers of each frame's line); with two or more planes, the
+   frame's crossings on all of them are fitted together by one shadow plane
+   (:func:`ransac_shadow_plane`): an object's isochrone back-projected onto a
+   plane it is not on can look like a line on that plane alone (the frog's
+   belly on the desk in the CMU frog capture), never like one coplanar with
+   the other planes' lines;
 2. predict every pixel's shadow time from those lines (the frame at which
    the line, interpolated between consecutive frames, crosses the pixel's
    point on the plane), for the entering and the leaving edge;
@@ -34,10 +39,17 @@ import cv2
 import numpy as np
 
 from gnomon.camera import CameraModel
-from gnomon.reference_lines import PlaneInCamera, ReferenceLines, lines_on_plane
+from gnomon.fitting import fit_plane_robust
+from gnomon.reference_lines import (
+    MIN_POINTS,
+    PlaneInCamera,
+    ReferenceLines,
+    lines_on_plane,
+    mask_crossings,
+)
 
 __all__ = ["PlaneRegion", "hull_mask", "nearest_plane", "pixel_footprint", "predicted_times", "propose_regions",
-           "smooth_times"]
+           "ransac_shadow_plane", "shadow_lines", "smooth_times"]
 
 # The first lines (over the seed, which may hold objects) are RANSAC lines of this tolerance, in pixels on the plane.
 RANSAC_PIXELS = 2.0
@@ -60,6 +72,128 @@ class PlaneRegion:
     residual: np.ndarray
     tolerance: float
     lines_found: int
+
+
+def ransac_shadow_plane(points: np.ndarray, label: np.ndarray, normals: np.ndarray, tolerance: np.ndarray,
+                        trials: int = 300, seed: int = 0, candidates: int = 20) -> np.ndarray:
+    """Inlier mask of the shadow plane through crossings on two or more reference planes.
+
+    ``points`` (N, 3) camera frame: one frame's crossings, each back-projected
+    onto its own reference plane ``label`` (N,) int, whose unit normals are
+    ``normals`` (P, 3); ``tolerance`` (P,) world units per plane. A straight
+    edge's shadow lies in one plane whatever the light, so the crossings of
+    one frame on every reference plane are coplanar; those of an object inside
+    a region (its own isochrone, back-projected onto a plane it is not on) are
+    not. Candidates are planes through two crossings of one reference plane
+    and one of another; of the ``candidates`` with the most points within
+    tolerance, the one whose inliers cover the most length along the lines it
+    cuts on the reference planes (bins of 4 × tolerance, summed over the
+    planes) wins: the shadow runs across every plane, an object's crossings
+    that happen to fit cluster on the object.
+    """
+    n = len(points)
+    kinds = np.unique(label)
+    out = np.zeros(n, dtype=bool)
+    if len(kinds) < 2 or n < 3:
+        return out
+    rng = np.random.default_rng(seed)
+    groups = [np.flatnonzero(label == k) for k in kinds]
+    pair = rng.integers(0, len(kinds), (trials, 2))
+    pair[:, 1] = (pair[:, 0] + 1 + rng.integers(0, len(kinds) - 1, trials)) % len(kinds)
+    a = np.array([groups[i][rng.integers(0, len(groups[i]))] for i in pair[:, 0]])
+    b = np.array([groups[i][rng.integers(0, len(groups[i]))] for i in pair[:, 0]])
+    c = np.array([groups[j][rng.integers(0, len(groups[j]))] for j in pair[:, 1]])
+    nrm = np.cross(points[b] - points[a], points[c] - points[a])
+    size = np.linalg.norm(nrm, axis=1)
+    ok = size > 1e-9 * (1.0 + np.abs(points).max()) ** 2
+    if not ok.any():
+        return out
+    nrm = nrm[ok] / size[ok, None]
+    off = np.einsum("ij,ij->i", nrm, points[a[ok]])
+    tol = tolerance[label]
+    counts = np.zeros(len(nrm), dtype=np.int64)
+    for s in range(0, len(nrm), 50):
+        r = np.abs(points @ nrm[s:s + 50].T - off[s:s + 50])  # (N, chunk)
+        counts[s:s + 50] = (r <= tol[:, None]).sum(axis=0)
+    best_cover = -1
+    for i in np.argsort(counts)[::-1][:candidates]:
+        inl = np.abs(points @ nrm[i] - off[i]) <= tol
+        cover, planes_cut = 0, 0
+        for k in kinds:
+            sel = inl & (label == k)
+            along = np.cross(nrm[i], normals[k])
+            if sel.sum() < 2 or np.linalg.norm(along) < 1e-9:
+                continue
+            planes_cut += 1
+            cover += np.unique(np.floor((points[sel] @ along) / np.linalg.norm(along) / (4.0 * tolerance[k]))).size
+        if planes_cut < 2:
+            continue
+        if cover > best_cover:
+            out, best_cover = inl, cover
+    return out
+
+
+def shadow_lines(times: np.ndarray, n_frames: int, planes: list[PlaneInCamera], masks: list[np.ndarray],
+                 camera: CameraModel, names: list[str], tolerance: list[float]) -> list[ReferenceLines]:
+    """Each plane's shadow line at every frame, the planes' crossings fitted together where they can be.
+
+    First each plane's own RANSAC line (:func:`~gnomon.reference_lines.lines_on_plane`,
+    ``tolerance`` world units per plane); then, in every frame where two or
+    more planes have crossings inside their ``masks``, one shadow plane is
+    fitted to all of them (:func:`ransac_shadow_plane`, refined by a robust
+    least-squares plane over its inliers) and each plane's line is where it
+    cuts that plane. A plane whose crossings that frame do not lie on the
+    shadow plane (an object inside its mask) has no line then.
+    """
+    lines = [lines_on_plane(times, n_frames, p, m, camera, nm, ransac_tolerance=tol)
+             for p, m, nm, tol in zip(planes, masks, names, tolerance)]
+    if len(planes) < 2:
+        return lines
+    pts, lab, frm, pixs = [], [], [], []
+    for k, (plane, mask) in enumerate(zip(planes, masks)):
+        f, pix = mask_crossings(times, mask, n_frames)
+        on = plane.intersect(camera.rays(pix)) if len(f) else np.zeros((0, 3))
+        good = np.isfinite(on[:, 0])
+        pts.append(on[good])
+        lab.append(np.full(int(good.sum()), k))
+        frm.append(f[good])
+        pixs.append(pix[good])
+    points, label, frame, pixel = (np.concatenate(x) for x in (pts, lab, frm, pixs))
+    normals = np.array([p.normal for p in planes])
+    tol = np.asarray(tolerance, dtype=np.float64)
+    order = np.argsort(frame, kind="stable")
+    bounds = np.searchsorted(frame[order], np.arange(n_frames + 1))
+    for t in range(n_frames):
+        idx = order[bounds[t]:bounds[t + 1]]
+        counts = np.bincount(label[idx], minlength=len(planes))
+        if (counts >= MIN_POINTS).sum() < 2:
+            continue
+        idx = idx[counts[label[idx]] >= MIN_POINTS]
+        inl = ransac_shadow_plane(points[idx], label[idx], normals, tol, seed=t)
+        if (np.bincount(label[idx][inl], minlength=len(planes)) >= MIN_POINTS).sum() < 2:
+            continue
+        centre, normal, sub = fit_plane_robust(points[idx][inl])
+        keep = np.flatnonzero(inl)[sub]
+        for k, plane in enumerate(planes):
+            ln = lines[k]
+            mine = keep[label[idx][keep] == k]
+            if counts[k] < MIN_POINTS:
+                continue
+            if len(mine) < MIN_POINTS:
+                ln.point[t], ln.direction[t] = np.nan, np.nan
+                continue
+            along = np.cross(normal, plane.normal)
+            along /= np.linalg.norm(along)
+            q = points[idx][mine].mean(axis=0)
+            across = np.cross(plane.normal, along)
+            q = q + across * ((normal @ centre - normal @ q) / (normal @ across))
+            ln.point[t], ln.direction[t] = q, along
+            ln.rms[t] = float(np.sqrt(np.mean(((points[idx][mine] - centre) @ normal) ** 2)))
+            ln.count[t] = len(mine)
+            ln.pixels[t] = pixel[idx][mine]
+            ln.points[t] = points[idx][mine]
+            ln.extrapolated[t] = False
+    return lines
 
 
 def predicted_times(lines: ReferenceLines, ray_map: np.ndarray) -> np.ndarray:
@@ -211,21 +345,23 @@ def propose_regions(
     tolerances: list[float] = []
     for _ in range(iterations):
         residuals = []
-        for k, plane in enumerate(planes):
-            candidate = nearest == k
-            fit_on = current[k] | (unreached[k] & candidate & swept)
-            worst: np.ndarray | None = None
-            pred = np.full(ray_map.shape[:2], np.nan)
-            for times in time_maps:
-                lines = lines_on_plane(times, n_frames, plane, fit_on, camera, names[k],
-                                       ransac_tolerance=RANSAC_PIXELS * footprint[k])
-                found[k] = int(lines.found.sum())
-                pred = predicted_times(lines, ray_map)
-                r = np.abs(times - pred)  # NaN where either is missing
-                worst = r if worst is None else np.maximum(worst, r)
-            unreached[k] = ~np.isfinite(pred)
-            assert worst is not None
-            residuals.append(np.where(candidate, worst, np.nan))
+        fit_on = [current[k] | (unreached[k] & (nearest == k) & swept) for k in range(len(planes))]
+        worst: list[np.ndarray | None] = [None] * len(planes)
+        preds: list[np.ndarray] = [np.full(ray_map.shape[:2], np.nan)] * len(planes)
+        for times in time_maps:
+            lines = shadow_lines(times, n_frames, planes, fit_on, camera, names,
+                                 [RANSAC_PIXELS * f for f in footprint])
+            for k, ln in enumerate(lines):
+                found[k] = int(ln.found.sum())
+                preds[k] = predicted_times(ln, ray_map)
+                r = np.abs(times - preds[k])  # NaN where either is missing
+                w = worst[k]
+                worst[k] = r if w is None else np.maximum(w, r)
+        for k in range(len(planes)):
+            unreached[k] = ~np.isfinite(preds[k])
+            w = worst[k]
+            assert w is not None
+            residuals.append(np.where(nearest == k, w, np.nan))
         tolerances = []
         for k, r in enumerate(residuals):
             inside = r[current[k] & np.isfinite(r)]
