@@ -17,8 +17,10 @@ previous scan's files mixed with the new ones.
 from __future__ import annotations
 
 import json
+import threading
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,8 +60,8 @@ MIN_PLANE_SHARE_ERROR = 0.2
 MIN_PLANE_SHARE_WARN = 0.5
 MAX_PLANE_GAP = 3.0
 
-__all__ = ["OUTPUT_FILES", "EdgeResult", "ScanOptions", "ScanResult", "Surface", "build_surface", "run_scan",
-           "scan", "staged_outputs", "write_scan", "write_surface"]
+__all__ = ["OUTPUT_FILES", "EdgeResult", "ScanOptions", "ScanResult", "Surface", "build_surface", "reconstruct",
+           "run_scan", "scan", "staged_outputs", "write_scan", "write_surface"]
 
 @dataclass
 class ScanOptions:
@@ -368,6 +370,25 @@ def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None =
 
     ``track``: the pass over the frames (:func:`~gnomon.tracking.track_source`, or a drop-in such
     as :class:`gnomon.tiles.TiledTracker`)."""
+    result, record = reconstruct(setup, source, recorder, progress=progress, frame_stride=frame_stride,
+                                 track=track)
+    if record is not None:
+        t0 = time.perf_counter() - result.report["timings_s"]["total_s"]
+        record()
+        result.report["timings_s"]["total_s"] = time.perf_counter() - t0
+    return result
+
+
+def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None = None, *,
+                progress: bool = False, frame_stride: int = 10,
+                track: Callable[..., TrackedSequence] = track_source
+                ) -> tuple[ScanResult, Callable[[], None] | None]:
+    """:func:`scan` without its last step: the result, and the call that logs it to ``recorder``
+    (None without one), so that a caller can record while it writes the outputs.
+
+    The frames are recorded as they stream by; the ray map is computed on a
+    worker thread while the frames are tracked (OpenCV releases the GIL).
+    """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     warnings = list(setup.warnings)
@@ -375,14 +396,16 @@ def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None =
     skip = setup.light.skipped_frames(source.count)
     colour = LitColour(sample_indices(np.flatnonzero(~skip), COLOUR_SAMPLES))
     on_frame = _frame_hook(colour, None if recorder is None else _frame_logger(recorder, setup))
-    with _timed(timings, "tracking_s"):
-        tracked = track(source, setup.tracker, (setup.camera.height, setup.camera.width),
-                        skip=skip, on_frame=on_frame,
-                        progress=progress, where=f"{setup.inputs.field_log}: [camera]")
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-ray-map") as pool:
+        rays = pool.submit(setup.camera.ray_map)
+        with _timed(timings, "tracking_s"):
+            tracked = track(source, setup.tracker, (setup.camera.height, setup.camera.width),
+                            skip=skip, on_frame=on_frame,
+                            progress=progress, where=f"{setup.inputs.field_log}: [camera]")
+        with _timed(timings, "ray_map_s"):  # what is left of it after tracking
+            ray_map = rays.result()
     _check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
-    with _timed(timings, "ray_map_s"):
-        ray_map = setup.camera.ray_map()
     with _timed(timings, "planes_and_triangulation_s"):
         edges = _reconstruct_edges(setup, tracked, ray_map, warnings)
     with _timed(timings, "fusion_and_mesh_s"):
@@ -395,14 +418,19 @@ def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None =
     warnings += _fusion_warnings(fused)
     report = _report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
     _report_outputs(report, setup, cropped)
-    if recorder is not None:
+    timings["total_s"] = time.perf_counter() - t0
+    report["warnings"] = warnings
+    result = ScanResult(setup, tracked.times, edges, fused.shadow_time, fused.depth, fused.sigma, fused.keep,
+                        fused.undersampled, surface, report, warnings, coverage=coverage)
+    if recorder is None:
+        return result, None
+
+    def record() -> None:
         with _timed(timings, "recording_s"):
             _record(recorder, setup, edges, surface, fused.shadow_time, warnings, report, frame_stride,
                     tracked.used, coverage)
-    timings["total_s"] = time.perf_counter() - t0
-    report["warnings"] = warnings
-    return ScanResult(setup, tracked.times, edges, fused.shadow_time, fused.depth, fused.sigma, fused.keep,
-                      fused.undersampled, surface, report, warnings, coverage=coverage)
+
+    return result, record
 
 
 def _report_outputs(report: dict[str, Any], setup: ScanSetup, cropped: np.ndarray) -> None:
@@ -415,10 +443,13 @@ def _report_outputs(report: dict[str, Any], setup: ScanSetup, cropped: np.ndarra
         report["site"] = site
 
 
-def write_scan(folder: Path, result: ScanResult, started: float | None = None) -> None:
+def write_scan(folder: Path, result: ScanResult, started: float | None = None,
+               before_report: Callable[[], None] | None = None) -> None:
     """The scan's files (points, mesh, maps, report.json) into ``folder``, each atomically.
 
-    ``started``: the ``time.perf_counter()`` when the run began, for the report's total.
+    ``started``: the ``time.perf_counter()`` when the run began, for the report's total;
+    ``before_report``: called before report.json is written (e.g. to wait for the recording,
+    whose timing the report gives).
     """
     t = time.perf_counter()
     setup, surface = result.setup, result.surface
@@ -433,6 +464,8 @@ def write_scan(folder: Path, result: ScanResult, started: float | None = None) -
         write_enu_points(folder / "points_enu.ply", surface, result.report["site"])
     timings = result.report["timings_s"]
     timings["outputs_s"] = time.perf_counter() - t
+    if before_report is not None:
+        before_report()
     if started is not None:
         timings["total_s"] = time.perf_counter() - started
     atomic.write_text(folder / "report.json", json.dumps(result.report, indent=2, default=_json_default))
@@ -555,20 +588,83 @@ def points_from_depth(ray_map: np.ndarray, depth: np.ndarray) -> np.ndarray:
 
 
 def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | None = None) -> ScanResult:
-    """Run a scan end to end and write its outputs into ``out_dir`` (nothing there unless it succeeds)."""
+    """Run a scan end to end and write its outputs into ``out_dir`` (nothing there unless it succeeds).
+
+    The recording is logged and encoded on a worker thread while the outputs are written.
+    """
     opts = options or ScanOptions()
     t0 = time.perf_counter()
+    if opts.rrd or opts.view:
+        _warm_rerun_import()
     log = load_field_log(field_log)
     source = frame_source(log)
     setup = resolve_scan(log, source)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
         full = source.video is not None and (opts.rrd or opts.view) and playable_video(source.video)
         with _recording(staging, opts, f"scan {log.path.name}", image_scale=1.0 if full else 0.5) as recorder:
-            result = scan(setup, source, recorder, progress=opts.progress, frame_stride=opts.frame_stride,
-                          track=opts.track or track_source)
-            write_scan(staging, result, t0)
+            result, record = reconstruct(setup, source, recorder, progress=opts.progress,
+                                         frame_stride=opts.frame_stride, track=opts.track or track_source)
+            with _Background(_record_and_close(record, recorder)) as recording:
+                write_scan(staging, result, t0, before_report=recording.join)
     result.out_dir = Path(out_dir)
     return result
+
+
+def _record_and_close(record: Callable[[], None] | None, recorder: ScanRecording | None) -> Callable[[], None]:
+    def run() -> None:
+        if record is not None:
+            record()
+        if recorder is not None:
+            recorder.close()  # encodes and writes the file (idempotent: the context's close is then a no-op)
+    return run
+
+
+class _Background:
+    """A call on a worker thread; :meth:`join` waits for it and re-raises its exception.
+
+    Leaving the ``with`` block always waits for the thread (nothing keeps writing
+    into a staging folder that is being removed)."""
+
+    def __init__(self, fn: Callable[[], None]):
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(fn,), name="gnomon-recording", daemon=True)
+
+    def _run(self, fn: Callable[[], None]) -> None:
+        try:
+            fn()
+        except BaseException as exc:  # re-raised by join, in the caller's thread
+            self._error = exc
+
+    def __enter__(self) -> "_Background":
+        self._thread.start()
+        return self
+
+    def join(self) -> None:
+        self._thread.join()
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+
+    def __exit__(self, *exc: object) -> None:
+        self._thread.join()
+        if exc[0] is None:
+            self.join()
+
+
+_rerun_warm: threading.Thread | None = None
+
+
+def _warm_rerun_import() -> None:
+    """Import rerun (≈ 1 s) on a thread while the field log is read and the frames are tracked."""
+    global _rerun_warm
+    if _rerun_warm is None:
+        def load() -> None:
+            try:
+                import rerun  # noqa: F401
+            except Exception:  # pragma: no cover - the recorder's own import reports it
+                pass
+        _rerun_warm = threading.Thread(target=load, name="gnomon-import-rerun", daemon=True)
+        _rerun_warm.start()
 
 
 def open_recorder(staging: Path, opts: ScanOptions, name: str, filename: str = "scan.rrd", *,

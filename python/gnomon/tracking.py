@@ -44,6 +44,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
 from collections.abc import Callable, Iterable
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -293,11 +294,13 @@ def track_source(
     tracker: ShadowTracker | None = None
     first: Frame | None = None
     previous: np.ndarray | None = None
-    noise: list[float] = []
+    noise: list[Future[float]] = []
     used: list[int] = []
     dips: list[int] = []
     seen = 0
-    with Progress("tracking", source.count, enabled=progress) as bar:
+    # The noise estimate (first frame pairs) runs on a worker thread while the tracker goes on.
+    with Progress("tracking", source.count, enabled=progress) as bar, \
+            ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-noise") as pool:
         for frame in source:
             seen += 1
             if first is None:
@@ -305,7 +308,7 @@ def track_source(
                 first, tracker = frame, ShadowTracker(settings, shape, frame.grey.dtype, crop)
             if previous is not None and len(noise) < NOISE_PAIRS:
                 # before any illumination drift has accumulated
-                noise.append(image_noise_dn(previous, frame.grey))
+                noise.append(pool.submit(image_noise_dn, previous, frame.grey))
             previous = frame.grey
             if on_frame is not None:
                 on_frame(frame)
@@ -321,7 +324,7 @@ def track_source(
     if len(used) < 2:
         raise FrameError(f"{source.name}: fewer than two usable frames (sun below the horizon or clouds)")
     times, lut = tracker.finish()
-    noise_dn = float(np.median(noise)) if noise else 1.0
+    noise_dn = float(np.median([n.result() for n in noise])) if noise else 1.0
     return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, lut, tracker.input_lut)
 
 
