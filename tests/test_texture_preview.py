@@ -71,3 +71,29 @@ def test_preview_has_four_captioned_panels(tmp_path) -> None:
     write_preview(tmp_path / "preview.png", rgb, depth, sigma, cov, units="mm")
     back = cv2.imread(str(tmp_path / "preview.png"))[:, :, ::-1]
     np.testing.assert_array_equal(back, img)
+
+
+def test_scan_colours_of_a_colour_capture_come_from_its_lit_frames(tmp_path) -> None:
+    """A colour capture: the reader hands the kept frames over in colour, so a pixel in the
+    stick's shadow in frame 0 takes its colour from the frames it is lit in, not frame 0's."""
+    import cv2
+
+    from conftest import write_tiny_capture
+    from gnomon.pipeline import ScanOptions, run_scan
+
+    log = write_tiny_capture(tmp_path / "capture")
+    frames = sorted((tmp_path / "capture" / "frames").glob("*.png"))
+    u = np.arange(48)
+    for i, path in enumerate(frames):  # the band starts inside the view: columns 3–13 dark in frame 0
+        centre = 8 + (48 + 4) * i / (len(frames) - 1)
+        lit = np.clip((np.abs(u - centre) - 5.0) / 6.0, 0, 1)
+        grey = np.tile(40 + 160 * lit, (36, 1))
+        bgr = np.stack([0.5 * grey, 0.75 * grey, grey], axis=2)  # a reddish desk
+        cv2.imwrite(str(path), np.round(bgr).astype(np.uint8))
+    result = run_scan(log, tmp_path / "scan", ScanOptions(rrd=False, progress=False))
+    rgb = result.surface.rgb.astype(float)
+    dark_in_frame_0 = rgb[:, 6:11]
+    # lit level 200 DN (red), 150 (green), 100 (blue): ±3 DN of JPEG-free rounding and the band's edge
+    assert np.allclose(dark_in_frame_0[..., 0], 200, atol=3)
+    assert np.allclose(dark_in_frame_0[..., 1], 150, atol=3)
+    assert np.allclose(dark_in_frame_0[..., 2], 100, atol=3)

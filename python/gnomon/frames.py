@@ -208,7 +208,7 @@ def natural_key(path: Path) -> tuple:
 class Frame:
     index: int
     grey: np.ndarray  # (H, W) uint8 | uint16
-    color: np.ndarray | None  # (H, W, 3) BGR, only for the first frame
+    color: np.ndarray | None  # (H, W, 3) BGR, for the first frame and those FrameSource.color_frames names
     name: str
 
 
@@ -226,6 +226,9 @@ class FrameSource:
         self.image_files = tuple(image_files)
         self.video = video
         self.expected_count = expected_count
+        # Frames delivered with their colour image too (besides grey): the first, and those a scan's
+        # colours are taken from (gnomon.texture.LitColour).
+        self.color_frames: frozenset[int] = frozenset({0})
         # sha256 of every frame file's bytes, set when a pass has decoded them all (videos: see frames_digest).
         self._digest: str | None = None
         if video is not None:
@@ -296,7 +299,7 @@ class FrameSource:
                 image, raw = decode_image_file(path)
                 digest.update(raw)
                 self._check_size(i, path.name, image, first)
-                color = image if (i == 0 and image.ndim == 3) else None
+                color = image if (i in self.color_frames and image.ndim == 3) else None
                 if first is None:
                     first = image
                 yield Frame(i, to_grey(image), color[:, :, :3] if color is not None else None, path.name)
@@ -314,7 +317,7 @@ class FrameSource:
                 self._check_size(i, f"video frame {i}", image, first)
                 if first is None:
                     first = image
-                color = image[:, :, :3] if (i == 0 and image.ndim == 3) else None
+                color = image[:, :, :3] if (i in self.color_frames and image.ndim == 3) else None
                 yield Frame(i, to_grey(image), color, f"video frame {i}")
                 i += 1
         finally:

@@ -395,6 +395,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     _record_setup(recorder, setup, source)
     skip = setup.light.skipped_frames(source.count)
     colour = LitColour(sample_indices(np.flatnonzero(~skip), COLOUR_SAMPLES))
+    source.color_frames = source.color_frames | frozenset(int(i) for i in colour.indices)
     on_frame = _frame_hook(colour, None if recorder is None else _frame_logger(recorder, setup))
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-ray-map") as pool:
         rays = pool.submit(setup.camera.ray_map)

@@ -221,9 +221,12 @@ class TiledTracker:
         return replace(tracked, info=self.info)
 
     def _record_frames(self, source, on_frame) -> None:
-        """Decode, on the client, only the frames the recording keeps (image files; a video's are skipped)."""
-        for i in range(0, len(source.image_files), max(self.frame_stride, 1)):
+        """Decode, on the client, only the frames the recording and the colours keep (image files; a
+        video's are skipped)."""
+        n = len(source.image_files)
+        wanted = set(range(0, n, max(self.frame_stride, 1))) | {i for i in source.color_frames if i < n}
+        for i in sorted(wanted):
             path = source.image_files[i]
             image, _ = decode_image_file(path)
-            color = image[:, :, :3] if (i == 0 and image.ndim == 3) else None
+            color = image[:, :, :3] if (i in source.color_frames and image.ndim == 3) else None
             on_frame(Frame(i, to_grey(image), color, path.name))
