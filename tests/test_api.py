@@ -83,3 +83,76 @@ def test_the_package_exposes_a_small_documented_api() -> None:
         gnomon.simulate("moon", "x")
     with pytest.raises(GnomonError, match="unexpected keyword"):
         gnomon.simulate("desk_lamp", "x", wobble=3)
+
+
+def test_the_cli_scan_is_the_api_scan(tiny_capture, tmp_path, monkeypatch, capsys) -> None:
+    """`gnomon scan` calls gnomon.api.scan with its options (a pass-through wrapper records the call;
+    the real function runs) and prints that call's result: the files are the returned Scan's."""
+    import gnomon.api
+    from gnomon.cli import main
+
+    calls = []
+    real = gnomon.api.scan
+
+    def recorded(*args, **kwargs):
+        calls.append([args, kwargs, None])
+        calls[-1][2] = real(*args, **kwargs)
+        return calls[-1][2]
+
+    monkeypatch.setattr(gnomon.api, "scan", recorded)
+    out = tmp_path / "out"
+    assert main(["scan", str(tiny_capture), "--out", str(out), "--no-rrd", "--quiet", "--frame-stride", "3"]) == 0
+    assert len(calls) == 1
+    args, kwargs, s = calls[0]
+    assert args == (tiny_capture, out)
+    assert kwargs == {"rrd": False, "rrd_path": None, "view": False, "progress": False, "frame_stride": 3,
+                      "tiles": None, "scheduler": None, "workers": None}
+    assert s.folder == out and not (out / "scan.rrd").exists()
+    v = plyfile.PlyData.read(str(out / "points.ply"))["vertex"].data
+    np.testing.assert_array_equal(s.points, np.stack([v["x"], v["y"], v["z"]], axis=1))
+    assert f"{len(s.points)} points" in capsys.readouterr().out
+    # the options' checks are the API's: a misplaced --workers fails inside gnomon.api.scan
+    assert main(["scan", str(tiny_capture), "--out", str(out), "--workers", "2"]) == 2
+    assert len(calls) == 2 and calls[1][1]["workers"] == 2 and calls[1][2] is None
+    assert "are for tiled scans" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_simulate_knows_every_scene_of_the_cli(tmp_path) -> None:
+    """gnomon.simulate renders each scene `gnomon simulate` offers, with the scene's own settings."""
+    import tomllib
+
+    from gnomon.api import SCENES
+    from gnomon.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command").choices["simulate"]
+    assert set(next(a for a in sub._actions if a.dest == "scene").choices) == set(SCENES)
+    small = {"width": 160, "height": 120, "frames": 16}
+
+    day = gnomon.simulate("facade_day", tmp_path / "day", **small, clouds=2)
+    truth = json.loads((day.parent / "ground_truth.json").read_text())
+    assert truth["scene"] == "facade_day" and truth["frame_count"] == 16
+    assert truth["config"]["full_day"] and truth["config"]["post"] and truth["config"]["clouds"] == 2
+    # FacadeSunConfig.day(): 06:40 local in Zurich (UTC+1 in November) for 11 h
+    assert truth["first_frame_utc"].startswith("2026-11-12T05:40") and truth["last_frame_utc"].startswith(
+        "2026-11-12T16:40")
+
+    aruco = gnomon.simulate("two_plane", tmp_path / "aruco", **small, markers="aruco")
+    log = tomllib.loads(aruco.read_text())
+    assert [m["id"] for p in log["planes"] for m in p.get("aruco", {}).get("markers", [])]
+
+    left = json.loads((gnomon.simulate("desk_lamp", tmp_path / "l", **small, pencil_photos=0).parent
+                       / "ground_truth.json").read_text())
+    right = json.loads((gnomon.simulate("desk_lamp_right", tmp_path / "r", **small, pencil_photos=0).parent
+                        / "ground_truth.json").read_text())
+    def lamp_x_in_camera(t: dict) -> float:  # the lamp's x in the camera frame (x to the image's right)
+        R = cv2.Rodrigues(np.asarray(t["rvec"], float))[0]
+        return float((R @ np.asarray(t["lamp"], float) + np.asarray(t["tvec"], float))[0])
+
+    assert right["lamp_side"] == "right" and lamp_x_in_camera(left) < 0 < lamp_x_in_camera(right)
+
+    board = gnomon.simulate("chessboard", tmp_path / "board", width=320, height=240, seed=1)
+    assert board == tmp_path / "board" and len(list(board.glob("view_*.png"))) == 12
+    assert cv2.imread(str(board / "view_00.png")).shape[:2] == (240, 320)
+    with pytest.raises(GnomonError, match="--seed"):
+        gnomon.simulate("desk_lamp", tmp_path / "x", seed=-1)

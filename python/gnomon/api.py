@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,10 +26,10 @@ import numpy as np
 
 from gnomon.errors import GnomonError
 
-__all__ = ["Scan", "ScanMesh", "scan", "load_scan", "simulate", "SCENES"]
+__all__ = ["SCENES", "Scan", "ScanMesh", "load_scan", "scan", "simulate"]
 
-#: Scenes :func:`simulate` can render.
-SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "chessboard")
+#: Scenes :func:`simulate` (and `gnomon simulate`) can render.
+SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "facade_day", "chessboard")
 
 
 @dataclass
@@ -133,38 +135,79 @@ def _from_result(result, folder: Path | None) -> Scan:
                 folder=folder, coverage=result.coverage)
 
 
+@contextmanager
+def _tracker(field_log: str | os.PathLike, tiles: str | None, scheduler: str | None, workers: int | None,
+             frame_stride: int) -> Iterator[Any]:
+    """The pass over the frames: None (the in-process tracker), or a :class:`gnomon.tiles.TiledTracker`
+    on a Dask cluster (``scheduler``'s, or a local one of ``workers`` processes), closed afterwards."""
+    if tiles is None:
+        if scheduler or workers is not None:
+            raise GnomonError("--scheduler and --workers are for tiled scans: add --tiles RxC")
+        yield None
+        return
+    from gnomon.batch import close_client, connect_client
+    from gnomon.fieldlog import load_field_log
+    from gnomon.tiles import TiledTracker, TileGrid
+
+    grid = TileGrid.parse(tiles)
+    if workers is not None and (workers < 1 or scheduler):
+        raise GnomonError("--workers N (N >= 1) sizes a local cluster; not with --scheduler")
+    cam = load_field_log(Path(field_log)).camera
+    grid.bounds((cam.height, cam.width))  # a bad tiling fails here, before any cluster starts
+    client, cluster = connect_client(scheduler, workers)
+    try:
+        yield TiledTracker(client, grid, frame_stride=frame_stride)
+    finally:
+        close_client(client, cluster)
+
+
 def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, rrd: bool | None = None,
          rrd_path: str | os.PathLike | None = None, view: bool = False, progress: bool = False,
-         frame_stride: int = 10) -> Scan:
+         frame_stride: int = 10, tiles: str | None = None, scheduler: str | None = None,
+         workers: int | None = None) -> Scan:
     """Scan the capture a field log describes; return the result, and write it if ``out`` is given.
 
-    ``field_log`` the capture's TOML field log (format: field_logs/README.md).
-    ``out`` a folder for the files `gnomon scan` writes (points.ply, mesh.*,
-    depth.npz, preview.png, report.json, …, published as a whole only on
-    success); None keeps everything in memory. ``rrd`` also write the rerun
-    recording (default: when ``out`` is given), to ``rrd_path`` (default
-    ``out/scan.rrd``); ``view`` also stream it to a rerun viewer;
-    ``frame_stride`` keep every n-th frame image in it. ``progress`` a
-    progress bar on stderr. `gnomon scan` is this function.
+    ``field_log`` the capture's TOML field log (format: field_logs/README.md;
+    its ``[output]`` table sets the crop). ``out`` a folder for the files
+    (points.ply, mesh.*, depth.npz, preview.png, report.json, …, published
+    as a whole only on success); None keeps everything in memory.
+
+    ``rrd`` also write the rerun recording (default: when ``out`` is given),
+    to ``rrd_path`` (default ``out/scan.rrd``); ``view`` also stream it to a
+    rerun viewer started here (where a display exists; the file is written
+    either way); ``frame_stride`` keep every n-th frame image in it.
+    ``progress`` a progress bar on stderr.
+
+    ``tiles`` ``"RxC"``: track R × C image tiles on Dask workers and stitch
+    the maps (the same result; ``pip install "gnomon[dask]"``, see
+    docs/batch.md), on the running scheduler at ``scheduler`` (an address)
+    or on a local cluster of ``workers`` processes; the report's
+    ``tracking`` says where each tile ran.
+
+    `gnomon scan` calls this function with its options (``--no-rrd`` is
+    ``rrd=False``, ``--rrd PATH`` ``rrd_path``, ``--quiet`` ``progress=False``)
+    and prints the summary; error messages name the command's options.
     """
     from gnomon.fieldlog import load_field_log
     from gnomon.pipeline import ScanOptions, run_scan
     from gnomon.pipeline import scan as scan_in_memory
     from gnomon.scan_setup import frame_source, resolve_scan
 
-    if out is not None:
-        opts = ScanOptions(rrd=True if rrd is None else bool(rrd), progress=progress,
-                           rrd_path=None if rrd_path is None else Path(rrd_path), view=view,
-                           frame_stride=max(1, int(frame_stride)))
-        result = run_scan(field_log, out, opts)
-        return _from_result(result, Path(out))
-    if rrd or rrd_path is not None or view:
+    frame_stride = max(1, int(frame_stride))
+    if out is None and (rrd or rrd_path is not None or view):
         raise ValueError("a recording needs an output folder: give out=")
-    log = load_field_log(field_log)
-    source = frame_source(log)
-    setup = resolve_scan(log, source)
-    result = scan_in_memory(setup, source, None, progress=progress, frame_stride=frame_stride)
-    return _from_result(result, None)
+    with _tracker(field_log, tiles, scheduler, workers, frame_stride) as track:
+        if out is not None:
+            opts = ScanOptions(rrd=True if rrd is None else bool(rrd), progress=progress,
+                               rrd_path=None if rrd_path is None else Path(rrd_path), view=view,
+                               frame_stride=frame_stride, track=track)
+            return _from_result(run_scan(Path(field_log), Path(out), opts), Path(out))
+        log = load_field_log(Path(field_log))
+        source = frame_source(log)
+        setup = resolve_scan(log, source)
+        result = scan_in_memory(setup, source, None, progress=progress, frame_stride=frame_stride,
+                                **({} if track is None else {"track": track}))
+        return _from_result(result, None)
 
 
 def _load_npy(path: Path, shape: tuple[int, int] | None = None) -> np.ndarray | None:
@@ -233,52 +276,70 @@ def load_scan(folder: str | os.PathLike) -> Scan:
                 units=units, report=report, warnings=list(report.get("warnings", [])), folder=f)
 
 
-def simulate(scene: str, out: str | os.PathLike, *, progress: bool = False, **options: Any) -> Path:
-    """Render a synthetic capture with exact ground truth into ``out``; return its field log's path.
-
-    ``scene`` one of :data:`SCENES`. ``options`` are the scene's settings
-    (:class:`gnomon.simulate.DeskLampConfig`, ``TwoPlaneConfig``,
-    ``FacadeSunConfig``), e.g. ``width=400, height=300, frames=120, seed=1``.
-    The folder gets ``frames/``, ``ground_truth.npz``, ``ground_truth.json``
-    and, last, ``field_log.toml``. ``chessboard`` writes 12 views of a 9x6
-    board (25 mm squares) and the true camera instead, and returns the folder.
-    """
-    result = simulate_scene(scene, out, progress=progress, **options)
-    return Path(out) if scene == "chessboard" else Path(result.field_log)
-
-
-def simulate_scene(scene: str, out: str | os.PathLike, *, progress: bool = False, **options: Any) -> Any:
-    """:func:`simulate`, returning the simulator's own result (frames, ground truth, field log paths)."""
-    from gnomon.progress import Progress
-
-    if scene not in SCENES:
-        raise GnomonError(f"simulate: unknown scene {scene!r} (one of {', '.join(SCENES)})")
-    if scene == "chessboard":
-        from gnomon.simulate.chessboard import default_truth_camera, write_chessboard_views
-
-        width, height = options.pop("width", 1280), options.pop("height", 960)
-        write_chessboard_views(out, camera=default_truth_camera(width, height), cols=9, rows=6, square=25.0,
-                               n_views=12, seed=options.pop("seed", 0))
-        if options:
-            raise GnomonError(f"simulate chessboard: unknown options {sorted(options)}")
-        return None
+def _scene_config(scene: str, options: dict[str, Any]) -> tuple[Any, Any]:
+    """``(config, render)`` of a shadow-sweep scene from its options (the configuration's fields)."""
     if scene in ("desk_lamp", "desk_lamp_right"):
         from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
-        options.setdefault("lamp_side", "left" if scene == "desk_lamp" else "right")
-        config_type, run = DeskLampConfig, simulate_desk_lamp
+        if "lamp_side" in options:
+            raise GnomonError(f"simulate {scene}: lamp_side is the scene's (desk_lamp: left, desk_lamp_right: right)")
+        make, render = DeskLampConfig, simulate_desk_lamp
+        options = {**options, "lamp_side": "left" if scene == "desk_lamp" else "right"}
     elif scene == "two_plane":
         from gnomon.simulate import TwoPlaneConfig, simulate_two_plane
 
-        config_type, run = TwoPlaneConfig, simulate_two_plane
+        make, render = TwoPlaneConfig, simulate_two_plane
     else:
         from gnomon.simulate.facade_sun import FacadeSunConfig, simulate_facade_sun
 
-        config_type, run = FacadeSunConfig, simulate_facade_sun
+        make = FacadeSunConfig.day if scene == "facade_day" else FacadeSunConfig
+        render = simulate_facade_sun
     try:
-        config = config_type(**options)
+        config = make(**options)
     except TypeError as exc:
         raise GnomonError(f"simulate {scene}: {exc}") from None
     config.validate()
+    return config, render
+
+
+def simulate(scene: str, out: str | os.PathLike, *, progress: bool = False, **options: Any) -> Path:
+    """Render a synthetic capture with exact ground truth into ``out``; return its field log's path.
+
+    ``scene`` one of :data:`SCENES` (`gnomon simulate --help` describes them).
+    ``options`` are the scene's settings, the fields of its configuration:
+    :class:`gnomon.simulate.DeskLampConfig` (``desk_lamp``, ``desk_lamp_right``),
+    :class:`~gnomon.simulate.TwoPlaneConfig` (``two_plane``; ``markers="aruco"``
+    for ArUco markers), :class:`~gnomon.simulate.FacadeSunConfig` (``facade_sun``;
+    ``facade_day`` starts from ``FacadeSunConfig.day()``), e.g. ``width=400,
+    height=300, frames=120, seed=1``; a setting left out keeps the scene's
+    default. The folder gets ``frames/``, ``ground_truth.npz``,
+    ``ground_truth.json`` and, last, ``field_log.toml`` (desk_lamp scenes also
+    pencil photos and ``pencil_log.toml``). ``chessboard`` (options ``width``,
+    ``height``, default 1280x960, and ``seed``) writes 12 views of a 9x6 board
+    with 25 mm squares and the true camera instead, and returns the folder.
+    ``progress`` a progress bar on stderr. `gnomon simulate` calls this
+    function with its options; error messages name the command's options.
+    """
+    from gnomon import validate
+    from gnomon.progress import Progress
+    from gnomon.publish import check_output_folder
+
+    if scene not in SCENES:
+        raise GnomonError(f"simulate: unknown scene {scene!r} (one of {', '.join(SCENES)})")
+    check_output_folder(out)
+    if "seed" in options:
+        validate.number(options["seed"], "--seed", minimum=0, maximum=2**32 - 1, integer=True)
+    if scene == "chessboard":
+        from gnomon.simulate.chessboard import default_truth_camera, write_chessboard_views
+
+        options = dict(options)
+        width, height, seed = options.pop("width", 1280), options.pop("height", 960), options.pop("seed", 0)
+        if options:
+            raise GnomonError(f"simulate chessboard: unknown options {sorted(options)} (width, height, seed)")
+        write_chessboard_views(out, camera=default_truth_camera(width, height), cols=9, rows=6, square=25.0,
+                               n_views=12, seed=seed)
+        return Path(out)
+    config, render = _scene_config(scene, options)
     with Progress("simulate", config.frames, enabled=progress) as bar:
-        return run(out, config, progress=lambda done, total: bar.update(done))
+        result = render(out, config, progress=lambda done, total: bar.update(done))
+    return Path(result.field_log)

@@ -1,13 +1,13 @@
-"""``gnomon simulate SCENE --out DIR``: write a synthetic capture, its field log and ground truth."""
+"""``gnomon simulate SCENE --out DIR``: write a synthetic capture, its field log and ground truth
+(a thin wrapper around :func:`gnomon.api.simulate`)."""
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
-from gnomon.errors import GnomonError
-
-SCENE_CHOICES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "facade_day", "chessboard")
+from gnomon.api import SCENES
 
 
 def register(subparsers) -> None:
@@ -28,7 +28,7 @@ def register(subparsers) -> None:
             "DIR/ground_truth.npz, DIR/ground_truth.json and (last) DIR/field_log.toml."),
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    p.add_argument("scene", choices=SCENE_CHOICES, help="which synthetic scene")
+    p.add_argument("scene", choices=SCENES, help="which synthetic scene")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (created if needed)")
     p.add_argument("--width", type=int, default=800, help="image width, px (the field of view is kept)")
     p.add_argument("--height", type=int, default=600, help="image height, px")
@@ -58,72 +58,50 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def run_chessboard(args: argparse.Namespace) -> int:
-    """12 views of a 9x6 chessboard (25 mm squares) with a known camera, for `gnomon calibrate camera`."""
-    from gnomon.simulate.chessboard import default_truth_camera, write_chessboard_views
-
-    width = args.width if args.width != 800 else 1280
-    height = args.height if args.height != 600 else 960
-    t0 = time.perf_counter()
-    write_chessboard_views(args.out, camera=default_truth_camera(width, height), cols=9, rows=6, square=25.0,
-                           n_views=12, seed=args.seed)
-    print(f"wrote 12 chessboard views (9x6 inner corners, 25 mm squares) and the true camera to {args.out} "
-          f"in {time.perf_counter() - t0:.1f} s; try: gnomon calibrate camera {args.out} --board 9x6 --square 25")
-    return 0
+def _options(args: argparse.Namespace) -> dict:
+    """The scene's settings from the command line (those the scene has; unset ones keep its defaults)."""
+    if args.scene == "chessboard":  # its own default size: 1280x960
+        return {"seed": args.seed, **({"width": args.width} if args.width != 800 else {}),
+                **({"height": args.height} if args.height != 600 else {})}
+    opts = {"width": args.width, "height": args.height, "noise": args.noise, "jpeg_quality": args.jpeg_quality,
+            "seed": args.seed, "distortion": not args.no_distortion, "blur": args.blur, "gamma": args.gamma}
+    if args.frames is not None:
+        opts["frames"] = args.frames
+    if args.scene in ("facade_sun", "facade_day"):
+        opts["pole_radius"] = args.pole_radius
+        if args.start is not None:
+            opts["start"] = args.start
+        if args.clouds is not None:
+            opts["clouds"] = args.clouds
+        return opts
+    opts.update(lamp_radius=args.lamp_radius, stick_radius=args.stick_radius)
+    if args.scene == "two_plane":
+        opts["markers"] = args.markers
+    else:
+        opts["pencil_photos"] = args.pencil_photos
+    return opts
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import validate
-    from gnomon.progress import Progress
-    from gnomon.publish import check_output_folder
+    from gnomon import api, validate
 
-    check_output_folder(args.out)
-    validate.number(args.seed, "--seed", minimum=0, maximum=2**32 - 1, integer=True)
-    # finite numbers here; their ranges are the scene configuration's to check (config.validate)
+    # finite numbers here; their ranges are the scene configuration's to check
     for name in ("noise", "blur", "gamma", "lamp_radius", "stick_radius", "pole_radius"):
         validate.number(getattr(args, name), "--" + name.replace("_", "-"))
-    if args.scene == "chessboard":
-        return run_chessboard(args)
-    from gnomon.simulate import DeskLampConfig, TwoPlaneConfig, simulate_desk_lamp, simulate_two_plane
-
-    if args.frames is None:
-        args.frames = {"facade_sun": 200, "facade_day": 400}.get(args.scene, 240)
-    common = dict(
-        width=args.width, height=args.height, frames=args.frames, noise=args.noise,
-        jpeg_quality=args.jpeg_quality, seed=args.seed, distortion=not args.no_distortion,
-        blur=args.blur, lamp_radius=args.lamp_radius, stick_radius=args.stick_radius,
-        gamma=args.gamma,
-    )
-    if args.scene in ("desk_lamp", "desk_lamp_right"):
-        config = DeskLampConfig(**common, lamp_side="left" if args.scene == "desk_lamp" else "right",
-                                pencil_photos=args.pencil_photos)
-        simulate = simulate_desk_lamp
-    elif args.scene == "two_plane":
-        config = TwoPlaneConfig(**common, markers=args.markers)
-        simulate = simulate_two_plane
-    elif args.scene in ("facade_sun", "facade_day"):
-        from gnomon.simulate.facade_sun import FacadeSunConfig, simulate_facade_sun
-
-        sun = {k: v for k, v in common.items() if k not in ("lamp_radius", "stick_radius")}
-        if args.start is not None:
-            sun["start"] = args.start
-        if args.clouds is not None:
-            sun["clouds"] = args.clouds
-        make = FacadeSunConfig.day if args.scene == "facade_day" else FacadeSunConfig
-        config = make(**sun, pole_radius=args.pole_radius)
-        simulate = simulate_facade_sun
-    else:  # pragma: no cover - argparse restricts choices
-        raise GnomonError(f"simulate: unknown scene {args.scene!r}")
-    config.validate()
     t0 = time.perf_counter()
-    with Progress("simulate", config.frames, enabled=not args.quiet) as bar:
-        result = simulate(args.out, config, progress=lambda done, total: bar.update(done))
+    field_log = api.simulate(args.scene, args.out, progress=not args.quiet, **_options(args))
+    seconds = time.perf_counter() - t0
+    if args.scene == "chessboard":
+        print(f"wrote 12 chessboard views (9x6 inner corners, 25 mm squares) and the true camera to {args.out} "
+              f"in {seconds:.1f} s; try: gnomon calibrate camera {args.out} --board 9x6 --square 25")
+        return 0
+    truth = json.loads((field_log.parent / "ground_truth.json").read_text())
     extra = ""
-    if result.pencil_log is not None:
-        extra = f", {len(result.pencil_photos)} pencil photos and {result.pencil_log.name}"
-    units = getattr(result, "units", "mm")
-    distance = result.camera_distance if units == "m" else result.camera_distance_mm
-    print(f"wrote {len(result.frames)} frames{extra}, ground truth and {result.field_log} "
-          f"({result.swept_fraction:.1%} of pixels swept, camera {distance:.1f} {units} "
-          f"from the scene) in {time.perf_counter() - t0:.1f} s")
+    if (field_log.parent / "pencil_log.toml").is_file():
+        extra = f", {truth['pencil']['photos']} pencil photos and pencil_log.toml"
+    units = truth.get("units", "mm")
+    distance = truth["camera_distance"] if units == "m" else truth["camera_distance_mm"]
+    print(f"wrote {truth['frame_count']} frames{extra}, ground truth and {field_log} "
+          f"({truth['swept_fraction']:.1%} of pixels swept, camera {distance:.1f} {units} "
+          f"from the scene) in {seconds:.1f} s")
     return 0
