@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import math
+import re
 import sys
 import tomllib
 from pathlib import Path
@@ -36,30 +37,61 @@ def test_licence_is_declared_and_shipped() -> None:
     assert any(c.startswith("Programming Language :: Python :: 3.11") for c in project["classifiers"])
 
 
-def _imported_top_level(path: Path) -> set[str]:
-    names = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            names |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            names.add(node.module.split(".")[0])
-    return names
+def _imports(path: Path) -> tuple[set[str], set[str]]:
+    """Top-level names of the absolute imports in ``path``: ``(at module level, anywhere)``."""
+    tree = ast.parse(path.read_text())
+
+    def names(nodes) -> set[str]:
+        out = set()
+        for node in nodes:
+            if isinstance(node, ast.Import):
+                out |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                out.add(node.module.split(".")[0])
+        return out
+
+    module_level = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
+    module_level += [n for block in tree.body if isinstance(block, (ast.If, ast.Try))
+                     for n in ast.walk(block) if isinstance(n, (ast.Import, ast.ImportFrom))]
+    return names(module_level), names(ast.walk(tree))
+
+
+def _distribution(requirement: str) -> str:
+    return re.split(r"[<>=!~;\[ ]", requirement, maxsplit=1)[0].strip().lower().replace("_", "-")
 
 
 def test_every_imported_package_is_declared() -> None:
+    """Every third-party package the code imports is a dependency; one imported only inside the
+    functions that need it may instead be in a feature extra (dask), never only in the test extra."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    # the dependencies, and the extras for the modules only they use (dask for `gnomon batch`)
-    requirements = project["dependencies"] + [d for extra in project["optional-dependencies"].values()
-                                              for d in extra]
-    declared = {d.split(">")[0].split("<")[0].split("=")[0].split("[")[0].strip().lower() for d in requirements}
+    required = {_distribution(d) for d in project["dependencies"]}
+    extras = {_distribution(d) for name, reqs in project["optional-dependencies"].items() if name != "test"
+              for d in reqs}
     # import name → distribution name
     dist = {"cv2": "opencv-python-headless", "PIL": "pillow", "rerun": "rerun-sdk", "tomli_w": "tomli-w"}
-    imported: set[str] = set()
+    eager: set[str] = set()
+    anywhere: set[str] = set()
     for path in (ROOT / "python" / "gnomon").rglob("*.py"):
-        imported |= _imported_top_level(path)
-    third_party = {m for m in imported if m not in sys.stdlib_module_names and m not in ("gnomon", "__future__")}
-    missing = {m for m in third_party if dist.get(m, m).lower() not in declared}
-    assert not missing, f"imported but not declared in pyproject.toml: {sorted(missing)}"
+        top, every = _imports(path)
+        eager |= top
+        anywhere |= every
+
+    def third_party(mods: set[str]) -> set[str]:
+        return {m for m in mods if m not in sys.stdlib_module_names and m not in ("gnomon", "__future__")}
+
+    assert {"numpy", "cv2", "rerun", "pvlib", "pandas", "pyarrow", "tomli_w"} <= third_party(anywhere)
+    missing = {m for m in third_party(eager) if dist.get(m, m).lower() not in required}
+    assert not missing, f"imported at module level but not a dependency in pyproject.toml: {sorted(missing)}"
+    missing = {m for m in third_party(anywhere) if dist.get(m, m).lower() not in required | extras}
+    assert not missing, f"imported but declared in neither the dependencies nor an extra: {sorted(missing)}"
+
+
+def test_metadata_is_complete() -> None:
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    for key in ("name", "description", "readme", "requires-python", "license", "license-files", "authors",
+                "keywords", "classifiers", "dependencies", "scripts"):
+        assert project.get(key), key
+    assert "Typing :: Typed" in project["classifiers"] and (ROOT / "python" / "gnomon" / "py.typed").is_file()
 
 
 def test_toml_round_trips_awkward_keys_and_strings(tmp_path) -> None:
