@@ -63,6 +63,38 @@ class ShadowTimes:
     @property
     def shape(self) -> tuple[int, int]: ...
 
+class FinishedPixels:
+    """Pixels whose dip ended (the live watch of :meth:`TemporalTracker.watch`); read-only
+    1-D arrays, one entry per pixel, in row order.
+
+    ``index`` (row-major ``y * width + x``) and ``frame`` (the frame whose sample
+    confirmed the recovery): int64. ``imax`` (the lit level before the dip), ``imin``
+    (the dip's darkest sample): DN; ``threshold``: linear irradiance, ``(L(imax) +
+    L(imin)) / 2``; ``enter``, ``leave``: provisional sub-frame times (frames, NaN when
+    the crossing has left the tracker's ring); ``enter_slope``, ``leave_slope``: linear
+    units per frame: float32.
+    """
+
+    @property
+    def index(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def frame(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def imax(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def imin(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def threshold(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def enter(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def leave(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def enter_slope(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def leave_slope(self) -> npt.NDArray[np.float32]: ...
+    def __len__(self) -> int: ...
+
 class TemporalTracker:
     """Streaming per-pixel shadow tracker: one shadow event (the deepest dip) per
     pixel; memory independent of the number of frames (see :mod:`gnomon.tracking`).
@@ -92,6 +124,21 @@ class TemporalTracker:
         ``min_contrast`` in DN. ``lut``: float32 decoding table DN → linear
         irradiance (256 or 65536 finite, non-decreasing entries), identity if None.
         """
+    def watch(self, min_contrast: float, recover: int = 3, lut: npt.NDArray[np.float32] | None = None) -> None:
+        """Start the live watch from the next frame on (replacing an earlier one).
+
+        Per pixel: a sample ``min_contrast`` DN (> 0) below the brightest so far opens a
+        dip; ``recover`` (1..255) consecutive samples at or above the DN mid-level between
+        that lit level and the dip's minimum end it, and the pixel is *finished* (one dip
+        per pixel). Its provisional times follow :meth:`finish`'s definitions on the frames
+        still in the ring, decoded with ``lut`` (as in :meth:`finish`). The results of
+        :meth:`finish` are unchanged.
+        """
+    def take_finished(self) -> FinishedPixels:
+        """The pixels finished since the last call; ``KernelParameterError`` before :meth:`watch`."""
+    @property
+    def watch_counts(self) -> tuple[int, int, int] | None:
+        """Pixels of the live watch ``(lit, in a dip, finished)``; None before :meth:`watch`."""
     @property
     def frames_seen(self) -> int: ...
     @property

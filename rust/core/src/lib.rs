@@ -3,6 +3,8 @@
 //!
 //! * [`TemporalTracker`]: streaming per-pixel shadow times from a sequence of
 //!   grey frames, `O(pixels)` memory whatever the number of frames;
+//! * the live watch ([`TemporalTracker::watch`], [`live`]): pixels whose
+//!   shadow has passed, with provisional times, as soon as it has passed;
 //! * [`triangulate`]: camera rays ∩ interpolated shadow planes;
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
@@ -11,6 +13,7 @@
 
 pub mod error;
 pub mod geometry;
+pub mod live;
 pub mod sample;
 pub mod simd;
 pub mod tracker;
@@ -18,6 +21,7 @@ pub mod triangulate;
 
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
+pub use live::{FinishedPixel, WatchParams};
 pub use sample::Sample;
 pub use simd::SimdPath;
 pub use tracker::{find_crossing, Crossing, Edge, ShadowTimes, TemporalTracker, TrackerParams};

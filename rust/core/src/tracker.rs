@@ -57,6 +57,7 @@ use std::borrow::Cow;
 use rayon::prelude::*;
 
 use crate::error::KernelError;
+use crate::live::{FinishedPixel, Watch, WatchParams};
 use crate::sample::Sample;
 use crate::simd::{Portable, SimdPath, Vector};
 
@@ -233,7 +234,7 @@ pub fn find_crossing(values: &[f32], threshold: f32, edge: Edge) -> Option<Cross
 
 /// The last `slots` frames, frame `j` in slot `j % slots`.
 #[derive(Debug, Clone)]
-struct FrameRing<T> {
+pub(crate) struct FrameRing<T> {
     samples: Vec<T>,
     width: usize,
     frame_len: usize,
@@ -257,7 +258,7 @@ impl<T: Sample> FrameRing<T> {
     }
 
     #[inline(always)]
-    fn row(&self, frame: usize, row: usize) -> &[T] {
+    pub(crate) fn row(&self, frame: usize, row: usize) -> &[T] {
         let start = (frame % self.slots) * self.frame_len + row * self.width;
         &self.samples[start..start + self.width]
     }
@@ -600,6 +601,8 @@ pub struct TemporalTracker<T: Sample> {
     frames_seen: usize,
     frames_evaluated: usize,
     path: SimdPath,
+    /// The live watch, once [`watch`](Self::watch) was called.
+    watch: Option<Watch<T>>,
 }
 
 impl<T: Sample> TemporalTracker<T> {
@@ -623,6 +626,7 @@ impl<T: Sample> TemporalTracker<T> {
             frames_seen: 0,
             frames_evaluated: 0,
             path: SimdPath::active(),
+            watch: None,
         })
     }
 
@@ -652,6 +656,9 @@ impl<T: Sample> TemporalTracker<T> {
             ));
         }
         self.path = path;
+        if let Some(watch) = &mut self.watch {
+            watch.config.path = path;
+        }
         Ok(())
     }
 
@@ -680,6 +687,16 @@ impl<T: Sample> TemporalTracker<T> {
             .zip(frame.par_chunks(STORE_PIECE))
             .for_each(|(dst, src)| dst.copy_from_slice(src));
         self.frames_seen += 1;
+        if let Some(watch) = &mut self.watch {
+            let (ring, config) = (&self.ring, &watch.config);
+            let newest = self.frames_seen - 1;
+            let oldest = self.frames_seen.saturating_sub(ring.slots);
+            watch
+                .rows
+                .par_iter_mut()
+                .enumerate()
+                .for_each(|(row, state)| config.update_row(state, ring, row, newest, oldest));
+        }
         if self.frames_seen == self.params.evaluate_at(self.frames_evaluated) {
             let job = BlockJob {
                 start: self.frames_evaluated,
@@ -695,6 +712,40 @@ impl<T: Sample> TemporalTracker<T> {
             self.frames_evaluated += max_width;
         }
         Ok(())
+    }
+
+    /// Start the live watch ([`crate::live`]) from the next frame on:
+    /// `params` its settings, `lut` the decoding table of its provisional
+    /// times (as in [`finish`](Self::finish)). Replaces an earlier watch.
+    pub fn watch(&mut self, params: WatchParams, lut: Option<&[f32]>) -> Result<(), KernelError> {
+        self.watch = Some(Watch::new(
+            self.height,
+            self.width,
+            self.params.window,
+            self.path,
+            &params,
+            lut,
+        )?);
+        Ok(())
+    }
+
+    /// The pixels whose dip ended since the last call, with their provisional
+    /// levels and times (row by row; see [`crate::live`]). An error before
+    /// [`watch`](Self::watch).
+    pub fn take_finished(&mut self) -> Result<Vec<FinishedPixel>, KernelError> {
+        match &mut self.watch {
+            Some(watch) => Ok(watch.take_finished()),
+            None => Err(KernelError::parameter(
+                "watch",
+                "the live watch was not started",
+            )),
+        }
+    }
+
+    /// Pixels of the live watch that are lit (no dip yet), in a dip, and
+    /// finished; `None` before [`watch`](Self::watch).
+    pub fn watch_counts(&self) -> Option<(usize, usize, usize)> {
+        self.watch.as_ref().map(Watch::counts)
     }
 
     /// The per-pixel results for the frames seen so far; does not change the
@@ -748,7 +799,7 @@ impl<T: Sample> TemporalTracker<T> {
 }
 
 /// The decoding table to use: the caller's after validation, or the identity.
-fn decoding_lut<T: Sample>(lut: Option<&[f32]>) -> Result<Cow<'_, [f32]>, KernelError> {
+pub(crate) fn decoding_lut<T: Sample>(lut: Option<&[f32]>) -> Result<Cow<'_, [f32]>, KernelError> {
     let Some(lut) = lut else {
         return Ok(Cow::Owned((0..T::LUT_LEN).map(|v| v as f32).collect()));
     };

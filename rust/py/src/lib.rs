@@ -7,10 +7,13 @@
 //! bad arrays raise `KernelArrayError`. The tracker's results are a typed
 //! `ShadowTimes` object. No numerics here: see `gnomon-core`.
 
-use gnomon_core::{KernelError, Sample, ShadowTimes, TemporalTracker as Tracker, TrackerParams};
-use numpy::ndarray::{Array2, Array3, ArrayView, Dimension, Ix1, Ix2, Ix3};
+use gnomon_core::{
+    FinishedPixel, KernelError, Sample, ShadowTimes, TemporalTracker as Tracker, TrackerParams,
+    WatchParams,
+};
+use numpy::ndarray::{Array1, Array2, Array3, ArrayView, Dimension, Ix1, Ix2, Ix3};
 use numpy::{
-    Element, IntoPyArray, PyArray, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray,
+    Element, IntoPyArray, PyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray,
     PyUntypedArray, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
@@ -133,8 +136,9 @@ fn image<'py, T: Element>(
     height: usize,
     width: usize,
 ) -> PyResult<Bound<'py, PyArray2<T>>> {
-    let array = Array2::from_shape_vec((height, width), data)
-        .map_err(|err| pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}")))?;
+    let array = Array2::from_shape_vec((height, width), data).map_err(|err| {
+        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
+    })?;
     Ok(array.into_pyarray(py))
 }
 
@@ -224,6 +228,90 @@ fn shadow_times(py: Python<'_>, times: ShadowTimes) -> PyResult<PyShadowTimes> {
         ambiguous: mask(py, times.ambiguous, h, w)?.unbind(),
         clipped: mask(py, times.clipped, h, w)?.unbind(),
     })
+}
+
+/// Pixels whose dip ended (the live watch): 1-D arrays, one entry per pixel.
+#[pyclass(module = "gnomon._kernel", name = "FinishedPixels", frozen)]
+struct PyFinishedPixels {
+    /// Row-major pixel index `y * width + x` (int64).
+    #[pyo3(get)]
+    index: Py<PyArray1<i64>>,
+    /// Frame at which the recovery was confirmed (int64).
+    #[pyo3(get)]
+    frame: Py<PyArray1<i64>>,
+    /// Lit level before the dip (DN).
+    #[pyo3(get)]
+    imax: Py<PyArray1<f32>>,
+    /// The dip's darkest sample (DN).
+    #[pyo3(get)]
+    imin: Py<PyArray1<f32>>,
+    /// Mid-level in linear irradiance.
+    #[pyo3(get)]
+    threshold: Py<PyArray1<f32>>,
+    /// Provisional entering-edge time (frames), NaN = not in the ring.
+    #[pyo3(get)]
+    enter: Py<PyArray1<f32>>,
+    /// Provisional leaving-edge time (frames).
+    #[pyo3(get)]
+    leave: Py<PyArray1<f32>>,
+    /// Linear irradiance change per frame at the entering crossing.
+    #[pyo3(get)]
+    enter_slope: Py<PyArray1<f32>>,
+    /// Same at the leaving crossing.
+    #[pyo3(get)]
+    leave_slope: Py<PyArray1<f32>>,
+}
+
+#[pymethods]
+impl PyFinishedPixels {
+    fn __len__(&self, py: Python<'_>) -> usize {
+        self.index.bind(py).len()
+    }
+
+    fn __repr__(&self, py: Python<'_>) -> String {
+        format!("FinishedPixels(n={})", self.__len__(py))
+    }
+}
+
+fn finished_pixels(py: Python<'_>, pixels: Vec<FinishedPixel>) -> PyFinishedPixels {
+    let column_i = |f: fn(&FinishedPixel) -> i64| {
+        Array1::from_iter(pixels.iter().map(f))
+            .into_pyarray(py)
+            .unbind()
+    };
+    let column_f = |f: fn(&FinishedPixel) -> f32| {
+        Array1::from_iter(pixels.iter().map(f))
+            .into_pyarray(py)
+            .unbind()
+    };
+    PyFinishedPixels {
+        index: column_i(|p| i64::from(p.index)),
+        frame: column_i(|p| i64::from(p.frame)),
+        imax: column_f(|p| p.imax),
+        imin: column_f(|p| p.imin),
+        threshold: column_f(|p| p.threshold),
+        enter: column_f(|p| p.enter),
+        leave: column_f(|p| p.leave),
+        enter_slope: column_f(|p| p.enter_slope),
+        leave_slope: column_f(|p| p.leave_slope),
+    }
+}
+
+fn watch_any<T: Sample>(
+    tracker: &mut Tracker<T>,
+    params: WatchParams,
+    lut: Option<&Bound<'_, PyAny>>,
+) -> PyResult<()> {
+    let result = match lut {
+        None => tracker.watch(params, None),
+        Some(lut) => {
+            let lut =
+                borrow_array::<f32, Ix1>(lut, "lut", "float32", &[Extent::Exactly(T::LUT_LEN)])?;
+            let view = lut.as_array();
+            with_slice(&view, |table| tracker.watch(params, Some(table)))
+        }
+    };
+    result.map_err(kernel_error)
 }
 
 enum AnyTracker {
@@ -320,6 +408,43 @@ impl TemporalTracker {
             AnyTracker::U16(t) => finish_any(py, t, min_contrast, lut)?,
         };
         shadow_times(py, times)
+    }
+
+    /// Start the live watch from the next frame on (see `gnomon-core`'s `live`).
+    #[pyo3(signature = (min_contrast, recover = 3, lut = None))]
+    fn watch(
+        &mut self,
+        min_contrast: f32,
+        recover: usize,
+        lut: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        let params = WatchParams {
+            min_contrast,
+            recover,
+        };
+        match &mut self.inner {
+            AnyTracker::U8(t) => watch_any(t, params, lut),
+            AnyTracker::U16(t) => watch_any(t, params, lut),
+        }
+    }
+
+    /// The pixels whose dip ended since the last call, with provisional times.
+    fn take_finished(&mut self, py: Python<'_>) -> PyResult<PyFinishedPixels> {
+        let pixels = match &mut self.inner {
+            AnyTracker::U8(t) => t.take_finished(),
+            AnyTracker::U16(t) => t.take_finished(),
+        }
+        .map_err(kernel_error)?;
+        Ok(finished_pixels(py, pixels))
+    }
+
+    /// `(lit, in_dip, finished)` pixel counts of the live watch, None before `watch`.
+    #[getter]
+    fn watch_counts(&self) -> Option<(usize, usize, usize)> {
+        match &self.inner {
+            AnyTracker::U8(t) => t.watch_counts(),
+            AnyTracker::U16(t) => t.watch_counts(),
+        }
     }
 
     #[getter]
@@ -438,8 +563,9 @@ fn triangulate<'py>(
             })
         })
         .map_err(kernel_error)?;
-    let points = Array3::from_shape_vec((h, w, 3), points)
-        .map_err(|err| pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}")))?;
+    let points = Array3::from_shape_vec((h, w, 3), points).map_err(|err| {
+        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
+    })?;
     Ok((points.into_pyarray(py), mask(py, valid, h, w)?))
 }
 
@@ -463,6 +589,7 @@ fn simd_paths() -> Vec<&'static str> {
 fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<TemporalTracker>()?;
     m.add_class::<PyShadowTimes>()?;
+    m.add_class::<PyFinishedPixels>()?;
     m.add_function(wrap_pyfunction!(triangulate, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
