@@ -45,3 +45,58 @@ def test_normalisation_undoes_exposure_drift(tmp_path) -> None:
     # unnormalised scan little (measured: RMS 0.20 vs 0.18 mm); normalising must
     # still do at least as well.
     assert acc[True].rms <= acc[False].rms
+
+
+def _day_frames(clouds: dict[int, float], n: int = 120, seed: int = 0):
+    """8-bit sRGB-ish frames of a day: direct sun rising from dawn and falling into dusk (×30 over the
+    day), a constant ambient, a sky (a quarter of the image) that brightens under a cloud, a shadow
+    band sweeping the image, noise. ``clouds``: frame → the direct sun's factor (0–1)."""
+    rng = np.random.default_rng(seed)
+    h, w = 60, 80
+    albedo = rng.uniform(0.2, 0.9, (h, w))
+    ambient = 0.03
+    for k in range(n):
+        phase = np.sin(np.pi * (k + 2) / (n + 3))
+        direct = 0.5 * phase**3 * clouds.get(k, 1.0)
+        light = albedo * (ambient + direct)
+        band = (np.arange(w) // 3) == (k % (w // 3))
+        light[:, band] = albedo[:, band] * ambient  # the moving shadow
+        light[: h // 4] = 0.4 + 0.3 * (1.0 - clouds.get(k, 1.0))  # sky: brighter under a cloud
+        dn = 255 * np.clip(light, 0, 1) ** (1 / 2.2) + rng.normal(0, 1.5, light.shape)
+        yield np.clip(np.rint(dn), 0, 255).astype(np.uint8)
+
+
+def test_normaliser_skips_clouds_not_dawn_or_dusk() -> None:
+    from gnomon.tracking import IlluminationNormalizer, decoding_lut
+
+    # clouds: one at mid-morning, one at noon, one just before dusk (the light falls fast
+    # meanwhile: after it the level is far below the one before)
+    clouds = {30: 0.9, 31: 0.5, 32: 0.3, 33: 0.6, 34: 0.95,
+              60: 0.7, 61: 0.4, 62: 0.7,
+              100: 0.8, 101: 0.4, 102: 0.3, 103: 0.5, 104: 0.85}
+    norm = IlluminationNormalizer(decoding_lut(2.2, np.uint8))
+    for frame in _day_frames(clouds):
+        norm.normalize(frame)
+    deep = {k for k, c in clouds.items() if c <= 0.7}
+    # every frame the cloud darkened by 30 % or more is skipped, and no clear frame (dawn's and
+    # dusk's fast changes, the frames after the last cloud) is
+    assert deep <= set(norm.skipped) <= set(clouds), (sorted(norm.skipped), sorted(deep))
+    # the gains follow the day: several-fold up to noon and down again by dusk (at dawn only the
+    # sky is above GAIN_FLOOR, so the first steps are the sky's)
+    gains = norm.accepted_gains
+    assert max(gains) / gains[0] > 3 and max(gains) / gains[-1] > 3
+
+
+def test_normaliser_takes_a_lasting_darkening_as_a_new_level() -> None:
+    from gnomon.tracking import IlluminationNormalizer, decoding_lut
+
+    rng = np.random.default_rng(1)
+    scene = rng.uniform(0.1, 0.8, (40, 50))
+    norm = IlluminationNormalizer(decoding_lut(1.0, np.uint8), max_run=8)
+    for k in range(40):
+        level = 1.0 if k < 10 else 0.6  # the exposure stepped down for good at frame 10
+        frame = np.clip(np.rint(255 * scene * level + rng.normal(0, 1.0, scene.shape)), 0, 255)
+        norm.normalize(frame.astype(np.uint8))
+    # the step is refused for max_run frames at most, then the new level is accepted
+    assert norm.skipped == list(range(10, 18))
+    assert norm.accepted_gains[-1] == pytest.approx(0.6, rel=0.02)

@@ -56,8 +56,10 @@ def test_refusals_are_never_silent(day) -> None:
     _, _, result, acc = day
     rejected = result.report["edges"]["centre"]["rejected"]
     print(rejected)
-    # the clouds' and the evening's darkenings are refused, and a warning says so with numbers
-    assert rejected["global_darkening"] + rejected["leave_before_enter_or_at_the_ends"] > 0
+    # the clouds' frames are skipped, the dips that are not the pole's refused, and warnings say so
+    # with numbers
+    assert any("skipped as cloud dips" in w for w in result.warnings), result.warnings
+    assert sum(rejected.values()) > 0
     assert any("refused" in w and "%" in w for w in result.warnings), result.warnings
 
 
@@ -71,9 +73,9 @@ def test_gross_errors_are_rare(day) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the illumination normaliser does not skip this day's clouds (its "
-                   "reference is the first frame after dawn, so a cloud raises the median gain): a cloud is then "
-                   "each pixel's deepest dip, refused as a global darkening")
+@pytest.mark.xfail(strict=True, reason="the clouds are skipped now, but most swept pixels also see the lamp "
+                   "post's shadow: the tracker keeps one dip and a rival's depth, so a pixel with both is "
+                   "ambiguous (or the post's dip wins) and no point measures the pole's shadow there")
 def test_coverage_of_the_day(day) -> None:
     _, _, _, acc = day
     assert acc.coverage >= 0.85, acc

@@ -126,13 +126,21 @@ def decoding_lut(gamma: float | str, dtype) -> np.ndarray:
     return linear.astype(np.float32)
 
 
-# A frame whose global gain falls below this fraction of its recent history is a dip (a cloud, a flicker).
+# A frame whose global level falls below the level its recent trend predicts by more than
+# DIP_SIGMAS times the trend's own scatter (log units; at least MIN_DIP, at most log(1/CLOUD_DROP))
+# darkened suddenly and together: a dip (a cloud, a flicker).
 CLOUD_DROP = 0.85
-GAIN_HISTORY = 9
+MIN_DIP = 0.05
+DIP_SIGMAS = 6.0
+# Accepted frames whose level steps (log per frame) give the trend, and whose residuals its scatter.
+GAIN_HISTORY = 5
+SCATTER_HISTORY = 15
 # Normalised linear irradiance is fed to the tracker as uint16 at this scale (headroom ×2).
 LINEAR_SCALE = 32768.0
 # Frame pairs at the start of a sequence used to estimate the image noise.
 NOISE_PAIRS = 4
+# Linear irradiance below which a pixel of the reference frame does not take part in the gain.
+GAIN_FLOOR = 0.02
 
 
 class IlluminationNormalizer:
@@ -140,33 +148,100 @@ class IlluminationNormalizer:
 
     ``normalize(frame)`` returns the frame as uint16 normalised linear
     irradiance (``LINEAR_SCALE`` = 1.0), or None for a frame to skip.
+
+    The reference is the last *accepted* frame (subsampled every ``step``
+    pixels), so it follows the day's slow change (dawn, the sun's course,
+    dusk) and never sits inside a cloud. A frame's gain relative to it is the
+    interquartile mean of the per-pixel log ratios over the pixels lit in the
+    reference (robust to the sweeping shadow's band and the sky brightening
+    under a cloud, and free of 8-bit quantisation, which a median rounds to
+    0). The gains chain up to the first frame.
+
+    The level a frame should have is the reference's carried forward by the
+    trend (the median per-frame step of the last ``GAIN_HISTORY`` accepted
+    frames). How far accepted frames fall from that prediction measures how
+    smooth the light is (the scatter: 1.4826 × their median absolute
+    residual); a frame below it (and below the reference) by more than
+    ``DIP_SIGMAS`` scatters per frame since the reference (at least
+    ``MIN_DIP``, at most ``log(1/CLOUD_DROP)``) darkened suddenly and
+    together — a cloud, a flicker — and is skipped. A slow change (dawn,
+    dusk) follows the trend and is divided out. A darkening that lasts
+    ``max_run`` frames is no dip but a new level (the weather changed, the
+    exposure): the frame is accepted and the trend restarts from it; so does
+    a dip whose level came back up and stopped rising below the trend (the
+    light went on changing meanwhile: dusk after a cloud).
     """
 
-    def __init__(self, lut: np.ndarray, step: int = 4):
+    def __init__(self, lut: np.ndarray, step: int = 4, max_run: int = 32):
         self.lut = lut.astype(np.float32)
         self.step = step
+        self.max_run = max_run
         self.reference: np.ndarray | None = None
-        self.gains: list[float] = []
-        self.accepted: list[float] = []
+        self.reference_log_gain = 0.0
+        self.frames = 0  # frames seen
+        self.reference_frame = -1  # index of the reference among the frames seen
+        self.steps: list[float] = []  # per-frame log-gain steps between accepted frames
+        self.residuals: list[float] = []  # accepted frames' log level minus the trend's prediction
+        self.gains: list[float] = []  # every frame's gain (relative to the first frame)
+        self.accepted_gains: list[float] = []  # the gain of each frame returned (fed to the tracker)
+        self.skipped: list[int] = []  # indices (among the frames seen) refused as dips
+        self._previous = 0.0  # the previous frame's log level
+        self._run_min = np.inf  # the lowest log level of the current run of skipped frames
 
-    def gain(self, linear: np.ndarray) -> float:
+    def log_gain(self, linear: np.ndarray) -> float:
+        """log of the frame's global level relative to the first frame (the reference's chain)."""
         sub = linear[:: self.step, :: self.step]
         if self.reference is None:
-            self.reference = sub.copy()
-            return 1.0
-        ok = self.reference > 0.02
-        return float(np.median(sub[ok] / self.reference[ok]))
+            return 0.0
+        ok = self.reference > GAIN_FLOOR
+        if np.count_nonzero(ok) < 16:
+            return self.reference_log_gain
+        ratio = np.log(np.maximum(sub[ok], 1e-6) / self.reference[ok])
+        lo, hi = np.percentile(ratio, [25.0, 75.0])
+        core = ratio[(ratio >= lo) & (ratio <= hi)]
+        return self.reference_log_gain + float(core.mean())
+
+    def tolerance(self, gap: int) -> float:
+        """How far (log) below the trend a frame ``gap`` frames after the reference may fall before
+        it is a dip (the prediction's error grows with the gap)."""
+        if len(self.residuals) < 3:
+            return -float(np.log(CLOUD_DROP))
+        scatter = 1.4826 * float(np.median(np.abs(self.residuals[-SCATTER_HISTORY:])))
+        return float(np.clip(DIP_SIGMAS * scatter * gap, MIN_DIP, -np.log(CLOUD_DROP)))
 
     def normalize(self, frame: np.ndarray) -> np.ndarray | None:
         linear = self.lut[frame]
-        g = self.gain(linear)
-        self.gains.append(g)
-        if len(self.accepted) >= 3:
-            recent = float(np.median(self.accepted[-GAIN_HISTORY:]))
-            if g < CLOUD_DROP * recent:
-                return None
-        self.accepted.append(g)
-        return np.clip(linear * (LINEAR_SCALE / max(g, 1e-6)), 0, 65535).astype(np.uint16)
+        index = self.frames
+        self.frames += 1
+        lg = self.log_gain(linear)
+        self.gains.append(float(np.exp(lg)))
+        previous, self._previous = self._previous, lg
+        if self.reference is not None:
+            gap = index - self.reference_frame
+            trend = float(np.median(self.steps[-GAIN_HISTORY:])) if self.steps else 0.0
+            expected = self.reference_log_gain + trend * gap
+            restart = gap > self.max_run
+            # (never a dip: a frame at least as bright as the reference)
+            if lg < expected - self.tolerance(gap) and lg < self.reference_log_gain and not restart:
+                # The level came back up from the dip's bottom and has stopped rising: the dip is over,
+                # it only ended below the trend (dusk went on meanwhile): a new level from here.
+                recovered = previous > self._run_min + self.tolerance(1) and lg - previous <= trend + self.tolerance(1)
+                self._run_min = min(self._run_min, lg)
+                if not recovered:
+                    self.skipped.append(index)
+                    return None
+                restart = True
+            self._run_min = np.inf
+            if restart:  # a lasting new level: start the trend again from here
+                self.steps, self.residuals = [], []
+            else:
+                self.steps.append((lg - self.reference_log_gain) / gap)
+                self.residuals.append(lg - expected)
+        self.reference = linear[:: self.step, :: self.step].copy()
+        self.reference_log_gain = lg
+        self.reference_frame = index
+        self.accepted_gains.append(float(np.exp(lg)))
+        return np.clip(linear * (LINEAR_SCALE / max(float(np.exp(lg)), 1e-6)), 0, 65535).astype(np.uint16)
 
 
 @dataclass(frozen=True)
@@ -202,7 +277,7 @@ class ShadowTracker:
                  crop: tuple[slice, slice] | None = None):
         self.settings = settings
         self.input_lut = decoding_lut(settings.gamma, dtype)
-        self.normalizer = IlluminationNormalizer(self.input_lut) if settings.normalize_illumination else None
+        self.normalizer = IlluminationNormalizer(self.input_lut, max_run=settings.max_width) if settings.normalize_illumination else None
         wide = self.normalizer is not None or np.dtype(dtype) != np.uint8
         # ``crop`` (rows, columns): track only this part of each frame; the normalisation still sees the
         # whole frame, so a tile's shadow times equal the same pixels' in an untiled pass.
@@ -222,6 +297,17 @@ class ShadowTracker:
         self._tracker.update(grey if self.crop is None else np.ascontiguousarray(grey[self.crop]))
         return True
 
+    def _gain_at_dip(self, times: ShadowTimes) -> np.ndarray:
+        """(H, W) float32: the normaliser's gain at each pixel's dip (between its two times; the
+        median gain where a pixel has no time)."""
+        assert self.normalizer is not None
+        gains = np.asarray(self.normalizer.accepted_gains, dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            centre = np.where(np.isfinite(times.enter) & np.isfinite(times.leave),
+                              0.5 * (times.enter + times.leave), np.fmax(times.enter, times.leave))
+        at = np.interp(np.nan_to_num(centre, nan=0.0), np.arange(len(gains)), gains)
+        return np.where(np.isfinite(centre), at, np.median(gains)).astype(np.float32)
+
     def finish(self) -> tuple[ShadowTimes, np.ndarray]:
         """The shadow times and the decoding table (DN fed to the kernel → linear) they were measured with."""
         if self.normalizer is None:
@@ -229,10 +315,16 @@ class ShadowTracker:
             return times, self.input_lut
         lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
         times = ShadowTimes.from_kernel(self._tracker.finish(0.0, lut))
+        # Back to each pixel's own light at the time of its dip: the levels, threshold and slopes
+        # (linear units of ``lut``) times the global gain then, so that the contrast in the input's
+        # DN and the noise at the threshold are those of the frames the dip was seen in.
+        scale = self._gain_at_dip(times)
+        for name in ("imax", "imin", "threshold", "enter_slope", "leave_slope", "rival"):
+            setattr(times, name, (getattr(times, name) * scale).astype(np.float32))
         # The contrast test stays in the input's DN: back through the encoding.
         code = lambda lin: np.searchsorted(self.input_lut, lin.astype(np.float32))  # noqa: E731
         contrast_dn = (code(times.imax / LINEAR_SCALE) - code(times.imin / LINEAR_SCALE)).astype(np.float32)
-        valid = contrast_dn >= self.settings.min_contrast
+        valid = times.valid & (contrast_dn >= self.settings.min_contrast)
         times.enter[~valid] = np.nan
         times.leave[~valid] = np.nan
         times.valid = valid

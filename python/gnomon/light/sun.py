@@ -60,6 +60,8 @@ __all__ = [
 
 # Sun directions per frame interval for the pole's plane table.
 SUBSTEPS = 8
+# A warning lists the pole checks' refusals when they refuse more than this share of the candidates.
+REFUSED_NOTE = 0.1
 
 
 def sun_world(times: Any, site: Site, heading_deg: float) -> np.ndarray:
@@ -307,7 +309,7 @@ class SunWithPole(SunLight):
                          "the pole's shadow): no points there")
         n_had = max(int(had.sum()), 1)
         refused = n_had - int((had & sound).sum())
-        if refused > 0.5 * n_had:
+        if refused > REFUSED_NOTE * n_had:
             notes.append(f"{refused} of {n_had} pixels ({100 * refused / n_had:.0f} %) were refused as not the "
                          f"pole's shadow ({', '.join(f'{k}: {v}' for k, v in rejected.items() if v)})")
         return Screening(sound, rejected, notes)
