@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import struct
 import subprocess
@@ -600,3 +601,134 @@ def test_ctrl_c_inside_an_import(monkeypatch, capsys) -> None:
     monkeypatch.setattr(sun_command, "run", interrupted_import)
     assert main(["sun", "--lat", "47", "--lon", "8", "--time", "2026-06-01T12:00Z"]) == 130
     assert capsys.readouterr().err.strip() == "gnomon: interrupted"
+
+
+@pytest.mark.slow
+def test_view_without_a_display_on_a_full_disk(tmp_path: Path) -> None:
+    """`--view` where no viewer can start (no DISPLAY): the recording still goes through Gnomon's own
+    writer, so a file-size limit that only the recording outgrows is one line naming scan.rrd, not a hang;
+    the viewer's absence is a notice, and nothing is published."""
+    # a crop that keeps a few points: every output but the recording stays small
+    log = write_tiny_capture(tmp_path / "cap", n_frames=60, width=160, height=120,
+                             extra={"output": {"crop_box": [[-10, -10, -5], [10, 10, 5]]}})
+    out = tmp_path / "out"
+    env = {k: v for k, v in ENV.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    args = [sys.executable, "-m", "gnomon", "scan", str(log), "--out", str(out), "--quiet", "--frame-stride", "1",
+            "--view"]
+    free = subprocess.run(args, env=env, capture_output=True, timeout=120)
+    assert free.returncode == 0, free.stderr.decode()
+    sizes = {p.name: p.stat().st_size for p in out.iterdir() if p.is_file()}
+    biggest_other = max(v for k, v in sizes.items() if k != "scan.rrd")
+    assert sizes["scan.rrd"] > 1.2 * biggest_other, sizes
+    limit = (sizes["scan.rrd"] + biggest_other) // 2
+    shutil.rmtree(out)
+
+    def set_limit() -> None:
+        import resource
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    t0 = time.monotonic()
+    r = subprocess.run(args, env=env, capture_output=True, timeout=120, preexec_fn=set_limit)
+    assert time.monotonic() - t0 < 60
+    lines = r.stderr.decode().strip().splitlines()
+    assert r.returncode == 2, lines
+    errors = [ln for ln in lines if ln.startswith("gnomon: error:")]
+    assert len(errors) == 1 and str(out / "scan.rrd") in errors[0] and "File too large" in errors[0], lines
+    notice = "no display: not starting the rerun viewer (recording to file only)"
+    assert [ln for ln in lines if ln not in errors] == [notice]
+    assert not out.exists()
+    no_leftovers(tmp_path)
+
+
+# A rerun gRPC server (what a viewer hosts, without a window) in a process of its own.
+GRPC_SERVER = textwrap.dedent("""
+    import sys, time
+    import rerun as rr
+    rec = rr.RecordingStream("gnomon-test-server")
+    print(rec.serve_grpc(grpc_port=int(sys.argv[1]), server_memory_limit="64MiB"), flush=True)
+    time.sleep(120)
+""")
+
+# A recording streamed to a viewer URL and written to argv[1]; exit 3 with the OSError's errno and path.
+TEE = textwrap.dedent("""
+    import sys
+    import numpy as np
+    import gnomon.recording as recording
+    recording.VIEWER_FLUSH_TIMEOUT_S = 1.0
+    path, url = sys.argv[1], sys.argv[2]
+    rng = np.random.default_rng(1)
+    rec = recording.ScanRecording(path, recording_name="tee", viewer_url=url, frame_stride=1, image_scale=1.0)
+    assert rec.viewer_spawned and rec.enabled
+    rec.log_camera(np.array([[200.0, 0, 160], [0, 200.0, 120], [0, 0, 1]]), 320, 240, np.eye(3), np.zeros(3), "mm")
+    for i in range(30):
+        rec.log_frame(i, rng.integers(0, 256, (240, 320), dtype=np.uint8))
+    xyz = rng.normal(size=(5000, 3)).astype(np.float32)
+    np.save(path + ".points.npy", xyz)
+    rec.log_points(xyz, rng.integers(0, 256, (5000, 3), dtype=np.uint8))
+    try:
+        rec.close()
+    except OSError as exc:
+        print(exc.errno, exc.filename)
+        sys.exit(3)
+""")
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("viewer", ["listening", "gone"])
+def test_recording_streamed_to_a_viewer_is_written_by_gnomon(tmp_path: Path, viewer: str) -> None:
+    """A recording that also streams to a viewer (here a rerun gRPC server, or a port nobody listens on:
+    a viewer closed by its user) is still encoded in memory and written by Gnomon: the file is complete
+    (its last message, the points, reads back bit for bit) and closing does not wait on a viewer that is
+    gone; a file-size limit is an EFBIG naming the file within seconds (rerun's own file writer would
+    wait forever)."""
+    import errno
+
+    from gnomon.review import read_points
+
+    port = _free_port()
+    server = None
+    if viewer == "listening":
+        server = subprocess.Popen([sys.executable, "-c", GRPC_SERVER, str(port)], env=ENV, stdout=subprocess.PIPE,
+                                  stderr=subprocess.DEVNULL)
+        assert server.stdout.readline().decode().strip().endswith(f":{port}/proxy")
+    url = f"rerun+http://127.0.0.1:{port}/proxy"
+    try:
+        path = tmp_path / "tee.rrd"
+        t0 = time.monotonic()
+        r = subprocess.run([sys.executable, "-c", TEE, str(path), url], env=ENV, capture_output=True, timeout=120)
+        assert r.returncode == 0, r.stderr.decode()
+        assert time.monotonic() - t0 < 60
+        ok = subprocess.run([sys.executable, "-m", "rerun", "rrd", "verify", str(path)], capture_output=True,
+                            timeout=120)
+        assert ok.returncode == 0, ok.stderr.decode()
+        xyz = np.load(str(path) + ".points.npy")
+        assert read_points(path)["xyz"].tobytes() == xyz.tobytes()
+
+        if viewer == "gone":
+            return  # (the limit below is the same write with or without a viewer on the other end)
+        limited = tmp_path / "limited.rrd"
+        limit = path.stat().st_size // 2
+
+        def set_limit() -> None:
+            import resource
+            resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+        t0 = time.monotonic()
+        r = subprocess.run([sys.executable, "-c", TEE, str(limited), url], env=ENV, capture_output=True,
+                           timeout=120, preexec_fn=set_limit)
+        assert time.monotonic() - t0 < 60
+        assert r.returncode == 3, r.stderr.decode()
+        assert r.stdout.decode().split() == [str(errno.EFBIG), str(limited)]
+        assert not limited.exists() and [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    finally:
+        if server is not None:
+            server.kill()
+            server.wait(timeout=30)

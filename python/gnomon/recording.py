@@ -82,9 +82,17 @@ The recording is written to a temporary file beside ``path`` and renamed onto
 a truncated ``.rrd`` that looks whole. Used as a context manager, an exception
 inside the block removes the temporary file.
 
+The file is always encoded in memory and written by Gnomon at close (an
+``OSError`` naming ``path`` on a full disk or past a file-size limit), never
+by rerun's own file writer, which waits forever once its disk is full; a
+viewer gets the same messages through a second sink.
+
 No network: a file recording never connects anywhere. ``spawn_viewer=True``
 starts a local viewer and streams to it over localhost, only where a display
-exists (otherwise it logs why and carries on with the file alone).
+exists (otherwise it logs why and carries on with the file alone);
+``viewer_url`` streams to a viewer (or a rerun gRPC server) already listening
+there instead. Closing waits at most :data:`VIEWER_FLUSH_TIMEOUT_S` for the
+viewer; one that is gone keeps what it received.
 """
 
 from __future__ import annotations
@@ -147,6 +155,9 @@ _PLANE_COLOURS = [
 _SHADOW_PLANE_RGBA = (255, 170, 0, 70)
 _LIGHT_RGB = (255, 220, 60)
 _EDGE_RGB = (255, 40, 40)
+
+#: How long closing a recording waits for a viewer to take the rest of it (seconds).
+VIEWER_FLUSH_TIMEOUT_S = 10.0
 
 _units_per_metre = {"mm": 1000.0, "cm": 100.0, "m": 1.0, "in": 1000.0 / 25.4, "ft": 1000.0 / 304.8}
 
@@ -236,8 +247,9 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
     """One run's rerun recording, driven by the pipeline.
 
     ``path`` the ``.rrd`` to write (None: no file). ``spawn_viewer`` also
-    stream to a local viewer (only where a display exists). With neither, the
-    recorder is disabled: every method is a no-op and rerun is never loaded.
+    stream to a local viewer (only where a display exists); ``viewer_url``
+    (``rerun+http://host:port/proxy``) to one already running. With neither,
+    the recorder is disabled: every method is a no-op and rerun is never loaded.
 
     ``frame_stride`` store every n-th frame image (index % stride == 0);
     ``image_scale`` (0, 1] downscale of stored images; ``jpeg_quality`` 1..100.
@@ -254,6 +266,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         image_scale: float = 0.5,
         jpeg_quality: int = 80,
         viewer_port: int = 9876,
+        viewer_url: str | None = None,
     ) -> None:
         if int(frame_stride) < 1:
             raise ValueError(f"frame_stride must be >= 1, got {frame_stride}")
@@ -282,8 +295,8 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         self._planes_logged = 0
         self._video_ns: np.ndarray | None = None  # frame timestamps of an AssetVideo input
 
-        want_viewer = bool(spawn_viewer)
-        if want_viewer and not display_available():
+        want_viewer = bool(spawn_viewer) or viewer_url is not None
+        if want_viewer and viewer_url is None and not display_available():
             log.warning("no display: not starting the rerun viewer (recording to file only)")
             want_viewer = False
         if self.path is None and not want_viewer:
@@ -292,30 +305,30 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         rr = _rr()
         rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
         try:
-            sinks = []
             if self.path is not None:
                 self._atomic = atomic_path(self.path)
                 self._tmp = self._atomic.__enter__()
-                if want_viewer:
-                    sinks.append(rr.FileSink(str(self._tmp)))
-                else:
-                    # Encoded in memory, written by close(): rerun's file writer dies on a full disk
-                    # or a file-size limit and every later flush then waits forever; our write fails
-                    # at once with an OSError naming the file.
-                    self._stream = rr.binary_stream(recording=rec)
+                # Encoded in memory, written by close(), also when a viewer watches: rerun's file writer
+                # dies on a full disk or a file-size limit and every later flush then waits forever;
+                # our write fails at once with an OSError naming the file.
+                self._stream = rr.binary_stream(recording=rec)
+            viewer = None
             if want_viewer:
                 try:
-                    rec.spawn(port=viewer_port, connect=False)
-                    sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{viewer_port}/proxy"))
-                    self.viewer_spawned = True
-                except Exception as exc:  # no viewer binary, port in use, ...
+                    url = viewer_url
+                    if url is None:
+                        rec.spawn(port=viewer_port, connect=False)
+                        url = f"rerun+http://127.0.0.1:{viewer_port}/proxy"
+                    viewer = rr.GrpcSink(url)
+                except Exception as exc:  # no viewer binary, port in use, a malformed URL, ...
                     log.warning("could not start the rerun viewer: %s", exc)
-            if sinks:
-                rec.set_sinks(*sinks, default_blueprint=default_blueprint())
-            elif self._stream is not None:
-                rr.send_blueprint(default_blueprint(), make_active=False, make_default=True, recording=rec)
-            else:
+            if viewer is not None:
+                # The viewer's stream beside the in-memory file: both get every message.
+                rec.set_sinks(viewer, *([self._stream] if self._stream is not None else []))
+                self.viewer_spawned = True
+            elif self._stream is None:
                 return  # viewer wanted, failed, and no file: disabled
+            rr.send_blueprint(default_blueprint(), make_active=False, make_default=True, recording=rec)
             rec.send_recording_name(recording_name)
             rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         except BaseException:
@@ -820,13 +833,20 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         self._closed = True
         rec, self._rec = self._rec, None
         try:
+            if self.viewer_spawned:
+                # The viewer gets a bounded wait: one that is slow or gone (closed by the user) is left
+                # with what it has; the file's bytes are in memory either way.
+                try:
+                    rec.flush(timeout_sec=VIEWER_FLUSH_TIMEOUT_S)
+                except Exception as exc:
+                    log.warning("the rerun viewer did not take the whole recording: %s", exc)
             if self._stream is not None:
-                data = self._stream.read(flush=True)  # in memory: no disk involved, cannot hang on one
+                # in memory: no disk involved, cannot hang on one
+                data = self._stream.read(flush=not self.viewer_spawned)
                 rec.disconnect()
                 self._write_file(data or b"", self._stream.read(flush=False) or b"")
             else:
-                rec.flush()
-                rec.disconnect()  # closes the file sink: footer written, file complete
+                rec.disconnect()
         except BaseException as exc:
             self._finish_file(exc)
             raise
