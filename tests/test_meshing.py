@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gnomon.meshing import grid_mesh
+from gnomon.meshing import grid_mesh, non_manifold_vertex_count
 from gnomon.triangulation import supported_by_neighbours
 
 
@@ -56,3 +56,51 @@ def test_isolated_spike_is_rejected_but_a_step_is_kept() -> None:
     assert not keep[2, 2]
     keep[2, 2] = True
     assert keep.all()
+
+
+# ---------------------------------------------------------------- kernel against numpy
+
+def _bumpy_surface(seed: int, h: int = 40, w: int = 50) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """float32 depth (steps, holes, single missing pixels that leave bow-ties), σ and validity."""
+    rng = np.random.default_rng(seed)
+    v, u = np.mgrid[0:h, 0:w]
+    depth = (500 + 0.5 * u + 30 * (u > w // 2) + 8 * np.sin(v / 3) + rng.normal(0, 0.3, (h, w))).astype(np.float32)
+    valid = rng.random((h, w)) > 0.12
+    valid[5:9, 5:30] = False
+    sigma = rng.uniform(0.05, 2.0, (h, w)).astype(np.float32)
+    sigma[rng.random((h, w)) < 0.02] = np.nan
+    return np.where(valid, depth, np.nan).astype(np.float32), sigma, valid
+
+
+def test_kernel_faces_and_clean_up_equal_the_numpy_definitions() -> None:
+    from gnomon.meshing import _grid_faces_numpy, _remove_small_components_numpy, remove_small_components
+
+    for seed in range(4):
+        depth, sigma, valid = _bumpy_surface(seed)
+        mesh = grid_mesh(grid_points(depth), depth, valid, 0.02, sigma=sigma)
+        np.testing.assert_array_equal(mesh.faces, _grid_faces_numpy(depth, valid, 0.02, sigma, 5.0))
+        assert non_manifold_vertex_count(mesh.faces) > 0  # the split of bow-ties is exercised
+        for min_vertices in (1, 5, 50):
+            fast = remove_small_components(mesh, min_vertices)
+            ref = _remove_small_components_numpy(mesh, min_vertices)
+            np.testing.assert_array_equal(fast.faces, ref.faces)
+            np.testing.assert_array_equal(fast.pixel_index, ref.pixel_index)
+            np.testing.assert_array_equal(fast.vertices, ref.vertices)
+            assert non_manifold_vertex_count(fast.faces) == 0
+
+
+def test_kernel_obj_text_equals_the_numpy_text() -> None:
+    from gnomon import _kernel
+    from gnomon.meshing import _decimals_for, _obj_body_numpy
+
+    rng = np.random.default_rng(3)
+    v = rng.normal(0, 1, (300, 3)) * np.array([1.0, 1e3, 1e-3])
+    v[5] = [np.nan, -0.0, np.inf]
+    v[6] = [-0.00000001, 123456.5, -999.99999]
+    f = rng.integers(0, len(v), (500, 3))
+    uv = rng.random((300, 2))
+    nrm = rng.normal(0, 1, (300, 3))
+    for t in (None, uv):
+        for n in (None, nrm):
+            fast = _kernel.obj_text(v, _decimals_for(v), t, n, f)
+            assert fast == _obj_body_numpy(v, f, t, n)

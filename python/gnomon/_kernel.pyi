@@ -169,3 +169,31 @@ def triangulate(
     the validity mask (H, W) bool. Invalid: time NaN or outside [0, N−1], a
     missing plane, ``|n·r| < min_cos``, or a point not in front of the camera.
     """
+
+
+def grid_faces(
+    valid: npt.NDArray[np.uint8],
+    depth: npt.NDArray[np.float32],
+    sigma: npt.NDArray[np.float32],
+    max_relative_jump: float,
+    sigma_factor: float = 5.0,
+) -> npt.NDArray[np.int32]:
+    """Faces (F, 3) of the grid mesh of the valid pixels of (H, W) maps, vertices
+    numbered by the valid pixels' row-major rank: :func:`gnomon.meshing.grid_mesh`'s
+    faces, element for element (float32 arithmetic)."""
+
+def clean_faces(
+    n_vertices: int, faces: npt.NDArray[np.int32], min_vertices: int
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64]]:
+    """Drop edge-connected pieces of fewer than ``min_vertices`` vertices and give each
+    fan meeting only at a vertex its own copy: the new faces (F', 3) and the input
+    vertex each new vertex copies (V',), as :func:`gnomon.meshing.remove_small_components`."""
+
+def obj_text(
+    vertices: npt.NDArray[np.float64],
+    vertex_decimals: int,
+    uv: npt.NDArray[np.float64] | None,
+    normals: npt.NDArray[np.float64] | None,
+    faces: npt.NDArray[np.int64],
+) -> bytes:
+    """The ``v``/``vt``/``vn``/``f`` lines of :func:`gnomon.meshing.write_obj`, byte for byte."""

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gnomon import _kernel
+
 __all__ = [
     "GridMesh",
     "grid_mesh",
@@ -77,6 +79,22 @@ def grid_mesh(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, max_rela
     given, become the vertices' normals.
     Faces are oriented counter-clockwise as seen from the camera.
     """
+    pixel_index = np.flatnonzero(valid)
+    vertices = points.reshape(-1, 3)[pixel_index].astype(np.float32)
+    vn = None if normals is None else normals.reshape(-1, 3)[pixel_index].astype(np.float32)
+    if depth.dtype == np.float32 and (sigma is None or sigma.dtype == np.float32):
+        # the same faces from the kernel (f32 arithmetic, as numpy does on these maps)
+        sig32 = np.zeros(depth.shape, np.float32) if sigma is None else np.ascontiguousarray(sigma)
+        faces = _kernel.grid_faces(np.ascontiguousarray(valid, dtype=np.uint8), np.ascontiguousarray(depth),
+                                   sig32, max_relative_jump, sigma_factor)
+    else:
+        faces = _grid_faces_numpy(depth, valid, max_relative_jump, sigma, sigma_factor)
+    return GridMesh(vertices, faces, pixel_index, vn)
+
+
+def _grid_faces_numpy(depth: np.ndarray, valid: np.ndarray, max_relative_jump: float,
+                      sigma: np.ndarray | None, sigma_factor: float) -> np.ndarray:
+    """grid_mesh's faces (F, 3) int32, in numpy (the kernel's ``grid_faces`` gives the same on float32 maps)."""
     h, w = valid.shape
     index = np.full((h, w), -1, dtype=np.int64)
     pixel_index = np.flatnonzero(valid)
@@ -112,10 +130,7 @@ def grid_mesh(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, max_rela
     ):
         keep = use & close(zs, ss)
         tris.append(np.stack([p[keep], q[keep], r[keep]], axis=1))
-    faces = np.concatenate(tris).astype(np.int32) if tris else np.zeros((0, 3), np.int32)
-    vertices = points.reshape(-1, 3)[pixel_index].astype(np.float32)
-    vn = None if normals is None else normals.reshape(-1, 3)[pixel_index].astype(np.float32)
-    return GridMesh(vertices, faces, pixel_index, vn)
+    return np.concatenate(tris).astype(np.int32) if tris else np.zeros((0, 3), np.int32)
 
 
 def grid_normals(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, camera_centre: np.ndarray,
@@ -320,6 +335,14 @@ def remove_small_components(mesh: GridMesh, min_vertices: int = 50) -> GridMesh:
     the vertices where kept pieces touch only at a point are split
     (:func:`split_non_manifold_vertices`): the result has no non-manifold vertex.
     """
+    faces, source = _kernel.clean_faces(len(mesh.vertices), np.ascontiguousarray(mesh.faces, dtype=np.int32),
+                                        int(min_vertices))
+    return GridMesh(mesh.vertices[source], faces, mesh.pixel_index[source],
+                    None if mesh.normals is None else mesh.normals[source])
+
+
+def _remove_small_components_numpy(mesh: GridMesh, min_vertices: int = 50) -> GridMesh:
+    """:func:`remove_small_components` in numpy and scipy (the kernel's ``clean_faces`` gives the same)."""
     f = np.asarray(mesh.faces, dtype=np.int64)
     if len(f):
         comp = face_components(f)
@@ -427,6 +450,18 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
         if uv is None:
             raise ValueError("a texture needs texture coordinates (uv)")
         parts.append(f"mtllib {target.stem}.mtl\nusemtl gnomon\n".encode())
+    if len(v) or len(f):
+        t = None if uv is None else np.ascontiguousarray(uv, dtype=np.float64).reshape(len(v), 2)
+        n = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64).reshape(len(v), 3)
+        parts.append(_kernel.obj_text(np.ascontiguousarray(v), _decimals_for(v) if len(v) else 1, t, n,
+                                      np.ascontiguousarray(f)))
+    _write_obj_material(target, texture)
+    atomic.write_bytes(target, b"".join(parts))
+
+
+def _obj_body_numpy(v: np.ndarray, f: np.ndarray, uv: np.ndarray | None, normals: np.ndarray | None) -> bytes:
+    """write_obj's v/vt/vn/f lines in numpy (the kernel's ``obj_text`` gives the same bytes)."""
+    parts: list[bytes] = []
     if len(v):
         dec = _decimals_for(v)
         parts.append(_lines(b"v", [_fixed_chars(v[:, k], dec) for k in range(3)]))
@@ -452,6 +487,13 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
         buf = _lines(b"f", [token[f[:, j]] for j in range(3)])
         arr = np.frombuffer(buf, dtype=np.uint8)
         parts.append(arr[arr != 0].tobytes())
+    return b"".join(parts)
+
+
+def _write_obj_material(target: Path, texture: np.ndarray | None) -> None:
+    """``<stem>.png`` (the texture) and ``<stem>.mtl`` beside an OBJ file."""
+    from gnomon import atomic
+
     if texture is not None:
         import cv2
 
@@ -464,7 +506,6 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
                           "# gnomon material: the scan's colours as a texture\n"
                           "newmtl gnomon\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n"
                           f"map_Kd {target.stem}.png\n")
-    atomic.write_bytes(target, b"".join(parts))
 
 
 def write_stl(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, header: str = "gnomon mesh") -> None:

@@ -6,6 +6,7 @@
 //! * the live watch ([`TemporalTracker::watch`], [`live`]): pixels whose
 //!   shadow has passed, with provisional times, as soon as it has passed;
 //! * [`triangulate`]: camera rays ∩ interpolated shadow planes;
+//! * [`grid_faces`], [`clean_faces`], [`obj_text`]: the mesh on the pixel grid, its clean-up, its OBJ text;
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
 //! Pure Rust, no Python types; every function on user data returns
@@ -14,6 +15,7 @@
 pub mod error;
 pub mod geometry;
 pub mod live;
+pub mod mesh;
 pub mod sample;
 pub mod simd;
 pub mod tracker;
@@ -22,6 +24,7 @@ pub mod triangulate;
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
 pub use live::{FinishedPixel, WatchParams};
+pub use mesh::{clean_faces, grid_faces, obj_text, CleanMesh};
 pub use sample::Sample;
 pub use simd::SimdPath;
 pub use tracker::{find_crossing, Crossing, Edge, ShadowTimes, TemporalTracker, TrackerParams};

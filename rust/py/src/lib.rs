@@ -569,6 +569,142 @@ fn triangulate<'py>(
     Ok((points.into_pyarray(py), mask(py, valid, h, w)?))
 }
 
+/// Faces (F, 3) int32 of the grid mesh of the valid pixels (see `gnomon_core::grid_faces`).
+#[pyfunction]
+#[pyo3(signature = (valid, depth, sigma, max_relative_jump, sigma_factor = 5.0))]
+fn grid_faces<'py>(
+    py: Python<'py>,
+    valid: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
+    sigma: &Bound<'py, PyAny>,
+    max_relative_jump: f32,
+    sigma_factor: f32,
+) -> PyResult<Bound<'py, PyArray2<i32>>> {
+    let valid = borrow_array::<u8, Ix2>(
+        valid,
+        "valid",
+        "uint8",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (valid.shape()[0], valid.shape()[1]);
+    let grid = [Extent::Exactly(h), Extent::Exactly(w)];
+    let depth = borrow_array::<f32, Ix2>(depth, "depth", "float32", &grid)?;
+    let sigma = borrow_array::<f32, Ix2>(sigma, "sigma", "float32", &grid)?;
+    let (valid, depth, sigma) = (valid.as_array(), depth.as_array(), sigma.as_array());
+    let faces = py
+        .detach(|| {
+            with_slice(&valid, |valid| {
+                with_slice(&depth, |depth| {
+                    with_slice(&sigma, |sigma| {
+                        gnomon_core::grid_faces(
+                            valid,
+                            depth,
+                            sigma,
+                            w.max(1),
+                            max_relative_jump,
+                            sigma_factor,
+                        )
+                    })
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    rows(py, faces)
+}
+
+fn rows<'py>(py: Python<'py>, faces: Vec<[i32; 3]>) -> PyResult<Bound<'py, PyArray2<i32>>> {
+    let n = faces.len();
+    let flat: Vec<i32> = faces.into_iter().flatten().collect();
+    image(py, flat, n, 3)
+}
+
+/// Drop small pieces and split non-manifold vertices (see `gnomon_core::clean_faces`):
+/// the new faces (F', 3) int32 and the source vertex of each new vertex (V',) int64.
+#[pyfunction]
+#[pyo3(signature = (n_vertices, faces, min_vertices))]
+fn clean_faces<'py>(
+    py: Python<'py>,
+    n_vertices: usize,
+    faces: &Bound<'py, PyAny>,
+    min_vertices: usize,
+) -> PyResult<(Bound<'py, PyArray2<i32>>, Bound<'py, PyArray1<i64>>)> {
+    let faces = borrow_array::<i32, Ix2>(
+        faces,
+        "faces",
+        "int32",
+        &[Extent::Any("F"), Extent::Exactly(3)],
+    )?;
+    let faces = faces.as_array();
+    let clean = py
+        .detach(|| {
+            with_slice(&faces, |flat| {
+                let tris: Vec<[i32; 3]> =
+                    flat.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+                gnomon_core::clean_faces(n_vertices, &tris, min_vertices)
+            })
+        })
+        .map_err(kernel_error)?;
+    Ok((rows(py, clean.faces)?, clean.source.into_pyarray(py)))
+}
+
+/// The body of a Wavefront OBJ file, bytes (see `gnomon_core::obj_text`).
+#[pyfunction]
+#[pyo3(signature = (vertices, vertex_decimals, uv, normals, faces))]
+fn obj_text<'py>(
+    py: Python<'py>,
+    vertices: &Bound<'py, PyAny>,
+    vertex_decimals: usize,
+    uv: Option<&Bound<'py, PyAny>>,
+    normals: Option<&Bound<'py, PyAny>>,
+    faces: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, pyo3::types::PyBytes>> {
+    let vertices = borrow_array::<f64, Ix2>(
+        vertices,
+        "vertices",
+        "float64",
+        &[Extent::Any("V"), Extent::Exactly(3)],
+    )?;
+    let nv = vertices.shape()[0];
+    let uv = uv
+        .map(|a| {
+            borrow_array::<f64, Ix2>(
+                a,
+                "uv",
+                "float64",
+                &[Extent::Exactly(nv), Extent::Exactly(2)],
+            )
+        })
+        .transpose()?;
+    let normals = normals
+        .map(|a| {
+            borrow_array::<f64, Ix2>(
+                a,
+                "normals",
+                "float64",
+                &[Extent::Exactly(nv), Extent::Exactly(3)],
+            )
+        })
+        .transpose()?;
+    let faces = borrow_array::<i64, Ix2>(
+        faces,
+        "faces",
+        "int64",
+        &[Extent::Any("F"), Extent::Exactly(3)],
+    )?;
+    let owned =
+        |a: &PyReadonlyArray<'py, f64, Ix2>| a.as_array().iter().copied().collect::<Vec<f64>>();
+    let (v, t, n, f) = (
+        owned(&vertices),
+        uv.as_ref().map(owned),
+        normals.as_ref().map(owned),
+        faces.as_array().iter().copied().collect::<Vec<i64>>(),
+    );
+    let text = py
+        .detach(|| gnomon_core::obj_text(&v, vertex_decimals, t.as_deref(), n.as_deref(), &f))
+        .map_err(kernel_error)?;
+    Ok(pyo3::types::PyBytes::new(py, &text))
+}
+
 /// The instruction set new trackers' hot loops run on: `"avx2"`, `"sse2"` or
 /// `"portable"` (detected at run time; `GNOMON_SIMD` may force a lower one).
 #[pyfunction]
@@ -591,6 +727,9 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyShadowTimes>()?;
     m.add_class::<PyFinishedPixels>()?;
     m.add_function(wrap_pyfunction!(triangulate, m)?)?;
+    m.add_function(wrap_pyfunction!(grid_faces, m)?)?;
+    m.add_function(wrap_pyfunction!(clean_faces, m)?)?;
+    m.add_function(wrap_pyfunction!(obj_text, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -1,0 +1,661 @@
+//! The triangle mesh on the pixel grid (docs/method.md, "Mesh") and its
+//! connectivity clean-up, as the numpy definitions in `gnomon.meshing` state
+//! them, with the same results element for element (faces, vertex order and
+//! vertex copies): [`grid_faces`] cuts the grid at depth jumps,
+//! [`clean_faces`] drops small edge-connected pieces and splits non-manifold
+//! vertices, [`obj_text`] formats a mesh as Wavefront OBJ text.
+//!
+//! Invariants: vertices are numbered by their pixel's rank among the valid
+//! pixels (row-major); faces are `[i32; 3]`, counter-clockwise seen from the
+//! camera; connectivity is "shares an edge" (two vertex indices).
+
+use rayon::prelude::*;
+
+use crate::error::KernelError;
+
+/// Rows of quads (or faces, corners, text lines) per parallel work item.
+const ROWS_PER_TASK: usize = 8;
+const ITEMS_PER_TASK: usize = 16384;
+
+/// Disjoint sets over `0..n` (path halving, union by index: the smaller root wins).
+struct UnionFind {
+    parent: Vec<u32>,
+}
+
+impl UnionFind {
+    fn new(n: usize) -> Self {
+        UnionFind {
+            parent: (0..n as u32).collect(),
+        }
+    }
+
+    fn find(&mut self, mut x: u32) -> u32 {
+        while self.parent[x as usize] != x {
+            let up = self.parent[self.parent[x as usize] as usize];
+            self.parent[x as usize] = up;
+            x = up;
+        }
+        x
+    }
+
+    fn union(&mut self, a: u32, b: u32) {
+        let (ra, rb) = (self.find(a), self.find(b));
+        if ra != rb {
+            let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+            self.parent[hi as usize] = lo;
+        }
+    }
+}
+
+/// Link the nodes of equal undirected edges: `edges` (a, b, node), vertices `< n`.
+///
+/// Edges are bucketed by their smaller vertex (a counting sort, linear time);
+/// within a bucket (a handful on a mesh) equal larger vertices are linked.
+fn union_edges(n: usize, edges: &[(u32, u32, u32)], sets: &mut UnionFind) {
+    let mut start = vec![0u32; n + 1];
+    for &(a, b, _) in edges {
+        start[a.min(b) as usize + 1] += 1;
+    }
+    for i in 0..n {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut slot = vec![(0u32, 0u32); edges.len()];
+    for &(a, b, node) in edges {
+        let lo = a.min(b) as usize;
+        slot[fill[lo] as usize] = (a.max(b), node);
+        fill[lo] += 1;
+    }
+    for lo in 0..n {
+        let bucket = &slot[start[lo] as usize..start[lo + 1] as usize];
+        for (i, &(hi, node)) in bucket.iter().enumerate() {
+            if let Some(&(_, other)) = bucket[..i].iter().find(|e| e.0 == hi) {
+                sets.union(other, node);
+            }
+        }
+    }
+}
+
+/// The faces of the grid mesh of an `H × W` grid (see `gnomon.meshing.grid_mesh`).
+///
+/// `valid`, `depth` (camera Z, f32, NaN where invalid) and `sigma` (σZ; NaN
+/// counts as 0) are row-major `H·W`. Each 2×2 block of valid pixels `a b / c d`
+/// is split along the diagonal whose ends are closer in depth (`|za − zd| ≤
+/// |zb − zc|`: `a d`; with `b` or `c` missing `a d`, with `a` or `d` missing
+/// `b c`), and a triangle is kept when its corners are finite and their depth
+/// spread is at most `max(max_relative_jump · min Z, sigma_factor · max σ)`,
+/// all in f32. Faces come in four groups, each in row-major block order:
+/// `(a, c, d)`, `(a, d, b)` (split `a d`), `(a, c, b)`, `(b, c, d)` (split `b c`).
+pub fn grid_faces(
+    valid: &[u8],
+    depth: &[f32],
+    sigma: &[f32],
+    width: usize,
+    max_relative_jump: f32,
+    sigma_factor: f32,
+) -> Result<Vec<[i32; 3]>, KernelError> {
+    let n = valid.len();
+    for (what, len) in [
+        ("depth (one per pixel)", depth.len()),
+        ("sigma (one per pixel)", sigma.len()),
+    ] {
+        if len != n {
+            return Err(KernelError::LengthMismatch {
+                what,
+                expected: n,
+                got: len,
+            });
+        }
+    }
+    if width == 0 || n % width != 0 {
+        return Err(KernelError::parameter(
+            "width",
+            format!("{width} does not divide {n} pixels"),
+        ));
+    }
+    if n > i32::MAX as usize {
+        return Err(KernelError::parameter(
+            "valid",
+            "more pixels than an int32 index holds",
+        ));
+    }
+    let height = n / width;
+    let mut index = vec![-1i32; n];
+    let mut next = 0i32;
+    for (i, &v) in valid.iter().enumerate() {
+        if v != 0 {
+            index[i] = next;
+            next += 1;
+        }
+    }
+    let z = |i: usize| if valid[i] != 0 { depth[i] } else { f32::NAN };
+    let s = |i: usize| {
+        if valid[i] == 0 {
+            0.0
+        } else {
+            let x = sigma[i];
+            if x.is_nan() {
+                0.0
+            } else if x == f32::INFINITY {
+                f32::MAX
+            } else if x == f32::NEG_INFINITY {
+                f32::MIN
+            } else {
+                x
+            }
+        }
+    };
+    let close = |p: [usize; 3]| {
+        let zs = [z(p[0]), z(p[1]), z(p[2])];
+        if !zs.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        let lo = zs[0].min(zs[1]).min(zs[2]);
+        let hi = zs[0].max(zs[1]).max(zs[2]);
+        let smax = s(p[0]).max(s(p[1])).max(s(p[2]));
+        let allowed = (max_relative_jump * lo).max(sigma_factor * smax);
+        hi - lo <= allowed
+    };
+    let rows: Vec<usize> = (0..height.saturating_sub(1)).collect();
+    let groups: Vec<[Vec<[i32; 3]>; 4]> = rows
+        .par_chunks(ROWS_PER_TASK)
+        .map(|chunk| {
+            let mut out: [Vec<[i32; 3]>; 4] = Default::default();
+            for &r in chunk {
+                for c in 0..width - 1 {
+                    let (a, b, cc, d) = (
+                        r * width + c,
+                        r * width + c + 1,
+                        (r + 1) * width + c,
+                        (r + 1) * width + c + 1,
+                    );
+                    let (za, zb, zc, zd) = (z(a), z(b), z(cc), z(d));
+                    let mut split_ad = (za - zd).abs() <= (zb - zc).abs();
+                    if zb.is_nan() || zc.is_nan() {
+                        split_ad = true;
+                    }
+                    if za.is_nan() || zd.is_nan() {
+                        split_ad = false;
+                    }
+                    let tri = |p: [usize; 3]| [index[p[0]], index[p[1]], index[p[2]]];
+                    if split_ad {
+                        if close([a, cc, d]) {
+                            out[0].push(tri([a, cc, d]));
+                        }
+                        if close([a, d, b]) {
+                            out[1].push(tri([a, d, b]));
+                        }
+                    } else {
+                        if close([a, cc, b]) {
+                            out[2].push(tri([a, cc, b]));
+                        }
+                        if close([b, cc, d]) {
+                            out[3].push(tri([b, cc, d]));
+                        }
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    let total = groups
+        .iter()
+        .map(|g| g.iter().map(Vec::len).sum::<usize>())
+        .sum();
+    let mut faces = Vec::with_capacity(total);
+    for k in 0..4 {
+        for g in &groups {
+            faces.extend_from_slice(&g[k]);
+        }
+    }
+    Ok(faces)
+}
+
+/// A cleaned mesh: `faces` into the new vertex list, `source[i]` the input
+/// vertex that new vertex `i` copies.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CleanMesh {
+    pub faces: Vec<[i32; 3]>,
+    pub source: Vec<i64>,
+}
+
+/// Drop edge-connected pieces with fewer than `min_vertices` vertices, then
+/// give every fan of triangles meeting at a vertex only there its own copy of
+/// the vertex (see `gnomon.meshing.remove_small_components` and
+/// `split_non_manifold_vertices`, whose results these are, element for element).
+///
+/// A piece's size counts each vertex once, for the piece of the last face (in
+/// order) that uses it. Vertices in no kept face are dropped; the kept ones
+/// keep their order, and the copies follow, in order of their fan's first
+/// corner (faces in order, corners in order).
+pub fn clean_faces(
+    n_vertices: usize,
+    faces: &[[i32; 3]],
+    min_vertices: usize,
+) -> Result<CleanMesh, KernelError> {
+    if faces
+        .iter()
+        .flatten()
+        .any(|&v| v < 0 || v as usize >= n_vertices)
+    {
+        return Err(KernelError::parameter(
+            "faces",
+            format!("index a vertex outside 0..{n_vertices}"),
+        ));
+    }
+    if faces.len() * 3 > u32::MAX as usize {
+        return Err(KernelError::parameter(
+            "faces",
+            "more corners than a u32 index holds",
+        ));
+    }
+    // Pieces: faces sharing an edge.
+    let mut sets = UnionFind::new(faces.len());
+    let edges: Vec<(u32, u32, u32)> = faces
+        .iter()
+        .enumerate()
+        .flat_map(|(i, f)| {
+            [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])].map(|(a, b)| (a as u32, b as u32, i as u32))
+        })
+        .collect();
+    union_edges(n_vertices, &edges, &mut sets);
+    drop(edges);
+    let root: Vec<u32> = (0..faces.len() as u32).map(|i| sets.find(i)).collect();
+    let mut vertex_piece = vec![u32::MAX; n_vertices];
+    for (f, &r) in faces.iter().zip(&root) {
+        for &v in f {
+            vertex_piece[v as usize] = r;
+        }
+    }
+    let mut size = vec![0usize; faces.len()];
+    for &r in vertex_piece.iter().filter(|&&r| r != u32::MAX) {
+        size[r as usize] += 1;
+    }
+    let kept: Vec<[i32; 3]> = faces
+        .iter()
+        .zip(&root)
+        .filter(|(_, &r)| size[r as usize] >= min_vertices)
+        .map(|(f, _)| *f)
+        .collect();
+    Ok(split_fans(n_vertices, &kept))
+}
+
+fn split_fans(n_vertices: usize, faces: &[[i32; 3]]) -> CleanMesh {
+    if faces.is_empty() {
+        return CleanMesh {
+            faces: Vec::new(),
+            source: Vec::new(),
+        };
+    }
+    let mut degree = vec![0u32; n_vertices];
+    for &v in faces.iter().flatten() {
+        degree[v as usize] += 1;
+    }
+    let mut remap = vec![-1i64; n_vertices];
+    let mut source: Vec<i64> = Vec::new();
+    for (v, &d) in degree.iter().enumerate() {
+        if d > 0 {
+            remap[v] = source.len() as i64;
+            source.push(v as i64);
+        }
+    }
+    // Interior edges (in two or more faces) at each vertex; a vertex with two or
+    // more open fans has more faces than interior edges plus one.
+    let mut interior = vec![0u32; n_vertices];
+    {
+        // edges by their smaller vertex; an edge in two or more faces is interior
+        let mut start = vec![0u32; n_vertices + 1];
+        for f in faces {
+            for (a, b) in [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])] {
+                start[a.min(b) as usize + 1] += 1;
+            }
+        }
+        for i in 0..n_vertices {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut slot = vec![0u32; 3 * faces.len()];
+        for f in faces {
+            for (a, b) in [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])] {
+                let lo = a.min(b) as usize;
+                slot[fill[lo] as usize] = a.max(b) as u32;
+                fill[lo] += 1;
+            }
+        }
+        for lo in 0..n_vertices {
+            let bucket = &slot[start[lo] as usize..start[lo + 1] as usize];
+            for (i, &hi) in bucket.iter().enumerate() {
+                let seen_before = bucket[..i].contains(&hi);
+                let count = bucket.iter().filter(|&&x| x == hi).count();
+                if !seen_before && count >= 2 {
+                    interior[lo] += 1;
+                    interior[hi as usize] += 1;
+                }
+            }
+        }
+    }
+    let flat: Vec<i32> = faces.iter().flatten().copied().collect();
+    let corners: Vec<usize> = (0..flat.len())
+        .filter(|&c| degree[flat[c] as usize] as i64 - interior[flat[c] as usize] as i64 >= 2)
+        .collect();
+    let mut new: Vec<i64> = flat.iter().map(|&v| remap[v as usize]).collect();
+    if !corners.is_empty() {
+        // Fans: corners at one vertex whose triangles share an edge at it.
+        // Directed edges (v → next, v → previous) of the corners, sorted: equal ones link corners.
+        let n = n_vertices as u64;
+        let mut sets = UnionFind::new(corners.len());
+        let mut pairs: Vec<(u64, u32)> = Vec::with_capacity(2 * corners.len());
+        for (k, &c) in corners.iter().enumerate() {
+            let (face, pos) = (c / 3, c % 3);
+            let v = flat[c] as u64;
+            let nxt = faces[face][(pos + 1) % 3] as u64;
+            let prv = faces[face][(pos + 2) % 3] as u64;
+            pairs.push((v * n + nxt, k as u32));
+            pairs.push((v * n + prv, k as u32));
+        }
+        pairs.par_sort_unstable_by_key(|p| p.0);
+        for w in pairs.windows(2) {
+            if w[0].0 == w[1].0 {
+                sets.union(w[0].1, w[1].1);
+            }
+        }
+        // Fan labels in order of their first corner; the first fan at a vertex keeps it.
+        let mut label = vec![u32::MAX; corners.len()];
+        let mut fan_vertex: Vec<i32> = Vec::new();
+        for k in 0..corners.len() {
+            let r = sets.find(k as u32) as usize;
+            if label[r] == u32::MAX {
+                label[r] = fan_vertex.len() as u32;
+                fan_vertex.push(flat[corners[k]]);
+            }
+        }
+        let mut first_fan = vec![u32::MAX; n_vertices];
+        let mut fan_new = vec![0i64; fan_vertex.len()];
+        for (f, &v) in fan_vertex.iter().enumerate() {
+            if first_fan[v as usize] == u32::MAX {
+                first_fan[v as usize] = f as u32;
+                fan_new[f] = remap[v as usize];
+            }
+        }
+        for (f, &v) in fan_vertex.iter().enumerate() {
+            if first_fan[v as usize] != f as u32 {
+                fan_new[f] = source.len() as i64;
+                source.push(v as i64);
+            }
+        }
+        for (k, &c) in corners.iter().enumerate() {
+            let r = sets.find(k as u32) as usize;
+            new[c] = fan_new[label[r] as usize];
+        }
+    }
+    let faces = new
+        .chunks_exact(3)
+        .map(|t| [t[0] as i32, t[1] as i32, t[2] as i32])
+        .collect();
+    CleanMesh { faces, source }
+}
+
+/// Decimal digits of `x` (at least one).
+fn digits(mut x: u64) -> usize {
+    let mut d = 1;
+    while x >= 10 {
+        x /= 10;
+        d += 1;
+    }
+    d
+}
+
+/// One column of fixed-point numbers: `(negative, integer part, fraction)` and its width.
+struct Column {
+    values: Vec<(bool, u64, u64)>,
+    int_digits: usize,
+    decimals: usize,
+}
+
+impl Column {
+    /// `values[i·stride + offset]`, NaN and ±inf as 0, rounded half to even at `decimals`.
+    fn new(values: &[f64], stride: usize, offset: usize, decimals: usize) -> Column {
+        let scale = 10u64.pow(decimals as u32);
+        let values: Vec<(bool, u64, u64)> = values
+            .par_iter()
+            .skip(offset)
+            .step_by(stride)
+            .map(|&x| {
+                let x = if x.is_finite() { x } else { 0.0 };
+                let q = (x.abs() * scale as f64).round_ties_even() as u64;
+                (x < 0.0 && q > 0, q / scale, q % scale)
+            })
+            .collect();
+        let top = values.iter().map(|v| v.1).max().unwrap_or(0);
+        Column {
+            int_digits: digits(top),
+            values,
+            decimals,
+        }
+    }
+
+    /// `" " + right-aligned "[-]int" in int_digits + 1 + "." + fraction`.
+    fn write(&self, i: usize, out: &mut Vec<u8>) {
+        let (neg, ip, fp) = self.values[i];
+        let text_len = digits(ip) + neg as usize;
+        out.extend(std::iter::repeat_n(b' ', self.int_digits + 1 - text_len));
+        if neg {
+            out.push(b'-');
+        }
+        write_uint(ip, out);
+        if self.decimals > 0 {
+            out.push(b'.');
+            let mut frac = [b'0'; 20];
+            let mut rest = fp;
+            for k in (0..self.decimals).rev() {
+                frac[k] = b'0' + (rest % 10) as u8;
+                rest /= 10;
+            }
+            out.extend_from_slice(&frac[..self.decimals]);
+        } else {
+            out.push(b' ');
+        }
+    }
+}
+
+fn write_uint(x: u64, out: &mut Vec<u8>) {
+    let mut buf = [0u8; 20];
+    let mut k = buf.len();
+    let mut rest = x;
+    loop {
+        k -= 1;
+        buf[k] = b'0' + (rest % 10) as u8;
+        rest /= 10;
+        if rest == 0 {
+            break;
+        }
+    }
+    out.extend_from_slice(&buf[k..]);
+}
+
+/// Lines `prefix col col …\n` for the rows of `columns`, in parallel.
+fn column_lines(prefix: &[u8], columns: &[Column], rows: usize) -> Vec<u8> {
+    let chunks: Vec<Vec<u8>> = (0..rows)
+        .collect::<Vec<_>>()
+        .par_chunks(ITEMS_PER_TASK)
+        .map(|chunk| {
+            let mut out = Vec::with_capacity(chunk.len() * 48);
+            for &i in chunk {
+                out.extend_from_slice(prefix);
+                for c in columns {
+                    out.push(b' ');
+                    c.write(i, &mut out);
+                }
+                out.push(b'\n');
+            }
+            out
+        })
+        .collect();
+    chunks.concat()
+}
+
+/// The body of a Wavefront OBJ file (see `gnomon.meshing.write_obj`, whose text this is, byte for byte).
+///
+/// `vertices` `V·3` (`v` lines, `vertex_decimals` decimals), `uv` `V·2`
+/// (`vt`, 6 decimals), `normals` `V·3` (`vn`, 5 decimals), `faces` `F·3`
+/// 0-based (`f a/a/a` with the 1-based index once per attribute present).
+/// Each column is right-aligned to its widest integer part, with one place
+/// for a minus sign; NaN and ±inf are written as 0.
+pub fn obj_text(
+    vertices: &[f64],
+    vertex_decimals: usize,
+    uv: Option<&[f64]>,
+    normals: Option<&[f64]>,
+    faces: &[i64],
+) -> Result<Vec<u8>, KernelError> {
+    if vertices.len() % 3 != 0 {
+        return Err(KernelError::parameter(
+            "vertices",
+            "expected rows of 3 coordinates",
+        ));
+    }
+    if vertex_decimals > 15 {
+        return Err(KernelError::parameter("vertex_decimals", "at most 15"));
+    }
+    let nv = vertices.len() / 3;
+    for (what, arr, k) in [
+        ("uv (2 per vertex)", uv, 2usize),
+        ("normals (3 per vertex)", normals, 3),
+    ] {
+        if let Some(a) = arr {
+            if a.len() != k * nv {
+                return Err(KernelError::LengthMismatch {
+                    what,
+                    expected: k * nv,
+                    got: a.len(),
+                });
+            }
+        }
+    }
+    if faces.len() % 3 != 0 || faces.iter().any(|&f| f < 0 || f as usize >= nv) {
+        return Err(KernelError::parameter(
+            "faces",
+            "expected rows of 3 vertex indices in range",
+        ));
+    }
+    let mut out = Vec::new();
+    if nv > 0 {
+        let cols = |a: &[f64], k: usize, dec: usize| {
+            (0..k)
+                .map(|j| Column::new(a, k, j, dec))
+                .collect::<Vec<_>>()
+        };
+        out.extend(column_lines(b"v", &cols(vertices, 3, vertex_decimals), nv));
+        if let Some(t) = uv {
+            out.extend(column_lines(b"vt", &cols(t, 2, 6), nv));
+        }
+        if let Some(nrm) = normals {
+            out.extend(column_lines(b"vn", &cols(nrm, 3, 5), nv));
+        }
+    }
+    // One token per vertex ("a", "a/a" with texture, "a//a" with normals, "a/a/a" with both), gathered by the faces.
+    let (with_uv, with_normals) = (uv.is_some(), normals.is_some());
+    let width = 3 * (digits(nv as u64) + 2);
+    let tokens: Vec<(usize, [u8; 64])> = (0..nv)
+        .into_par_iter()
+        .map(|i| {
+            let mut t = Vec::with_capacity(width);
+            let idx = i as u64 + 1;
+            write_uint(idx, &mut t);
+            if with_uv {
+                t.push(b'/');
+                write_uint(idx, &mut t);
+            }
+            if with_normals {
+                t.extend_from_slice(if with_uv { b"/" } else { b"//" });
+                write_uint(idx, &mut t);
+            }
+            let mut fixed = [0u8; 64];
+            fixed[..t.len()].copy_from_slice(&t);
+            (t.len(), fixed)
+        })
+        .collect();
+    let chunks: Vec<Vec<u8>> = faces
+        .par_chunks(3 * ITEMS_PER_TASK)
+        .map(|chunk| {
+            let mut o = Vec::with_capacity(chunk.len() / 3 * (3 * width + 5));
+            for f in chunk.chunks_exact(3) {
+                o.push(b'f');
+                for &v in f {
+                    o.push(b' ');
+                    let (len, ref bytes) = tokens[v as usize];
+                    o.extend_from_slice(&bytes[..len]);
+                }
+                o.push(b'\n');
+            }
+            o
+        })
+        .collect();
+    for c in chunks {
+        out.extend(c);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flat_grid_is_two_triangles_per_block_and_clean() {
+        let (h, w) = (4, 5);
+        let valid = vec![1u8; h * w];
+        let depth = vec![100.0f32; h * w];
+        let sigma = vec![0.1f32; h * w];
+        let faces = grid_faces(&valid, &depth, &sigma, w, 0.05, 5.0).unwrap();
+        assert_eq!(faces.len(), 2 * (h - 1) * (w - 1));
+        // equal depths split along a–d: group (a, c, d) first
+        assert_eq!(faces[0], [0, w as i32, w as i32 + 1]);
+        let clean = clean_faces(h * w, &faces, 3).unwrap();
+        assert_eq!(clean.faces, faces);
+        assert_eq!(clean.source, (0..(h * w) as i64).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn depth_jump_cuts_and_small_pieces_go() {
+        let (h, w) = (3, 6);
+        let valid = vec![1u8; h * w];
+        let depth: Vec<f32> = (0..h * w)
+            .map(|i| if i % w < 3 { 100.0 } else { 200.0 })
+            .collect();
+        let faces = grid_faces(&valid, &depth, &vec![0.0; h * w], w, 0.05, 5.0).unwrap();
+        // two 3×3 pieces of 8 faces each; no face bridges columns 2 and 3
+        assert_eq!(faces.len(), 16);
+        assert!(faces
+            .iter()
+            .all(|f| f.iter().all(|&v| v % 6 < 3) || f.iter().all(|&v| v % 6 >= 3)));
+        assert_eq!(clean_faces(h * w, &faces, 10).unwrap().faces.len(), 0);
+        assert_eq!(clean_faces(h * w, &faces, 9).unwrap().faces.len(), 16);
+    }
+
+    #[test]
+    fn bow_tie_vertex_is_split() {
+        // two triangles touching only at vertex 2
+        let faces = vec![[0, 1, 2], [2, 3, 4]];
+        let clean = clean_faces(5, &faces, 1).unwrap();
+        assert_eq!(clean.source, vec![0, 1, 2, 3, 4, 2]);
+        assert_eq!(clean.faces, vec![[0, 1, 2], [5, 3, 4]]);
+    }
+
+    #[test]
+    fn obj_columns_are_aligned_and_rounded_half_to_even() {
+        let v = [1.5, -0.25, 12.0, -0.0001, 3.0, f64::NAN];
+        let text = obj_text(&v, 2, None, None, &[0, 1, 0]).unwrap();
+        assert_eq!(
+            String::from_utf8(text).unwrap(),
+            "v  1.50 -0.25  12.00\nv  0.00  3.00   0.00\nf 1 2 1\n"
+        );
+    }
+
+    #[test]
+    fn bad_indices_are_errors() {
+        assert!(clean_faces(2, &[[0, 1, 2]], 1).is_err());
+        assert!(obj_text(&[0.0; 3], 2, None, None, &[0, 0, 1]).is_err());
+        assert!(grid_faces(&[1; 6], &[0.0; 5], &[0.0; 6], 3, 0.1, 5.0).is_err());
+    }
+}
