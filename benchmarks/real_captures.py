@@ -82,7 +82,7 @@ def plane_table(name: str, rect: tuple[float, float], pixels, exact: bool) -> di
     key = "pixel" if exact else "pixel_hint"
     return {"name": name, "point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "x_axis": [1.0, 0.0, 0.0],
             "markers": [{"id": k, "plane_xy": list(p), key: [float(u), float(v)]}
-                        for k, (p, (u, v)) in enumerate(zip(xy, pixels))]}
+                        for k, (p, (u, v)) in enumerate(zip(xy, pixels, strict=True))]}
 
 
 def run(cmd: list[str]) -> None:
@@ -211,7 +211,8 @@ def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
         rough = np.array(ROUGH[name][plane], dtype=np.float64) if name in ROUGH else scale * clicks
         crosses = np.array([cross_centre(first, r) for r in rough])
         print(f"{name} {plane}: npz clicks re-projected {np.round(clicks, 1).tolist()}; crosses found at "
-              f"{np.round(crosses, 1).tolist()} (the scaled clicks off by {np.round(np.hypot(*(crosses - rough).T), 1).tolist()} px)")
+              f"{np.round(crosses, 1).tolist()} (the scaled clicks off by "
+              f"{np.round(np.hypot(*(crosses - rough).T), 1).tolist()} px)")
         planes.append(plane_table(plane, PHONE_RECT, crosses, exact=True))
     print(f"{name}: npz intrinsics fx/fy = {ev['fx_over_fy']:.4f} (stills squashed to 1920×1080 give "
           f"{ev['squash']:.4f}); npz desk–wall angle {ev['angle_deg']:.2f}°", flush=True)
@@ -227,7 +228,8 @@ def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
     for p in rep["reference_planes"]:
         extra = f", {p['angle_to_first_deg']:.2f}° to the desk" if "angle_to_first_deg" in p else ""
         print(f"{name} {p['plane']}: crosses reprojection RMS {p['rms_px']:.2f} px{extra}")
-    masks = {p: cv2.imread(str(folder / "regions" / f"{p}_mask.png"), cv2.IMREAD_GRAYSCALE) > 0 for p in ("desk", "wall")}
+    masks = {p: cv2.imread(str(folder / "regions" / f"{p}_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
+             for p in ("desk", "wall")}
     score = score_scan(name, scan, camera, None, region_masks=masks)
     print("\n".join(score.lines()), flush=True)
 

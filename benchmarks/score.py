@@ -18,6 +18,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 from gnomon.calibration import load_camera_file
 from gnomon.camera import Pose
 
@@ -57,7 +58,8 @@ class CaptureScore:
                        f"coverage {100 * p.coverage:.1f} % of {p.swept} swept bare pixels")
         if self.object_pixels:
             out.append(f"  object coverage {100 * self.object_points / self.object_pixels:.1f} % of its "
-                       f"{self.object_pixels} pixels ({100 * self.object_swept_points / max(self.object_swept, 1):.1f} % "
+                       f"{self.object_pixels} pixels "
+                       f"({100 * self.object_swept_points / max(self.object_swept, 1):.1f} % "
                        f"of the {self.object_swept} with a shadow time)")
         what = "outside the object" if self.object_pixels else "object included: no outline"
         out.append(f"  points off both planes by > 5 mm ({what}) "
@@ -77,7 +79,8 @@ def _polygon_mask(shape, polygons, grow_px: int = 0) -> np.ndarray:
     return m.astype(bool)
 
 
-def score_scan(name: str, scan_dir: Path, camera_file: Path, extents: dict[str, tuple[float, float, float, float]] | None,
+def score_scan(name: str, scan_dir: Path, camera_file: Path,
+               extents: dict[str, tuple[float, float, float, float]] | None,
                object_outline: list | None = None, shadow_outlines: list | None = None,
                keep_out_px: int = 12, marker_keep_out_px: int = 40, false_mm: float = 5.0,
                region_masks: dict[str, np.ndarray] | None = None) -> CaptureScore:

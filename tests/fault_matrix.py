@@ -35,9 +35,9 @@ import sys
 import tempfile
 import time
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -46,7 +46,6 @@ sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "python"))
 
 from conftest import write_tiny_capture  # noqa: E402
-
 from gnomon import toml_io  # noqa: E402
 
 PY = sys.executable

@@ -59,7 +59,7 @@ def sigma_calibration(result, truth) -> list[tuple[float, float, int]]:
     sig = result.sigma[m]
     edges = np.quantile(sig, np.linspace(0, 1, 6))
     rows = []
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
         sel = (sig >= lo) & (sig <= hi)
         rows.append((float(np.sqrt(np.mean(sig[sel] ** 2))), float(np.sqrt(np.mean(err[sel] ** 2))), int(sel.sum())))
     return rows

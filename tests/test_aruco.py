@@ -43,7 +43,7 @@ def scene():
     truth = simcb.default_truth_camera(960, 720)
     sc = simmk.desk_and_wall_scene(truth)
     planes = []
-    for base, plane in zip((0, 10), sc.planes):
+    for base, plane in zip((0, 10), sc.planes, strict=True):
         ms = tuple(dataclasses.replace(m, size=SIZE, aruco_id=base + k) for k, m in enumerate(plane.markers))
         planes.append(dataclasses.replace(plane, markers=ms, charuco=BOARD if base == 0 else None))
     card = simmk.ScenePlane("card", origin=(60.0, -120.0, 0.0), x_axis=(1.0, 0.0, 0.0), y_axis=(0.0, 0.0, 1.0),
@@ -68,7 +68,8 @@ def test_plane_from_aruco_markers_without_hints(scene, name):
         sc.camera.project(plane.to_world(simmk.aruco_corners(m.ab, SIZE)) @ sc.R.T + sc.t) for m in plane.markers
     ])
     corner_err = np.linalg.norm(pp.pixels - truth_px, axis=1)
-    print(f"\n[{name} from 4 ArUco markers] normal {angle_deg(pp.normal_cam, n_true):.4f}° (σ {pp.std_normal_deg:.3f}°)  "
+    print(f"\n[{name} from 4 ArUco markers] normal {angle_deg(pp.normal_cam, n_true):.4f}° "
+          f"(σ {pp.std_normal_deg:.3f}°)  "
           f"offset {100 * (pp.offset_cam / d_true - 1):+.4f} %  corners RMS {np.sqrt(np.mean(corner_err**2)):.3f} px  "
           f"fit RMS {pp.rms_px:.3f} px")
     assert angle_deg(pp.normal_cam, n_true) < 0.2
@@ -119,7 +120,8 @@ def test_charuco_board_partly_covered(scene):
     pp = aruco.plane_pose_from_charuco(img, as_opencv(sc.camera), "DICT_5X5_50", (7, 5), 40.0, 30.0,
                                        origin=(-140.0, 100.0), source="desk.png")
     n_true, d_true = sc.plane_in_camera(desk)
-    print(f"\n[ChArUco 7x5, partly covered] {len(pp.pixels)} of 24 corners; normal {angle_deg(pp.normal_cam, n_true):.4f}°  "
+    print(f"\n[ChArUco 7x5, partly covered] {len(pp.pixels)} of 24 corners; "
+          f"normal {angle_deg(pp.normal_cam, n_true):.4f}°  "
           f"offset {100 * (pp.offset_cam / d_true - 1):+.4f} %  RMS {pp.rms_px:.3f} px")
     assert 6 <= len(pp.pixels) < 24
     assert angle_deg(pp.normal_cam, n_true) < 0.2
@@ -137,9 +139,8 @@ def test_charuco_board_partly_covered(scene):
 
 
 def _log_with(tmp_path, plane_extra):
-    from gnomon import toml_io
-
     from conftest import write_tiny_capture
+    from gnomon import toml_io
 
     log_path = write_tiny_capture(tmp_path / "cap")
     data = toml_io.load(log_path)
@@ -157,7 +158,8 @@ def test_field_log_reads_aruco_and_charuco(tmp_path):
     assert plane.aruco.dictionary == "DICT_5X5_100" and plane.aruco.size == 40.0
     assert plane.aruco.markers == ((3, (0.0, 0.0)), (9, (100.0, 50.0)))
     assert np.allclose(plane.plane_to_world(np.array([[100.0, 50.0]])), [[100.0, 50.0, 0.0]])
-    ch = {"charuco": {"dictionary": "DICT_4X4_50", "squares": [7, 5], "square": 30.0, "marker": 22.0, "origin": [-100, 80]}}
+    ch = {"charuco": {"dictionary": "DICT_4X4_50", "squares": [7, 5], "square": 30.0, "marker": 22.0,
+                      "origin": [-100, 80]}}
     plane = load_field_log(_log_with(tmp_path / "c", ch)).planes[0]
     assert plane.charuco.squares == (7, 5) and plane.charuco.origin == (-100.0, 80.0)
 

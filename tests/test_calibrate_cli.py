@@ -62,7 +62,8 @@ def error_lines(err: str) -> list[str]:
 def test_calibrate_camera_zhang(views, tmp_path, capsys):
     folder, cam, images = views
     out = tmp_path / "camera.toml"
-    code = run_cli(["calibrate", "camera", *map(str, images), str(folder / "blank.png"), "--board", "9x6", "--square", "25", "--out", str(out)])
+    code = run_cli(["calibrate", "camera", *map(str, images), str(folder / "blank.png"), "--board", "9x6", "--square",
+                    "25", "--out", str(out)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     # the warning: one line, naming the image
@@ -83,7 +84,8 @@ def test_calibrate_camera_zhang(views, tmp_path, capsys):
 def test_calibrate_camera_directory_and_tsai(views, tmp_path, capsys):
     folder, cam, images = views
     out = tmp_path / "tsai.toml"
-    code = run_cli(["calibrate", "camera", str(images[0]), "--board", "9x6", "--square", "25", "--model", "tsai", "--pixel-pitch", "0.006", "-o", str(out)])
+    code = run_cli(["calibrate", "camera", str(images[0]), "--board", "9x6", "--square", "25", "--model", "tsai",
+                    "--pixel-pitch", "0.006", "-o", str(out)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     c = calibration.load_camera_file(out)
@@ -92,7 +94,8 @@ def test_calibrate_camera_directory_and_tsai(views, tmp_path, capsys):
     assert calibration.load_calibration_info(out)["method"] == "tsai-coplanar"
     # several views, with the centre optimised too
     out2 = tmp_path / "tsai_full.toml"
-    code = run_cli(["calibrate", "camera", *map(str, images[:6]), "--board", "9x6", "--square", "25", "--model", "tsai", "--pixel-pitch", "0.006,0.006", "--full", "-o", str(out2)])
+    code = run_cli(["calibrate", "camera", *map(str, images[:6]), "--board", "9x6", "--square", "25", "--model",
+                    "tsai", "--pixel-pitch", "0.006,0.006", "--full", "-o", str(out2)])
     assert code == 0, capsys.readouterr().err
     c2 = calibration.load_camera_file(out2)
     assert calibration.load_calibration_info(out2)["method"] == "tsai-views+full"
@@ -130,12 +133,14 @@ def test_bad_images_exit_2_with_one_line(views, tmp_path, capsys):
     empty.mkdir()
     cases = [
         ([images[0], small], "small.png: image size 120x100 differs from 640x480"),
-        ([images[0], folder / "blank.png", images[1]], "only 2 of 3 images show the 9x6 chessboard (none in blank.png)"),
+        ([images[0], folder / "blank.png", images[1]],
+         "only 2 of 3 images show the 9x6 chessboard (none in blank.png)"),
         ([tmp_path / "missing.png"], "missing.png: image not found"),
         ([empty], "empty: directory holds no images"),
     ]
     for paths, message in cases:
-        code = run_cli(["calibrate", "camera", *map(str, paths), "--board", "9x6", "--square", "25", "-o", str(tmp_path / "c.toml")])
+        code = run_cli(["calibrate", "camera", *map(str, paths), "--board", "9x6", "--square", "25", "-o",
+                        str(tmp_path / "c.toml")])
         err = capsys.readouterr().err
         assert code == 2, message
         lines = error_lines(err)

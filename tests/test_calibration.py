@@ -43,7 +43,8 @@ def test_zhang_acceptance(seed):
     c = z.camera
     print(
         f"\n[zhang seed {seed}] fx {100 * (c.fx / cam.fx - 1):+.3f} %  fy {100 * (c.fy / cam.fy - 1):+.3f} %  "
-        f"principal point off by {np.hypot(c.cx - cam.cx, c.cy - cam.cy):.2f} px (σ {z.std['cx']:.2f}, {z.std['cy']:.2f})  "
+        f"principal point off by {np.hypot(c.cx - cam.cx, c.cy - cam.cy):.2f} px (σ {z.std['cx']:.2f}, "
+        f"{z.std['cy']:.2f})  "
         f"RMS {z.rms_px:.3f} px = {z.rms_px / RMS_2D:.3f} × σ√2"
     )
     assert abs(c.fx / cam.fx - 1) < 0.002
@@ -56,7 +57,7 @@ def test_zhang_acceptance(seed):
     for key, truth in (("fx", cam.fx), ("fy", cam.fy), ("cx", cam.cx), ("cy", cam.cy)):
         assert abs(getattr(c, key) - truth) < 4 * z.std[key], key
     # and the poses are the boards' (translation within 0.5 %)
-    for (R, t), pose in zip(poses, z.poses):
+    for (_, t), pose in zip(poses, z.poses, strict=True):
         assert np.linalg.norm(pose.t - t) < 0.005 * np.linalg.norm(t)
 
 
@@ -169,7 +170,8 @@ def test_calibrate_images_errors(rendered, tmp_path):
 @pytest.mark.slow
 def test_calibrate_images_tsai_single_view(rendered):
     folder, cam, truth, _ = rendered
-    cal = calibration.calibrate_images([folder / truth["views"][0]["image"]], (9, 6), 25.0, model="tsai", pixel_pitch_mm=(0.006, 0.006))
+    cal = calibration.calibrate_images([folder / truth["views"][0]["image"]], (9, 6), 25.0, model="tsai",
+                                       pixel_pitch_mm=(0.006, 0.006))
     assert cal.method == "tsai-coplanar"
     assert isinstance(cal.camera, TsaiCamera)
     # The truth is OpenCV's model with the principal point 4 px off the image

@@ -13,14 +13,13 @@ import numpy as np
 import pytest
 from PIL import Image, ImageOps
 
+from conftest import write_tiny_capture
 from gnomon import calibration, toml_io
 from gnomon.camera import OpenCVCamera, TsaiCamera
 from gnomon.errors import GnomonError
 from gnomon.fieldlog import load_field_log
 from gnomon.frames import FrameSource, decode_image_file, glob_frames, image_size
 from gnomon.simulate import chessboard as sim
-
-from conftest import write_tiny_capture
 
 COLS, ROWS, SQ = 9, 6, 25.0
 
@@ -119,7 +118,8 @@ def test_field_log_camera_file_from_stills_is_rescaled(tmp_path):
     assert log.camera.fx == pytest.approx(60.0) and log.camera.cx == pytest.approx(23.5)
     assert log.calibration["rescaled_from"] == [96, 72]
     # Another aspect ratio (a crop): refused when the field log is read, naming the frame.
-    calibration.write_camera_file(tmp_path / "cap" / "stills.toml", OpenCVCamera(96, 54, 120.0, 120.0, 47.5, 26.5, (0.0,) * 5))
+    calibration.write_camera_file(tmp_path / "cap" / "stills.toml",
+                                  OpenCVCamera(96, 54, 120.0, 120.0, 47.5, 26.5, (0.0,) * 5))
     with pytest.raises(GnomonError, match=r"frame 0 \(frame_0000\.png\) is 48x36 but the camera's 96x54 .*stills|crop"):
         load_field_log(log_path)
 

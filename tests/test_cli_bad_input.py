@@ -11,10 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import write_tiny_capture
 from gnomon import toml_io
 from gnomon.cli import main
-
-from conftest import write_tiny_capture
 
 
 def run_scan(log: Path, out: Path, capsys) -> tuple[int, str]:

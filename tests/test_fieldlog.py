@@ -75,10 +75,9 @@ def test_a_tsai_camera_file_flows_into_the_scan(tmp_path: Path) -> None:
     """A camera file from `gnomon calibrate camera --model tsai` is used by `gnomon scan`."""
     import numpy as np
 
+    from conftest import write_tiny_capture
     from gnomon.camera import TsaiCamera
     from gnomon.pipeline import ScanOptions, run_scan
-
-    from conftest import write_tiny_capture
 
     log_path = write_tiny_capture(tmp_path / "cap")
     pitch = 0.005  # mm per pixel: f = 60 px · pitch
@@ -100,11 +99,10 @@ def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
     """[[planes]] chessboard = "9x6", image = ...: the board's frame becomes the world frame."""
     import numpy as np
 
+    from conftest import write_tiny_capture
     from gnomon.cli import main
     from gnomon.frames import FrameSource
     from gnomon.scan_setup import resolve_reference_planes
-
-    from conftest import write_tiny_capture
 
     assert main(["simulate", "chessboard", "--out", str(tmp_path / "cb"), "--width", "640", "--height", "480"]) == 0
     truth = tomllib.loads((tmp_path / "cb" / "truth.toml").read_text())

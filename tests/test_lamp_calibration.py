@@ -229,7 +229,7 @@ def write_pencil_log(folder, scene: Scene, b: np.ndarray, t: np.ndarray, pencil_
             "height": scene.height,
             "sigma_px": SIGMA_PX,
             "photos": [{"base": bi.tolist(), "tip": ti.tolist(), "image": f"pencil{i + 1}.jpg"}
-                       for i, (bi, ti) in enumerate(zip(b, t))],
+                       for i, (bi, ti) in enumerate(zip(b, t, strict=True))],
             **(pencil_extra or {}),
         },
         **(extra or {}),
@@ -346,11 +346,10 @@ def test_tips_found_against_the_empty_desk(tmp_path) -> None:
 
 def test_a_missing_tip_needs_the_empty_desk(tmp_path) -> None:
     import tomllib
+    from pathlib import Path
 
     from gnomon import toml_io
     from gnomon.cli import main
-
-    from pathlib import Path
 
     src = Path(__file__).resolve().parents[1] / "field_logs" / "desk_lamp_small" / "pencil_log.toml"
     log = tomllib.loads(src.read_text())

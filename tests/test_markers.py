@@ -60,7 +60,8 @@ def test_plane_from_four_markers_acceptance(scene, name):
     det = np.max(np.linalg.norm(pp.pixels - sc.marker_pixels(plane), axis=1))
     print(
         f"\n[{name} from 4 markers] normal {angle_deg(pp.normal_cam, n_true):.4f}° (σ {pp.std_normal_deg:.3f}°)  "
-        f"offset {100 * (pp.offset_cam / d_true - 1):+.4f} % of {d_true:.0f} mm  markers ≤ {det:.3f} px off  RMS {pp.rms_px:.3f} px"
+        f"offset {100 * (pp.offset_cam / d_true - 1):+.4f} % of {d_true:.0f} mm  markers ≤ {det:.3f} px off  RMS "
+        f"{pp.rms_px:.3f} px"
     )
     assert angle_deg(pp.normal_cam, n_true) < 0.2
     assert abs(pp.offset_cam / d_true - 1) < 0.002
@@ -123,7 +124,8 @@ def test_marker_not_found_near_its_hint(scene):
     plane, ab, names = plane_args(sc, "desk")
     bad = hints["desk"].copy()
     bad[2] = [320.0, 330.0]  # bare (textured) desk, far from any marker
-    with pytest.raises(GnomonError, match=r"^frame\.png: marker 'd3': not found within 30 px of its hint \(320\.0, 330\.0\)"):
+    with pytest.raises(GnomonError, match=r"^frame\.png: marker 'd3': not found within 30 px of its hint \(320\.0, "
+                                          r"330\.0\)"):
         markers.plane_pose_from_markers(img, as_opencv(sc.camera), ab, bad, names=names, source="frame.png")
     with pytest.raises(GnomonError, match=r"marker 'd3': hint \(900\.0, 10\.0\) lies outside the 640x480 image"):
         bad[2] = [900.0, 10.0]

@@ -183,7 +183,8 @@ def test_read_variable_length_faces(tmp_path):
     "content, message",
     [
         (b"hello world\n", "not a PLY file"),
-        (b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\nend_header\n\x00\x00", "truncated"),
+        (b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\nend_header\n\x00\x00",
+         "truncated"),
         (b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty quux x\nend_header\n", "bad PLY header"),
         (b"ply\nformat foo 1.0\nend_header\n", "unsupported PLY format"),
     ],

@@ -12,11 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from conftest import write_tiny_capture
 from gnomon import publish
 from gnomon.cli import main
 from gnomon.errors import OutputError
-
-from conftest import write_tiny_capture
 
 NAMES = ("a.txt", "b.txt", "c.txt")
 
@@ -86,7 +85,7 @@ def test_a_reader_sees_all_old_or_all_new(tmp_path: Path) -> None:
                 seen = []
                 for name in NAMES:
                     try:
-                        with open(name, opener=lambda p, f: os.open(p, f, dir_fd=fd)) as fh:
+                        with open(name, opener=lambda p, f, fd=fd: os.open(p, f, dir_fd=fd)) as fh:
                             seen.append(fh.read())
                     except FileNotFoundError:
                         seen.append("gone")

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 import cv2
 import numpy as np
@@ -68,7 +68,7 @@ def rows(data, entity: str, component: str, timeline: str | None = "frame") -> l
             times = tcol.cast(pa.int64()).to_pylist()
             if pa.types.is_timestamp(tcol.type):  # ns since the epoch, UTC
                 times = [None if t is None else EPOCH + timedelta(microseconds=t / 1000) for t in times]
-        out += [(t, v) for t, v in zip(times, col) if v is not None]
+        out += [(t, v) for t, v in zip(times, col, strict=True) if v is not None]
     return sorted(out, key=lambda x: (x[0] is None, x[0] if x[0] is not None else 0))
 
 
@@ -83,8 +83,8 @@ def one(data, entity: str, component: str):
 W, H = 64, 48
 N_FRAMES = 30
 STRIDE = 10
-T0 = datetime(2024, 6, 21, 10, 0, 0, tzinfo=timezone.utc)
-EPOCH = datetime(1970, 1, 1, tzinfo=timezone.utc)
+T0 = datetime(2024, 6, 21, 10, 0, 0, tzinfo=UTC)
+EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
 K = np.array([[80.0, 0.0, 31.5], [0.0, 80.0, 23.5], [0.0, 0.0, 1.0]])
 R = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])  # looking down at z = 0
 T = np.array([-30.0, 20.0, 400.0])
@@ -168,7 +168,8 @@ def test_entities(scan):
         "/world/camera", "/world/camera/image", "/world/camera/image/edges", "/world/shadow_plane",
         "/world/planes/ground", "/world/planes/back_wall", "/world/light", "/world/points", "/world/mesh",
         "/maps/shadow_time", "/maps/depth", "/maps/sigma", "/log", "/world", "/world/camera/depth",
-        "/maps/coverage", "/metrics/coverage", "/metrics/depth_rms_mm", "/metrics/timings/total_s", "/metrics/timings/kernel_s",
+        "/maps/coverage", "/metrics/coverage", "/metrics/depth_rms_mm", "/metrics/timings/total_s",
+        "/metrics/timings/kernel_s",
     }
     assert set(data) - {"/__properties"} == expected
 
@@ -188,7 +189,8 @@ def test_recording_properties_and_blueprint(scan):
         if "ViewBlueprint:space_origin" in c.to_record_batch().schema.names
     ]
     assert sorted(v.strip("/") for v in views) == sorted(
-        ["world", "world/camera/image", "maps/shadow_time", "maps/depth", "maps/sigma", "maps/coverage", "log", "metrics"]
+        ["world", "world/camera/image", "maps/shadow_time", "maps/depth", "maps/sigma", "maps/coverage", "log",
+         "metrics"]
     )
 
 
@@ -326,7 +328,7 @@ def test_sun_arrow_moves_with_time(tmp_path):
     origins = rows(data, ENTITY["light"], "Arrows3D:origins")
     stored = rows(data, ENTITY["light"], "GnomonSun:direction")
     assert [t for t, _ in arrows] == list(range(12))
-    for (i, vec), (_, org), (_, d) in zip(arrows, origins, stored):
+    for (i, vec), (_, org), (_, d) in zip(arrows, origins, stored, strict=True):
         assert np.allclose(d, dirs[i])
         assert np.allclose(np.array(vec[0]), -10.0 * dirs[i], atol=1e-5)  # incoming light
         assert np.allclose(np.array(org[0]) + np.array(vec[0]), [1, 2, 0], atol=1e-5)  # tip at the anchor
@@ -376,7 +378,7 @@ def test_uint16_colour_and_naive_time(tmp_path):
     c = cv2.imdecode(np.frombuffer(bytes(blobs[1][1][0]), np.uint8), cv2.IMREAD_COLOR)
     assert c[..., 2].mean() > 240 and c[..., 0].mean() < 15  # decoded BGR: red stays red
     (t,) = [t for t, _ in rows(data, ENTITY["image"], "EncodedImage:blob", timeline="capture_time") if t]
-    assert t == datetime(2024, 1, 1, 12, 0, 0, tzinfo=timezone.utc)
+    assert t == datetime(2024, 1, 1, 12, 0, 0, tzinfo=UTC)
 
 
 def test_disabled_recorder_writes_nothing(tmp_path):

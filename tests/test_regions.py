@@ -14,6 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+
 from gnomon import toml_io
 from gnomon.cli import main
 from gnomon.errors import GnomonError
@@ -102,7 +103,8 @@ def test_preview_draws_the_corner_where_it_is(two_plane_small: Path, tmp_path: P
     corner = np.stack([xs, np.full_like(xs, WALL_Y), np.zeros_like(xs)], axis=1)
     R = cv2.Rodrigues(truth["rvec"])[0]
     cam = corner @ R.T + truth["tvec"]
-    pix = cv2.projectPoints(cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), truth["K"], truth["dist"])[0].reshape(-1, 2)
+    pix = cv2.projectPoints(cam.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), truth["K"], truth["dist"])[0]
+    pix = pix.reshape(-1, 2)
     d = np.min(np.hypot(u[:, None] - pix[None, :, 0], v[:, None] - pix[None, :, 1]), axis=1)
     print(np.percentile(d, [50, 95]))
     assert np.percentile(d, 95) < 1.5  # px: the line is drawn 1 px wide, antialiased
@@ -124,7 +126,7 @@ def test_init_writes_a_template_that_loads_once_filled(two_plane_small: Path, tm
     assert data["capture"]["frames"].startswith("frames/*") and data["camera"] == {"file": "camera.toml"}
     # fill in what a user would: the markers and regions (here the simulator's)
     original = tomllib.loads((two_plane_small / "field_log.toml").read_text())
-    for plane, filled in zip(data["planes"], original["planes"]):
+    for plane, filled in zip(data["planes"], original["planes"], strict=True):
         plane["markers"] = filled["markers"]
         plane["regions"] = filled["regions"]
         plane.update(point=filled["point"], normal=filled["normal"], x_axis=filled["x_axis"])

@@ -27,11 +27,10 @@ import numpy as np
 import pytest
 
 import gnomon
+from conftest import write_tiny_capture
 from gnomon import toml_io
 from gnomon.cli import main
 from gnomon.errors import GnomonError
-
-from conftest import write_tiny_capture
 
 ROOT = Path(__file__).resolve().parents[1]
 # Subprocesses import gnomon from where this process does (the checkout's

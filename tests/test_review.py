@@ -7,7 +7,7 @@ import json
 import os
 import subprocess
 import sys
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 import pytest
@@ -18,7 +18,7 @@ from gnomon.recording import ScanRecording
 from gnomon.review import compare, export_points, nearest_distances, read_points, summarize
 
 OFFLINE_ENV = {"CI": "1", "TELEMETRY_ENABLED": "false", "RERUN_TELEMETRY_ENABLED": "false"}
-T0 = datetime(2024, 9, 1, 8, 30, 0, tzinfo=timezone.utc)
+T0 = datetime(2024, 9, 1, 8, 30, 0, tzinfo=UTC)
 
 
 @pytest.fixture(autouse=True)

@@ -94,14 +94,15 @@ def test_scan_warnings_are_on_the_frame_timeline(scanned) -> None:
         assert "frame" in batch.schema.names
         frames = batch.column("frame").to_pylist()
         texts = batch.column("TextLog:text").to_pylist()
-        found += [(f, t[0]) for f, t in zip(frames, texts) if t]
+        found += [(f, t[0]) for f, t in zip(frames, texts, strict=True) if t]
     assert sorted(t for _, t in found) == sorted(report["warnings"])
     assert all(f == 0 for f, _ in found)
 
 
 def test_scan_recording_has_coverage_and_depth_under_the_camera(scanned) -> None:
-    from gnomon.preview import COVERAGE_CLASSES
     from rerun.chunk import RrdReader
+
+    from gnomon.preview import COVERAGE_CLASSES
 
     seen = {}
     for chunk in RrdReader(scanned / "scan" / "scan.rrd").stream():

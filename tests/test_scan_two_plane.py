@@ -117,10 +117,11 @@ def test_every_plane_from_its_own_markers(two_plane) -> None:
     u0, v0, u1, v1 = desk["regions"][0]
     others = region_mask((h, w), desk["regions"][1:])
     cv2.imwrite(str(root / "capture" / "desk_mask.png"), others.astype(np.uint8) * 255)
-    desk["regions"] = [{"polygon": [[u0 - 0.5, v0 - 0.5], [u1 - 0.5, v0 - 0.5], [u1 - 0.5, v1 - 0.5], [u0 - 0.5, v1 - 0.5]]}]
+    desk["regions"] = [{"polygon": [[u0 - 0.5, v0 - 0.5], [u1 - 0.5, v0 - 0.5], [u1 - 0.5, v1 - 0.5],
+                                    [u0 - 0.5, v1 - 0.5]]}]
     desk["mask"] = "desk_mask.png"
     wall.update(point=[0.0, 0.0, 0.0], normal=[0.0, 0.0, 1.0], x_axis=[1.0, 0.0, 0.0])
-    for m, pixel in zip(wall["markers"], truth["marker_pixels"][1]):
+    for m, pixel in zip(wall["markers"], truth["marker_pixels"][1], strict=True):
         del m["pixel_hint"]
         m["pixel"] = [float(x) for x in pixel]
     toml_io.dump(log, root / "capture" / "own_markers.toml")

@@ -91,7 +91,7 @@ def test_rodrigues_matches_opencv(small):
     axes = rng.normal(size=(20, 3))
     axes /= np.linalg.norm(axes, axis=1, keepdims=True)
     angles = np.concatenate([rng.uniform(0, np.pi, 16), [0.0, 1e-9, np.pi - 1e-6, np.pi]])
-    for k, a in zip(axes, angles):
+    for k, a in zip(axes, angles, strict=True):
         r = k * a
         R = geo.rotation_from_rodrigues(r)
         np.testing.assert_allclose(R, cv2.Rodrigues(r)[0], atol=1e-12)
@@ -201,8 +201,8 @@ def test_ground_truth_arrays(small):
     assert list(gt["image_size"]) == [w, h]
     sw = gt["swept"]
     assert sw.mean() > 0.85
-    e, l = gt["enter_time"][sw], gt["leave_time"][sw]
-    assert (e >= 1).all() and (l <= N - 2).all() and (e < l).all()
+    e, lv = gt["enter_time"][sw], gt["leave_time"][sw]
+    assert (e >= 1).all() and (lv <= N - 2).all() and (e < lv).all()
     # Every plane is unit, and at integer frames it brackets the pixel's times.
     for key, times in (("shadow_planes_enter", gt["enter_time"]), ("shadow_planes_leave", gt["leave_time"])):
         planes = gt[key]
@@ -224,12 +224,12 @@ def test_determinism_and_seed(tmp_path):
     c = simulate_desk_lamp(tmp_path / "c", DeskLampConfig(width=160, height=120, frames=24, seed=4))
     assert [p.name for p in a.frames] == [p.name for p in b.frames]
     assert all(p.suffix == ".jpg" for p in a.frames)
-    assert all(pa.read_bytes() == pb.read_bytes() for pa, pb in zip(a.frames, b.frames))
+    assert all(pa.read_bytes() == pb.read_bytes() for pa, pb in zip(a.frames, b.frames, strict=True))
     ga, gb = np.load(a.ground_truth), np.load(b.ground_truth)
     for key in ga.files:
         np.testing.assert_array_equal(ga[key], gb[key])
     assert a.field_log.read_text() == b.field_log.read_text()
-    assert any(pa.read_bytes() != pc.read_bytes() for pa, pc in zip(a.frames, c.frames))
+    assert any(pa.read_bytes() != pc.read_bytes() for pa, pc in zip(a.frames, c.frames, strict=True))
 
 
 @pytest.mark.slow
@@ -253,12 +253,12 @@ def test_frames_show_the_shadow_between_enter_and_leave(small, small_frames, sma
     sc = small_scene
     lit, dark = sc.lit_image(), sc.shadowed_image()
     sw = gt["swept"]
-    e, l = gt["enter_time"], gt["leave_time"]
+    e, lv = gt["enter_time"], gt["leave_time"]
     for k in (30, 48, 70):
         lin = linearise(small_frames[k], SMALL.gamma)
         level = np.divide(lin - dark, lit - dark, out=np.zeros_like(lin), where=sw)  # 1 lit, 0 dark
-        inside = sw & (e < k - 0.5) & (l > k + 0.5)
-        outside = sw & ((e > k + 3) | (l < k - 3))
+        inside = sw & (e < k - 0.5) & (lv > k + 0.5)
+        outside = sw & ((e > k + 3) | (lv < k - 3))
         assert inside.sum() > 50 and outside.sum() > 10000
         assert np.median(level[inside]) < 0.2
         assert np.median(level[outside]) == pytest.approx(1.0, abs=0.02)
@@ -495,10 +495,10 @@ def test_wide_stick_times_are_exact(wide_scene, small_scene):
     ys, xs = np.nonzero(sw)
     for i in rng.choice(len(ys), 40, replace=False):
         y, x = ys[i], xs[i]
-        e, l = sc.enter_time[y, x], sc.leave_time[y, x]
+        e, lv = sc.enter_time[y, x], sc.leave_time[y, x]
         assert sc.occlusion(e)[y, x] == pytest.approx(0.5, abs=1e-6)
-        assert sc.occlusion(l)[y, x] == pytest.approx(0.5, abs=1e-6)
-        assert sc.occlusion((e + l) / 2)[y, x] == pytest.approx(1.0, abs=1e-6)   # the umbra between
+        assert sc.occlusion(lv)[y, x] == pytest.approx(0.5, abs=1e-6)
+        assert sc.occlusion((e + lv) / 2)[y, x] == pytest.approx(1.0, abs=1e-6)   # the umbra between
     both = sw & small_scene.swept
     wide_len = (sc.leave_time - sc.enter_time)[both]
     thin_len = (small_scene.leave_time - small_scene.enter_time)[both]

@@ -158,8 +158,8 @@ def test_sun_direction_matches_pvlib(small):
 
 
 def test_world_frame_heading():
-    from gnomon.sun import R_world_from_enu as pipeline_R
     from gnomon.simulate.facade_sun import HEADING_DEG, R_world_from_enu
+    from gnomon.sun import R_world_from_enu as pipeline_R
 
     for h in (0.0, 30.0, 90.0, HEADING_DEG):
         np.testing.assert_allclose(R_world_from_enu(h), pipeline_R(h), atol=1e-15)
@@ -179,8 +179,8 @@ def test_times_and_planes(small):
     N = SMALL.frames
     sw = gt["swept"]
     assert sw.mean() > 0.1
-    e, c, l = (gt[k][sw].astype(np.float64) for k in ("enter_time", "center_time", "leave_time"))
-    assert (e >= 1).all() and (l <= N - 2).all() and (e < c).all() and (c < l).all()
+    e, c, lv = (gt[k][sw].astype(np.float64) for k in ("enter_time", "center_time", "leave_time"))
+    assert (e >= 1).all() and (lv <= N - 2).all() and (e < c).all() and (c < lv).all()
     for key in ("shadow_planes_enter", "shadow_planes_center", "shadow_planes_leave"):
         planes = gt[key]
         assert planes.shape == (N, 4)
@@ -194,7 +194,7 @@ def test_times_and_planes(small):
     np.testing.assert_allclose(gt["shadow_planes_leave"][:, 3] - gt["shadow_planes_center"][:, 3], -r, atol=1e-9)
     # At integer frames the planes bracket each point's times (the shadow moves ahead of n).
     P = gt["points_world"][sw].astype(np.float64)
-    for key, t in (("shadow_planes_enter", e), ("shadow_planes_center", c), ("shadow_planes_leave", l)):
+    for key, t in (("shadow_planes_enter", e), ("shadow_planes_center", c), ("shadow_planes_leave", lv)):
         planes = gt[key]
         k0 = np.floor(t).astype(int)
         g0 = np.einsum("ij,ij->i", planes[k0, :3], P) - planes[k0, 3]
@@ -434,13 +434,13 @@ def test_determinism_png_and_rerun(tmp_path):
     assert all(p.suffix == ".png" for p in b.frames)
     assert sorted(p.name for p in (tmp_path / "a" / "frames").iterdir()) == [p.name for p in b.frames]
     assert [p.name for p in a.frames] == [p.name for p in c.frames]  # names are the times
-    assert any(pa.read_bytes() != pc.read_bytes() for pa, pc in zip(b.frames, c.frames))
+    assert any(pa.read_bytes() != pc.read_bytes() for pa, pc in zip(b.frames, c.frames, strict=True))
     gb, gc = np.load(b.ground_truth), np.load(c.ground_truth)
     np.testing.assert_array_equal(gb["depth"], gc["depth"])
     with Image.open(b.frames[0]) as im:                             # PNG frames carry EXIF too
         assert im.getexif().get_ifd(0x8769)[0x9011] == "+01:00"
     d = simulate_facade_sun(tmp_path / "d", TINY)
-    assert all(pb.read_bytes() == pd_.read_bytes() for pb, pd_ in zip(b.frames, d.frames))
+    assert all(pb.read_bytes() == pd_.read_bytes() for pb, pd_ in zip(b.frames, d.frames, strict=True))
 
 
 @pytest.mark.slow

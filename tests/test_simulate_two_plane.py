@@ -132,7 +132,7 @@ def test_regions_are_bare_swept_and_clear_of_markers(capture):
     _, gt, log = capture
     h, w = gt["depth"].shape
     P = gt["points_world"].astype(np.float64)
-    for i, (plane, oid) in enumerate(zip(log["planes"], (DESK, WALL))):
+    for plane, oid in zip(log["planes"], (DESK, WALL), strict=True):
         regions = plane["regions"]
         assert len(regions) >= 2
         p, n, x, y = plane_frame(plane)
@@ -250,8 +250,8 @@ def test_times_and_coverage(capture):
     N = SMALL.frames
     sw = gt["swept"]
     assert sw.mean() > 0.75  # the stick is rocked ±8° (the lamp must be observable), which sweeps a little less
-    e, l = gt["enter_time"][sw], gt["leave_time"][sw]
-    assert (e >= 1).all() and (l <= N - 2).all() and (e < l).all()
+    e, lv = gt["enter_time"][sw], gt["leave_time"][sw]
+    assert (e >= 1).all() and (lv <= N - 2).all() and (e < lv).all()
     # Most of each plane is swept (the rest: marker edges, the corner, object silhouettes and
     # cast shadows, the image's far corners the shadow plane reaches only off the other plane).
     for plane_id, share in ((DESK, 0.75), (WALL, 0.85)):
@@ -284,14 +284,14 @@ def test_frames_show_the_shadow_on_both_planes(capture, frames, scene):
     sc = scene
     lit, dark = sc.lit_image(), sc.shadowed_image()
     sw = gt["swept"]
-    e, l = gt["enter_time"], gt["leave_time"]
+    e, lv = gt["enter_time"], gt["leave_time"]
     for k in (35, 55):
         lin = (frames[k] / 255.0) ** SMALL.gamma
         level = np.divide(lin - dark, lit - dark, out=np.zeros_like(lin), where=sw)
         for plane_id in (DESK, WALL):
             on = sw & (gt["object_id"] == plane_id)
-            inside = on & (e < k - 0.5) & (l > k + 0.5)
-            outside = on & ((e > k + 3) | (l < k - 3))
+            inside = on & (e < k - 0.5) & (lv > k + 0.5)
+            outside = on & ((e > k + 3) | (lv < k - 3))
             assert inside.sum() > 20 and outside.sum() > 5000
             assert np.median(level[inside]) < 0.25
             assert np.median(level[outside]) == pytest.approx(1.0, abs=0.03)
@@ -302,7 +302,7 @@ def test_determinism(tmp_path):
     cfg = TwoPlaneConfig(width=160, height=120, frames=20, seed=2)
     a = simulate_two_plane(tmp_path / "a", cfg)
     b = simulate_two_plane(tmp_path / "b", cfg)
-    assert all(pa.read_bytes() == pb.read_bytes() for pa, pb in zip(a.frames, b.frames))
+    assert all(pa.read_bytes() == pb.read_bytes() for pa, pb in zip(a.frames, b.frames, strict=True))
     assert a.field_log.read_text() == b.field_log.read_text()
     ga, gb = np.load(a.ground_truth), np.load(b.ground_truth)
     for key in ga.files:

@@ -104,7 +104,7 @@ def test_parse_time_forms():
     assert parse_time(SPA_TIME) == utc
     assert parse_time("20031017T193030Z") == utc
     assert parse_time("2003-10-17 21:30:30.000", "Europe/Paris") == utc
-    assert parse_time(dt.datetime(2003, 10, 17, 19, 30, 30, tzinfo=dt.timezone.utc)) == utc
+    assert parse_time(dt.datetime(2003, 10, 17, 19, 30, 30, tzinfo=dt.UTC)) == utc
 
 
 @pytest.mark.parametrize(

@@ -355,7 +355,7 @@ def test_a_wide_cloud_dip_and_the_shadow_dip():
     cloud = np.where(np.abs(t - 70) < 30, 35 * (1 + np.cos(np.pi * (t - 70) / 30)), 0)
     enter = rng.uniform(130, 140, pixels)
     leave = enter + rng.uniform(5, 12, pixels)
-    shadow = np.stack([dips_profile(n, [(e, l, SHADOW)]) for e, l in zip(enter, leave)], axis=1)
+    shadow = np.stack([dips_profile(n, [(e, lv, SHADOW)]) for e, lv in zip(enter, leave, strict=True)], axis=1)
     values = shadow - cloud + rng.normal(0, 1.0, (n, pixels))
     times = track_both(values)
     assert times.valid.all() and not times.ambiguous.any()

@@ -12,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+
 from conftest import write_tiny_capture
 from gnomon.accuracy import FALSE_SIGMAS, GROSS_FRACTION, depth_accuracy
 from gnomon.cli import main

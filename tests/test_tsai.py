@@ -66,7 +66,8 @@ def report(label, res, e):
     """Measured figures, shown with `pytest -s -k acceptance`."""
     print(
         f"\n[tsai {label}] f {100 * e['f']:.3f} %  kappa1 {100 * e['kappa1']:.2f} %  R {e['R_deg']:.4f}°  "
-        f"T {100 * e['T']:.3f} %  sx {res.camera.sx:.5f}  RMS {res.rms_px:.3f} px (noise σ√2 = {NOISE * np.sqrt(2):.3f})"
+        f"T {100 * e['T']:.3f} %  sx {res.camera.sx:.5f}  RMS {res.rms_px:.3f} px "
+        f"(noise σ√2 = {NOISE * np.sqrt(2):.3f})"
     )
 
 
@@ -207,7 +208,8 @@ def test_calibrate_dispatches_and_handles_a_plane_in_any_position():
     assert res.method == "coplanar"
     assert np.allclose(res.pose.R, R @ Q.T, atol=1e-8)
     assert np.allclose(res.pose.t, t - R @ Q.T @ o, atol=1e-6)
-    assert tsai.calibrate(grid(z=-60.0), observe(cam, grid(z=-60.0), R, t, noise=0), W, H, PITCH, PITCH).method == "noncoplanar"
+    res = tsai.calibrate(grid(z=-60.0), observe(cam, grid(z=-60.0), R, t, noise=0), W, H, PITCH, PITCH)
+    assert res.method == "noncoplanar"
 
 
 def test_full_optimisation_finds_an_off_centre_principal_point():
@@ -302,11 +304,12 @@ def test_views_and_tsai_vs_zhang_on_the_same_views_acceptance():
     poses = random_poses(truth, 14, 10, 15.0, 12, seed=1, fill=(0.5, 0.85), tilt_deg=(20, 50), margin_px=5)
     objs, pixs = synthetic_corners(truth, 14, 10, 15.0, poses, noise_px=NOISE, seed=1)
     z = calibration.calibrate_zhang(objs, pixs, (W, H))
-    r = tsai.calibrate_views(list(zip(objs, pixs)), W, H, PITCH, PITCH)
-    rf = tsai.calibrate_views(list(zip(objs, pixs)), W, H, PITCH, PITCH, full=True)
+    r = tsai.calibrate_views(list(zip(objs, pixs, strict=True)), W, H, PITCH, PITCH)
+    rf = tsai.calibrate_views(list(zip(objs, pixs, strict=True)), W, H, PITCH, PITCH, full=True)
     f_zhang = z.camera.fy * PITCH
     print(
-        f"\n[tsai vs zhang, 12 views] f: zhang {100 * (f_zhang / 4 - 1):+.3f} %, tsai {100 * (r.camera.f_mm / 4 - 1):+.3f} %, "
+        f"\n[tsai vs zhang, 12 views] f: zhang {100 * (f_zhang / 4 - 1):+.3f} %, "
+        f"tsai {100 * (r.camera.f_mm / 4 - 1):+.3f} %, "
         f"tsai full {100 * (rf.camera.f_mm / 4 - 1):+.3f} %; kappa1 tsai {100 * (r.camera.kappa1 / 4e-3 - 1):+.2f} %; "
         f"RMS zhang {z.rms_px:.3f} tsai {r.rms_px:.3f} full {rf.rms_px:.3f} px; "
         f"full centre error ({rf.camera.cx - truth.cx:+.2f}, {rf.camera.cy - truth.cy:+.2f}) px"

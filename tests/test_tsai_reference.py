@@ -23,11 +23,12 @@ import tracemalloc
 
 import numpy as np
 import pytest
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+
 from gnomon import cli, tsai
 from gnomon.errors import GnomonError
 from gnomon.simulate.chessboard import TruthTsai, board_points
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 W, H = 1280, 960
 PITCH = 0.00375
@@ -133,7 +134,7 @@ def test_two_stage_matches_the_xy_reference(tilt):
         f"reference x+y {ref_rms[0]:.4f} / {ref_rms[1]:.3f} / {100 * ref_rms[2]:.2f} %;  "
         f"y only {y_rms[0]:.4f} / {y_rms[1]:.3f} / {100 * y_rms[2]:.2f} %;  median σf {np.median(sig_f):.4f} mm"
     )
-    for g_, r_ in zip(g_rms, ref_rms):
+    for g_, r_ in zip(g_rms, ref_rms, strict=True):
         assert g_ <= 1.15 * r_
     # The reported σ of f (marginal over the pose) is the size of the actual error.
     assert 0.6 < g_rms[0] / np.median(sig_f) < 1.5
@@ -204,7 +205,8 @@ def test_memory_grows_linearly_with_the_point_count():
 
     p50, _ = run(50)
     p100, dt = run(100)
-    print(f"\n[tsai size] 2,500 points: {p50 / 1e6:.1f} MB; 10,000 points: {p100 / 1e6:.1f} MB, {dt * 1e3:.0f} ms (under tracemalloc)")
+    print(f"\n[tsai size] 2,500 points: {p50 / 1e6:.1f} MB; 10,000 points: {p100 / 1e6:.1f} MB, {dt * 1e3:.0f} ms "
+          "(under tracemalloc)")
     assert p100 < 100e6
     assert p100 < 6 * p50  # 4× the points: linear, not quadratic (16×)
 
@@ -237,7 +239,8 @@ def test_a_nearly_collinear_strip_is_one_clear_line():
     with pytest.raises(GnomonError) as exc:
         tsai.calibrate(world, observe(world, R, t, 0), W, H, PITCH, PITCH, where="strip.png")
     msg = str(exc.value)
-    assert "\n" not in msg and msg.startswith("strip.png: ") and "nearly collinear" in msg and "as wide as it is long" in msg
+    assert "\n" not in msg and msg.startswith("strip.png: ")
+    assert "nearly collinear" in msg and "as wide as it is long" in msg
 
 
 def test_a_target_behind_the_camera_is_one_clear_line():
@@ -276,7 +279,8 @@ def test_cli_calibrates_points_and_writes_a_camera_file(tmp_path, capsys):
     world, R, t = scene(60.0)
     pts = _write_points(tmp_path / "view.txt", world, observe(world, R, t, 0))
     out = tmp_path / "cam.toml"
-    code, stdout, err = _cli(["calibrate", "points", pts, "--size", "1280x960", "--pixel-pitch", "0.00375", "-o", str(out)], capsys)
+    code, stdout, err = _cli(["calibrate", "points", pts, "--size", "1280x960", "--pixel-pitch", "0.00375", "-o",
+                              str(out)], capsys)
     assert code == 0, err
     cam = load_camera_file(out)
     info = load_calibration_info(out)
@@ -314,12 +318,14 @@ def _bad_line(tmp_path):
 
 @pytest.mark.parametrize(
     "make,needle",
-    [(_edge_on, "edge-on"), (_strip, "nearly collinear"), (_behind, "behind the camera"), (_bad_line, "bad.txt:3: expected five numbers")],
+    [(_edge_on, "edge-on"), (_strip, "nearly collinear"), (_behind, "behind the camera"),
+     (_bad_line, "bad.txt:3: expected five numbers")],
 )
 def test_cli_degenerate_targets_exit_2_with_one_line(tmp_path, capsys, make, needle):
     pts = make(tmp_path)
     out = tmp_path / "cam.toml"
-    code, _, err = _cli(["calibrate", "points", pts, "--size", "1280x960", "--pixel-pitch", "0.00375", "-o", str(out)], capsys)
+    code, _, err = _cli(["calibrate", "points", pts, "--size", "1280x960", "--pixel-pitch", "0.00375", "-o",
+                         str(out)], capsys)
     assert code == 2
     assert len(err) == 1 and err[0].startswith("gnomon: error: ") and needle in err[0], err
     assert not out.exists()

@@ -55,7 +55,8 @@ def test_video_capture_is_recorded_as_a_video(tiny_capture: Path) -> None:
                 blobs += [b for b in batch.column("AssetVideo:blob").to_pylist() if b]
             if "VideoFrameReference:timestamp" in names:
                 refs += [(f, t[0]) for f, t in zip(batch.column("frame").to_pylist(),
-                                                    batch.column("VideoFrameReference:timestamp").to_pylist()) if t]
+                                                    batch.column("VideoFrameReference:timestamp").to_pylist(),
+                                                    strict=True) if t]
             jpegs += "EncodedImage:blob" in names
         if chunk.entity_path == "/world/camera" and "Pinhole:resolution" in names:
             resolution = batch.column("Pinhole:resolution").to_pylist()[0][0]

@@ -82,7 +82,8 @@ def _parameters() -> cv2.aruco.DetectorParameters:
 
 def _sample(img: np.ndarray, pts: np.ndarray) -> np.ndarray:
     p = pts.astype(np.float32).reshape(-1, 2)
-    out = cv2.remap(img, p[:, 0].reshape(1, -1), p[:, 1].reshape(1, -1), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    out = cv2.remap(img, p[:, 0].reshape(1, -1), p[:, 1].reshape(1, -1), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
     return out.ravel().astype(np.float64)
 
 
@@ -159,7 +160,8 @@ class ArucoDetection:
     duplicates: tuple[int, ...] = ()
 
 
-def detect_aruco(image: np.ndarray, dict_name: str, *, where: str = "image", linear: np.ndarray | None = None) -> ArucoDetection:
+def detect_aruco(image: np.ndarray, dict_name: str, *, where: str = "image",
+                 linear: np.ndarray | None = None) -> ArucoDetection:
     """Find every marker of the dictionary ``dict_name`` in ``image`` (grey or BGR), with sub-pixel corners.
 
     ``linear``: the same image in linear intensity (any float scale), where
@@ -179,7 +181,7 @@ def detect_aruco(image: np.ndarray, dict_name: str, *, where: str = "image", lin
     dup: list[int] = []
     if ids is not None:
         lin = None if linear is None else np.asarray(linear, dtype=np.float32)
-        for c, i in zip(corners, np.asarray(ids).ravel()):
+        for c, i in zip(corners, np.asarray(ids).ravel(), strict=True):
             k = int(i)
             if k in found:
                 dup.append(k)
@@ -231,7 +233,8 @@ def plane_pose_from_aruco(
     found = detect_aruco(image, dict_name, where=source, linear=linear)
     dup = [i for i in found.duplicates if i in markers]
     if dup:
-        raise GnomonError(f"{source}: ArUco marker id {dup[0]} appears twice in the image; each printed marker needs its own id")
+        raise GnomonError(f"{source}: ArUco marker id {dup[0]} appears twice in the image; "
+                          "each printed marker needs its own id")
     ids = [i for i in markers if i in found.corners]
     missing = [i for i in markers if i not in found.corners]
     if len(ids) < min_markers:
@@ -248,7 +251,8 @@ def plane_pose_from_aruco(
     names = [f"id {i} corner {k}" for i in ids for k in range(4)]
     res = fit_plane_pose(camera, obj, pix, names=names, method="aruco", source=source)
     if missing:
-        w = f"{source}: ArUco markers not found: ids {', '.join(map(str, missing))} (the plane's pose uses the {len(ids)} others)"
+        w = (f"{source}: ArUco markers not found: ids {', '.join(map(str, missing))} "
+             f"(the plane's pose uses the {len(ids)} others)")
         res = replace(res, warnings=res.warnings + (w,))
     return res
 
@@ -273,18 +277,20 @@ def plane_pose_from_charuco(
     board's top-left corner lies on the plane. The board's inner corners that
     OpenCV interpolates from the markers it sees are the points: a board
     partly covered by an object still gives a plane while ``min_corners``
-    corners remain. ``to_world`` as for :func:`plane_pose_from_aruco`. A corner whose residual is over 4× the median (and 1 px)
-    — pulled off by an occluding edge — is left out once, with a warning.
+    corners remain. ``to_world`` as for :func:`plane_pose_from_aruco`. A corner whose residual is
+    over 4× the median (and 1 px) — pulled off by an occluding edge — is left out once, with a warning.
     """
     cols, rows = (int(x) for x in squares)
     if cols < 2 or rows < 2:
         raise GnomonError(f"{source}: a ChArUco board needs at least 2x2 squares, got {cols}x{rows}")
     if not (square > 0 and 0 < marker < square):
-        raise GnomonError(f"{source}: ChArUco sizes: need square > marker > 0, got square {square!r}, marker {marker!r}")
+        raise GnomonError(f"{source}: ChArUco sizes: need square > marker > 0, "
+                          f"got square {square!r}, marker {marker!r}")
     d = dictionary(dict_name, source)
     n_markers = (cols * rows) // 2
     if n_markers > d.bytesList.shape[0]:
-        raise GnomonError(f"{source}: a {cols}x{rows} ChArUco board needs {n_markers} markers; {dict_name} has {d.bytesList.shape[0]}")
+        raise GnomonError(f"{source}: a {cols}x{rows} ChArUco board needs {n_markers} markers; {dict_name} has "
+                          f"{d.bytesList.shape[0]}")
     board = cv2.aruco.CharucoBoard((cols, rows), float(square), float(marker), d)
     cd = cv2.aruco.CharucoDetector(board)
     ch_corners, ch_ids, _, _ = cd.detectBoard(_grey_u8(image))
@@ -308,7 +314,9 @@ def plane_pose_from_charuco(
     bad = err > max(1.0, 4.0 * float(np.median(err)))
     if bad.any() and (~bad).sum() >= min_corners:
         keep = ~bad
-        dropped = ", ".join(f"{n} ({e:.1f} px)" for n, e, b in zip(names, err, bad) if b)
-        res = fit_plane_pose(camera, obj[keep], pix[keep], names=[n for n, k in zip(names, keep) if k], method="charuco", source=source)
-        res = replace(res, warnings=res.warnings + (f"{source}: ChArUco corners off the board's fit, left out: {dropped}",))
+        dropped = ", ".join(f"{n} ({e:.1f} px)" for n, e, b in zip(names, err, bad, strict=True) if b)
+        res = fit_plane_pose(camera, obj[keep], pix[keep], names=[n for n, k in zip(names, keep, strict=True) if k],
+                             method="charuco", source=source)
+        res = replace(res, warnings=res.warnings + (f"{source}: ChArUco corners off the board's fit, left out: "
+                                                    f"{dropped}",))
     return res

@@ -396,7 +396,8 @@ def run_merge_job(job: MergeJob, a: JobResult, b: JobResult) -> JobResult:
             raise GnomonError(f"not merged: scan {bad[0].name!r} failed")
         files = MERGE_FILES + (("merge.rrd",) if job.rrd else ())
         up_to_date = (a.status == b.status == "skipped" and all((job.out / f).is_file() for f in files)
-                      and _newer_than(job.out / "report.json", Path(a.out) / "report.json", Path(b.out) / "report.json"))
+                      and _newer_than(job.out / "report.json", Path(a.out) / "report.json",
+                                      Path(b.out) / "report.json"))
         if up_to_date:
             result.status = "skipped"
             report = json.loads((job.out / "report.json").read_text())

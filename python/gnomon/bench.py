@@ -60,7 +60,7 @@ def synthetic_frames(height: int, width: int, count: int = DISTINCT, seed: int =
     return frames
 
 
-def _feed(tracker, frames: list[np.ndarray], n: int, start: int = 0) -> "Throughput":
+def _feed(tracker, frames: list[np.ndarray], n: int, start: int = 0) -> Throughput:
     """Feed ``n`` frames of the cycle (from ``start``), timed."""
     t0, c0 = time.perf_counter(), time.process_time()
     for i in range(start, start + n):
@@ -203,7 +203,8 @@ def format_table(r: BenchResult) -> str:
             )
         ),
         f"  speed-up {r.speedup:.1f}x (frames/s), "
-        f"{(r.numpy.cpu_seconds / r.numpy.frames) / (r.kernel.cpu_seconds / r.kernel.frames):.1f}x (CPU time per frame)",
+        f"{(r.numpy.cpu_seconds / r.numpy.frames) / (r.kernel.cpu_seconds / r.kernel.frames):.1f}x "
+        "(CPU time per frame)",
     ]
     if r.memory_mib:
         mem = ", ".join(f"{n} frames {mib:.0f} MiB" for n, mib in sorted(r.memory_mib.items()))

@@ -54,9 +54,10 @@ The field log's inline ``[camera]`` uses the same keys.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -137,7 +138,8 @@ def fit_camera_to_frames(
     if abs(sw / sh - 1.0) > 0.01:
         raise GnomonError(
             f"{frame_name} is {width}x{height} but the camera's {w0}x{h0} ({where}) has another aspect ratio "
-            f"({w0 / h0:.3f} vs {width / height:.3f}): the frames are a crop of the sensor, which rescaling cannot fix; "
+            f"({w0 / h0:.3f} vs {width / height:.3f}): the frames are a crop of the sensor, which rescaling cannot "
+            "fix; "
             f"calibrate the camera from frames of the capture itself"
         )
     if isinstance(camera, OpenCVCamera):
@@ -308,15 +310,16 @@ def _zhang_once(objs, pixs, size, flags):
         cy=float(K[1, 2]),
         dist=tuple(float(x) for x in dist),
     )
-    poses = [Pose.from_rvec_tvec(r, t) for r, t in zip(rvecs, tvecs)]
+    poses = [Pose.from_rvec_tvec(r, t) for r, t in zip(rvecs, tvecs, strict=True)]
     # Our own per-view RMS in float64 (length of the 2D residual, as OpenCV's).
     per_view = []
-    for obj, pix, pose in zip(objs, pixs, poses):
-        res = np.asarray(pix, dtype=np.float64).reshape(-1, 2) - cam.project(pose.world_to_camera(np.asarray(obj, dtype=np.float64)))
+    for obj, pix, pose in zip(objs, pixs, poses, strict=True):
+        projected = cam.project(pose.world_to_camera(np.asarray(obj, dtype=np.float64)))
+        res = np.asarray(pix, dtype=np.float64).reshape(-1, 2) - projected
         per_view.append(float(np.sqrt(np.mean(np.sum(res * res, axis=1)))))
     std_i = np.asarray(std_i, dtype=np.float64).ravel()
     std = {k: float(std_i[i]) for i, k in enumerate(OPENCV_STD_NAMES)}
-    all_sq = sum(r * r * len(o) for r, o in zip(per_view, objs))
+    all_sq = sum(r * r * len(o) for r, o in zip(per_view, objs, strict=True))
     total = float(np.sqrt(all_sq / sum(len(o) for o in objs)))
     return cam, total, per_view, poses, std
 
@@ -350,7 +353,8 @@ def calibrate_zhang(
     rejected: list[tuple[str, float]] = []
     warns: list[str] = []
     while True:
-        cam, rms, per_view, poses, std = _zhang_once([object_points[i] for i in keep], [image_points[i] for i in keep], image_size, flags)
+        cam, rms, per_view, poses, std = _zhang_once([object_points[i] for i in keep],
+                                                     [image_points[i] for i in keep], image_size, flags)
         med = float(np.median(per_view))
         limit = max(reject_factor * med, reject_floor_px)
         worst = int(np.argmax(per_view))
@@ -440,7 +444,8 @@ def detect_in_images(
         if size is None:
             size, first = (w, h), str(p)
         elif (w, h) != size:
-            raise GnomonError(f"{p}: image size {w}x{h} differs from {size[0]}x{size[1]} of {first}; all views must come from one camera setting")
+            raise GnomonError(f"{p}: image size {w}x{h} differs from {size[0]}x{size[1]} of {first}; all views must "
+                              "come from one camera setting")
         c = detect_chessboard(img, board)
         if c is None:
             skipped.append(str(p))
@@ -482,7 +487,8 @@ def calibrate_images(
     if not square > 0:
         raise GnomonError(f"square {square}: the square's side must be positive")
     if model == "tsai" and pixel_pitch_mm is None:
-        raise GnomonError("--model tsai needs the sensor's pixel pitch (--pixel-pitch DX[,DY] in mm, e.g. 0.0028): Tsai's method takes dx, dy a priori")
+        raise GnomonError("--model tsai needs the sensor's pixel pitch (--pixel-pitch DX[,DY] in mm, e.g. 0.0028): "
+                          "Tsai's method takes dx, dy a priori")
     names, corners, size, skipped, warns = detect_in_images(paths, board, progress=progress)
     obj = board_points(board[0], board[1], square)
     if model == "zhang":
@@ -612,7 +618,8 @@ def _number(table: Mapping[str, Any], key: str, where: str, *, positive: bool = 
     return v
 
 
-def camera_from_table(table: Mapping[str, Any], where: str, *, extra_keys: Sequence[str] = ()) -> OpenCVCamera | TsaiCamera:
+def camera_from_table(table: Mapping[str, Any], where: str, *,
+                      extra_keys: Sequence[str] = ()) -> OpenCVCamera | TsaiCamera:
     """Build the camera from a camera file's keys or a field log's inline [camera].
 
     ``where`` names the file/table in messages (e.g. ``"scan.toml: [camera]"``).

@@ -104,7 +104,7 @@ class Pose:
     t: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
-    def from_rvec_tvec(cls, rvec: np.ndarray, tvec: np.ndarray) -> "Pose":
+    def from_rvec_tvec(cls, rvec: np.ndarray, tvec: np.ndarray) -> Pose:
         R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3))
         return cls(R=R, t=np.asarray(tvec, dtype=np.float64).reshape(3))
 

@@ -102,7 +102,7 @@ def _polyline(img: np.ndarray, camera: CameraModel, pose: Pose, pts_world: np.nd
     ok = np.isfinite(pix).all(axis=1)
     # draw each run of consecutive good points
     run: list[np.ndarray] = []
-    for p, good in zip(pix, ok):
+    for p, good in zip(pix, ok, strict=True):
         if good:
             run.append(p)
         elif run:
@@ -163,7 +163,8 @@ def setup_preview(first: np.ndarray, camera: CameraModel, pose: Pose, planes: li
             if hit is None:
                 continue
             point, direction = hit
-            span = max((e[1] - e[0]) for e in (a.extent, b.extent) if e is not None) if (a.extent or b.extent) else 1000.0
+            span = (max((e[1] - e[0]) for e in (a.extent, b.extent) if e is not None)
+                    if (a.extent or b.extent) else 1000.0)
             centre = point + direction * float(direction @ (a.origin - point))
             line = centre + np.linspace(-1.5 * span, 1.5 * span, 200)[:, None] * direction
             _polyline(img, camera, pose, line, (0, 255, 255), 1)

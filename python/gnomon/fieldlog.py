@@ -82,7 +82,7 @@ class _Table:
             raise self.error(key, f"expected {n} finite numbers, got {v!r}")
         return np.asarray(v, dtype=np.float64)
 
-    def subtable(self, key: str, *, required: bool = False) -> "_Table | None":
+    def subtable(self, key: str, *, required: bool = False) -> _Table | None:
         if key not in self.data:
             if required:
                 raise FieldLogError(f"{self.path}: missing required table [{self.name}.{key}]")
@@ -372,7 +372,8 @@ def _fit_camera(camera: CameraModel, calibration: dict, capture: CaptureSpec, wh
 
     first = capture.video if capture.video is not None else capture.image_files[0]
     size = video_size(first) if capture.video is not None else image_size(first)
-    fitted, note = fit_camera_to_frames(camera, size[0], size[1], where, frame_name=f"frame 0 ({first.name})")  # type: ignore[arg-type]
+    fitted, note = fit_camera_to_frames(camera, size[0], size[1], where,
+                                        frame_name=f"frame 0 ({first.name})")  # type: ignore[arg-type]
     if note is None:
         return camera, calibration
     return fitted, {**calibration, "rescaled_from": [int(camera.width), int(camera.height)]}
@@ -453,7 +454,8 @@ def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
     aruco = _parse_aruco(t.subtable("aruco")) if "aruco" in t.data else None
     charuco = _parse_charuco(t.subtable("charuco")) if "charuco" in t.data else None
     if (aruco or charuco) and x_axis is None:
-        raise FieldLogError(f"{t.path}: [{t.name}] ArUco markers or a ChArUco board need 'x_axis' (the plane's 2-D frame)")
+        raise FieldLogError(f"{t.path}: [{t.name}] ArUco markers or a ChArUco board need 'x_axis' (the plane's 2-D "
+                            "frame)")
     if sum(bool(x) for x in (markers, chessboard, aruco, charuco)) > 1:
         raise FieldLogError(f"{t.path}: [{t.name}] give one of markers, chessboard, aruco or charuco per plane")
     t.done()
@@ -495,7 +497,8 @@ def _parse_charuco(t: _Table | None) -> CharucoSpec:
     assert t is not None
     dictionary = _dictionary_name(t)
     raw = t.take("squares")
-    if not (isinstance(raw, list) and len(raw) == 2 and all(isinstance(x, int) and not isinstance(x, bool) and x >= 2 for x in raw)):
+    if not (isinstance(raw, list) and len(raw) == 2
+            and all(isinstance(x, int) and not isinstance(x, bool) and x >= 2 for x in raw)):
         raise t.error("squares", f"expected [cols, rows] squares of the board, each >= 2, got {raw!r}")
     square = t.number("square", positive=True)
     marker = t.number("marker", positive=True)
@@ -503,7 +506,8 @@ def _parse_charuco(t: _Table | None) -> CharucoSpec:
         raise t.error("marker", f"the marker ({marker}) must be smaller than the square ({square})")
     origin = t.vector("origin", 2, [0.0, 0.0])
     t.done()
-    return CharucoSpec(dictionary, (int(raw[0]), int(raw[1])), float(square), float(marker), (float(origin[0]), float(origin[1])))
+    return CharucoSpec(dictionary, (int(raw[0]), int(raw[1])), float(square), float(marker),
+                       (float(origin[0]), float(origin[1])))
 
 
 def _parse_light(t: _Table, base: Path) -> LightSpec:

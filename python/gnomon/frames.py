@@ -6,8 +6,8 @@ a reader thread ahead of the consumer (OpenCV releases the GIL while decoding),
 through a small bounded queue.
 
 Problems with the input raise :class:`FrameError` naming the frame: a file that
-cannot be decoded or is truncated (the decoder only warns about those), a frame whose size differs from the first, a video that
-ends before the number of frames it announced (or the field log expects).
+cannot be decoded or is truncated (the decoder only warns about those), a frame whose size
+differs from the first, a video that ends before the number of frames it announced (or the field log expects).
 
 Image files are turned upright by their EXIF orientation tag (as a phone
 records a portrait photo) wherever Gnomon reads them: :func:`decode_image_file`,
@@ -23,9 +23,9 @@ import io
 import queue
 import re
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import cv2
 import numpy as np
@@ -124,7 +124,9 @@ def apply_exif_orientation(image: np.ndarray, orientation: int) -> np.ndarray:
 
 
 def decode_image_file(path: Path) -> tuple[np.ndarray, bytes]:
-    """Decode an image file as stored (keeping 16-bit data), turned upright by its EXIF orientation; return it and its raw bytes.
+    """Decode an image file as stored (keeping 16-bit data), turned upright by its EXIF orientation.
+
+    Returns the image and the file's raw bytes.
 
     Raises :class:`FrameError` naming the file when it cannot be read or
     decoded, or when it is truncated (see :func:`truncation_problem`: the
@@ -266,7 +268,7 @@ class FrameSource:
     def name(self) -> str:
         return str(self.video) if self.video is not None else str(self.image_files[0].parent)
 
-    def _produce(self, out: "queue.Queue[object]", stop: threading.Event) -> None:
+    def _produce(self, out: queue.Queue[object], stop: threading.Event) -> None:
         try:
             for frame in self._decode():
                 while not stop.is_set():
@@ -325,7 +327,7 @@ class FrameSource:
 
     def __iter__(self) -> Iterator[Frame]:
         """Frames in order, decoded on a background thread."""
-        out: "queue.Queue[object]" = queue.Queue(maxsize=_QUEUE_DEPTH)
+        out: queue.Queue[object] = queue.Queue(maxsize=_QUEUE_DEPTH)
         stop = threading.Event()
         worker = threading.Thread(target=self._produce, args=(out, stop), name="gnomon-frame-reader", daemon=True)
         worker.start()

@@ -23,8 +23,9 @@ Frames: camera as OpenCV's; ``Pose`` maps the points' frame to the camera,
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -32,8 +33,6 @@ from scipy.optimize import least_squares
 
 from gnomon.camera import Pose
 from gnomon.errors import GnomonError
-
-
 
 # --------------------------------------------------------------------------- marker detection
 
@@ -95,7 +94,9 @@ def _x_check(img: np.ndarray, centre: tuple[float, float], radius: float) -> tup
 
 def _sample(img: np.ndarray, pts: np.ndarray) -> np.ndarray:
     p = pts.astype(np.float32)
-    return cv2.remap(img, p[:, 0].reshape(1, -1), p[:, 1].reshape(1, -1), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel().astype(np.float64)
+    out = cv2.remap(img, p[:, 0].reshape(1, -1), p[:, 1].reshape(1, -1), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.ravel().astype(np.float64)
 
 
 def _symmetric_centre(img: np.ndarray, start: tuple[float, float], radius: int, iters: int = 30) -> tuple[float, float]:
@@ -170,7 +171,8 @@ def find_marker(
     inside &= (xx >= radius_px) & (xx <= w - 1 - radius_px) & (yy >= radius_px) & (yy <= h - 1 - radius_px)
     resp = np.where(inside, resp, -np.inf)
     if not np.isfinite(resp).any():
-        raise GnomonError(f"{where}: not found within {search_px:g} px of its hint ({u0:.1f}, {v0:.1f}): too close to the image border")
+        raise GnomonError(f"{where}: not found within {search_px:g} px of its hint ({u0:.1f}, {v0:.1f}): "
+                          "too close to the image border")
     k = int(np.argmax(resp))
     u, v = _symmetric_centre(img, (float(xx.flat[k]), float(yy.flat[k])), radius_px)
     if not (np.isfinite(u) and np.isfinite(v)) or np.hypot(u - xx.flat[k], v - yy.flat[k]) > radius_px:
@@ -205,8 +207,9 @@ def find_markers(
     hints = np.asarray(hints, dtype=np.float64).reshape(-1, 2)
     names = list(names) if names is not None else [f"m{i}" for i in range(len(hints))]
     dets = [
-        find_marker(image, h, name=n, search_px=search_px, radius_px=radius_px, min_contrast=min_contrast, source=source)
-        for h, n in zip(hints, names)
+        find_marker(image, h, name=n, search_px=search_px, radius_px=radius_px, min_contrast=min_contrast,
+                    source=source)
+        for h, n in zip(hints, names, strict=True)
     ]
     for i in range(len(dets)):
         for j in range(i + 1, len(dets)):
@@ -258,7 +261,7 @@ class PlanePose:
             "n_points": int(len(self.pixels)),
             "rms_px": float(self.rms_px),
             "max_px": float(self.max_px),
-            "residuals_px": {n: [float(r[0]), float(r[1])] for n, r in zip(self.names, self.residuals_px)},
+            "residuals_px": {n: [float(r[0]), float(r[1])] for n, r in zip(self.names, self.residuals_px, strict=True)},
             "normal_cam": [float(x) for x in self.normal_cam],
             "offset_cam": float(self.offset_cam),
             "std_normal_deg": float(self.std_normal_deg),
@@ -309,7 +312,7 @@ def _fit_pose_planar(camera, local2d: np.ndarray, pixels: np.ndarray, where: str
         raise GnomonError(f"{where}: no pose fits the points (check their order and coordinates)")
     # IPPE returns both planar solutions: keep the one that reprojects best in pixels.
     best = None
-    for rv, tv in zip(rvecs, tvecs):
+    for rv, tv in zip(rvecs, tvecs, strict=True):
         res = _pixel_residuals(camera, rv, np.asarray(tv).ravel(), obj, pixels)
         err = float(np.sum(np.nan_to_num(res, nan=1e6) ** 2))
         if best is None or err < best[0]:
@@ -357,7 +360,8 @@ def fit_plane_pose(
     names = tuple(names) if names is not None else tuple(f"p{i}" for i in range(len(pts)))
     where = f"{source}: plane ({method})"
     if pts.ndim != 2 or pts.shape[1] not in (2, 3):
-        raise GnomonError(f"{where}: coordinates must be (N, 2) plane or (N, 3) world coordinates, got shape {pts.shape}")
+        raise GnomonError(f"{where}: coordinates must be (N, 2) plane or (N, 3) world coordinates, "
+                          f"got shape {pts.shape}")
     if len(pts) != len(pix):
         raise GnomonError(f"{where}: {len(pts)} points but {len(pix)} pixels")
     if len(pts) < 4:
@@ -401,7 +405,8 @@ def fit_plane_pose(
         std_d = float(np.sqrt(max(C[3, 3], 0.0)))
     warns = []
     if len(pts) == 4:
-        warns.append(f"{where}: only 4 points: the residuals barely test the fit (2 degrees of freedom); more markers give an honest check")
+        warns.append(f"{where}: only 4 points: the residuals barely test the fit (2 degrees of freedom); "
+                     "more markers give an honest check")
     normal_world = B[:, 2] if (R @ B[:, 2]) @ n_cam > 0 else -B[:, 2]
     return PlanePose(
         pose=pose,
@@ -489,7 +494,8 @@ def plane_pose_from_chessboard(
     names = [f"corner {i}" for i in range(len(obj))]
     res = fit_plane_pose(camera, obj, corners, names=names, method="chessboard", source=source)
     if (board[0] - board[1]) % 2 == 0:
-        w = f"{source}: a {board[0]}x{board[1]} board is symmetric under a half-turn: its origin corner is ambiguous (use e.g. 9x6)"
+        w = (f"{source}: a {board[0]}x{board[1]} board is symmetric under a half-turn: "
+             "its origin corner is ambiguous (use e.g. 9x6)")
         res = replace(res, warnings=res.warnings + (w,))
     return res
 
@@ -518,7 +524,8 @@ def plane_pose_from_pose(rvec: Sequence[float], tvec: Sequence[float]) -> PlaneP
     )
 
 
-def plane_in_camera(point_world: np.ndarray, normal_world: np.ndarray, world_to_camera: Pose) -> tuple[np.ndarray, float]:
+def plane_in_camera(point_world: np.ndarray, normal_world: np.ndarray,
+                    world_to_camera: Pose) -> tuple[np.ndarray, float]:
     """A plane given in world coordinates → (unit normal, offset) in the camera frame, offset ≥ 0.
 
     For a second plane (e.g. a wall) known in the world frame that another

@@ -31,12 +31,12 @@ import numpy as np
 from gnomon import __version__, atomic, ply
 from gnomon.calibration import camera_to_table
 from gnomon.camera import Pose
+from gnomon.crop import crop_mask
 from gnomon.errors import FrameError
 from gnomon.fieldlog import load_field_log
 from gnomon.frames import Frame, FrameSource, sha256_file
 from gnomon.fusion import fuse_depths
 from gnomon.light import EdgePlanes, EdgeTimes, ReferenceGeometry
-from gnomon.crop import crop_mask
 from gnomon.meshing import GridMesh, grid_mesh, grid_normals, remove_small_components, write_obj, write_stl
 from gnomon.preview import coverage_map, write_preview
 from gnomon.publish import OUTPUT_FILES, staged_outputs
@@ -46,13 +46,13 @@ from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
 from gnomon.texture import LitColour, sample_indices
 from gnomon.tracking import ShadowTimes, TrackedSequence, track_source
 from gnomon.triangulation import supported_by_neighbours, triangulate
-from gnomon.validity import MIN_CONTRAST_SIGMAS, contrast_above_noise
 from gnomon.uncertainty import (
     depth_sigma,
     interpolation_time_sigma,
     linear_noise_at_threshold,
     undersampled,
 )
+from gnomon.validity import MIN_CONTRAST_SIGMAS, contrast_above_noise
 
 # Quality gates: share of the sweep's frames with a measured shadow plane (error below / warning
 # below), and the longest gap (frames) to a plane over which a pixel's depth may be interpolated.
@@ -104,7 +104,7 @@ class ScanResult:
     sigma: np.ndarray  # (H, W) σZ, NaN = none
     valid: np.ndarray  # (H, W)
     undersampled: np.ndarray  # (H, W) bool
-    surface: "Surface"
+    surface: Surface
     report: dict[str, Any]
     warnings: list[str] = field(default_factory=list)
     out_dir: Path | None = None

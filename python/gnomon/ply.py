@@ -26,8 +26,8 @@ naming the file.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 
@@ -293,7 +293,7 @@ def _read_binary_element(buf: memoryview, pos: int, el: _Element, endian: str, w
             )
             if uniform:
                 out = {}
-                for n, t in el.props:
+                for n, _ in el.props:
                     a = table[n]
                     out[n] = a.astype(a.dtype.newbyteorder("="), copy=True)
                 return out, pos + nbytes

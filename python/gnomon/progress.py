@@ -40,7 +40,7 @@ class Progress:
                 self._last_decile = decile
                 self.stream.write(f"{self.label}: {done}/{self.total} ({frac:.0%}, {now - self.start:.1f}s)\n")
 
-    def __enter__(self) -> "Progress":
+    def __enter__(self) -> Progress:
         return self
 
     def __exit__(self, *exc: object) -> None:

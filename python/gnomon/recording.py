@@ -102,11 +102,12 @@ import os
 import re
 import sys
 import uuid
+from collections.abc import Mapping, Sequence
 from contextlib import AbstractContextManager
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -187,7 +188,7 @@ def _safe_part(name: str) -> str:
 
 def _utc(t: datetime | np.datetime64) -> datetime | np.datetime64:
     if isinstance(t, datetime):
-        return t.replace(tzinfo=timezone.utc) if t.tzinfo is None else t.astimezone(timezone.utc)
+        return t.replace(tzinfo=UTC) if t.tzinfo is None else t.astimezone(UTC)
     return t
 
 

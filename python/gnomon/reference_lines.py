@@ -34,7 +34,8 @@ from gnomon.fitting import fit_line_robust
 MIN_POINTS = 10
 
 __all__ = [
-    "PlaneInCamera", "ReferenceLines", "ReferencePlane", "fit_line_robust", "isochrone_crossings", "lines_on_plane", "mask_crossings",
+    "PlaneInCamera", "ReferenceLines", "ReferencePlane", "fit_line_robust", "isochrone_crossings", "lines_on_plane",
+    "mask_crossings",
     "measure_reference_lines", "ransac_line", "region_mask",
 ]
 # A frame's own fit sets the line's direction when its inliers span at least
@@ -138,7 +139,8 @@ def _typical_step(times: np.ndarray, axis: int) -> float:
     return float(np.median(d)) if d.size else 0.0
 
 
-def isochrone_crossings(times: np.ndarray, n_frames: int, unique: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def isochrone_crossings(times: np.ndarray, n_frames: int,
+                        unique: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sub-pixel points where a shadow-time patch crosses each integer frame.
 
     ``times``: (h, w) shadow times in frames (NaN = none) of one image region.

@@ -253,7 +253,8 @@ def pixel_footprint(plane: PlaneInCamera, camera: CameraModel, where: np.ndarray
     pick = np.linspace(0, u.size - 1, min(u.size, 2000)).astype(int)
     base = np.stack([u[pick], v[pick]], axis=1).astype(np.float64)
     p0 = plane.intersect(camera.rays(base))
-    sides = [np.linalg.norm(plane.intersect(camera.rays(base + step)) - p0, axis=1) for step in ([1.0, 0.0], [0.0, 1.0])]
+    sides = [np.linalg.norm(plane.intersect(camera.rays(base + step)) - p0, axis=1)
+             for step in ([1.0, 0.0], [0.0, 1.0])]
     return float(np.nanmedian(np.maximum(*sides)))
 
 
@@ -337,7 +338,7 @@ def propose_regions(
     time_maps = [smooth_times(t) for t in time_maps]
     swept = np.logical_and.reduce([np.isfinite(t) for t in time_maps])
     nearest = nearest_plane(planes, ray_map)
-    footprint = [pixel_footprint(plane, camera, seed) for plane, seed in zip(planes, seeds)]
+    footprint = [pixel_footprint(plane, camera, seed) for plane, seed in zip(planes, seeds, strict=True)]
     current = [s & (nearest == k) for k, s in enumerate(seeds)]
     unreached = [np.zeros_like(s) for s in seeds]
     found = [0] * len(planes)

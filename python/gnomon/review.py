@@ -19,10 +19,11 @@ the recording store's chunks as Arrow record batches); nothing here parses the
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -245,7 +246,7 @@ def export_points(path: str | Path, out_ply: str | Path, entity: str = ENTITY["p
 def _time_value(value: Any, kind: str) -> int | str:
     if kind == "timestamp":
         ns = int(value)
-        dt = datetime.fromtimestamp(ns // 1_000_000_000, tz=timezone.utc)
+        dt = datetime.fromtimestamp(ns // 1_000_000_000, tz=UTC)
         frac = ns % 1_000_000_000
         text = dt.strftime("%Y-%m-%dT%H:%M:%S")
         return text + (f".{frac:09d}".rstrip("0") if frac else "") + "Z"

@@ -127,7 +127,8 @@ def two_plane_shadow_planes(lines: list[ReferenceLines], min_angle_deg: float = 
         centre, normal, inl = fit_plane_robust(pts)
         _, sv, _ = np.linalg.svd(pts[inl] - centre, full_matrices=False)
         enough = all(np.count_nonzero(inl[a:b]) >= min_points
-                     for a, b in zip(np.cumsum([0] + [len(x) for x in sets[:-1]]), np.cumsum([len(x) for x in sets])))
+                     for a, b in zip(np.cumsum([0] + [len(x) for x in sets[:-1]]), np.cumsum([len(x) for x in sets]),
+                                     strict=True))
         if not enough or sv[1] < sin_min * sv[0] or sv[2] > sin_min * sv[1]:
             degenerate += 1
             continue

@@ -37,16 +37,16 @@ import datetime as dt
 import math
 import re
 import zoneinfo
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable, Union
 
 import numpy as np
 import pandas as pd
 
 from gnomon.errors import GnomonError
 
-TimeLike = Union[str, dt.datetime, pd.Timestamp, np.datetime64]
-TzLike = Union[str, dt.tzinfo, None]
+TimeLike = str | dt.datetime | pd.Timestamp | np.datetime64
+TzLike = str | dt.tzinfo | None
 
 # Plausible ranges: a value outside is almost certainly a unit mistake
 # (pressure in mbar or kPa instead of Pa, altitude in feet...).
@@ -66,7 +66,7 @@ def parse_timezone(tz: TzLike) -> dt.tzinfo | None:
         raise GnomonError(f"time zone {tz!r} is not a zone name or a UTC offset")
     text = tz.strip()
     if text.upper() in ("UTC", "Z", "GMT"):
-        return dt.timezone.utc
+        return dt.UTC
     m = _OFFSET_RE.match(text)
     if m:
         sign, hours, minutes = m.group(1), int(m.group(2)), int(m.group(3) or 0)

@@ -39,8 +39,8 @@ import datetime as dt
 import math
 import os
 import re
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence, Union
 
 import numpy as np
 import pandas as pd
@@ -58,7 +58,7 @@ _EXIF_FORMAT = "%Y:%m:%d %H:%M:%S"
 _EXIF_OFFSET = re.compile(r"^([+-])(\d{2}):?(\d{2})$")
 _EXIF_BLANK_OFFSET = re.compile(r"^\s*:\s*$")
 
-FileLike = Union[str, os.PathLike]
+FileLike = str | os.PathLike
 
 
 def frame_times(files: Sequence[FileLike] | int, mode: str, *, pattern: str | None = None,
@@ -172,7 +172,7 @@ def _from_name(path: Path, pattern: str, kind: str, site_tz) -> int:
     if parsed.tzinfo is not None:
         return _aware_ns(parsed)
     if kind == "utc":
-        return _aware_ns(parsed.replace(tzinfo=dt.timezone.utc))
+        return _aware_ns(parsed.replace(tzinfo=dt.UTC))
     return _localise(parsed, site_tz, str(path))
 
 

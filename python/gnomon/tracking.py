@@ -42,9 +42,9 @@ baseline.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
 from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -521,8 +521,13 @@ class NumpyTracker:
         self._m, self._w, self._ambiguity = int(window), int(max_width), float(ambiguity)
         n = self._shape[0] * self._shape[1]
         self._ring = np.zeros((3 * self._w + 2 * self._m, n), self._dtype)
-        i32 = lambda v: np.full(n, v, np.int32)
-        i64 = lambda: np.full(n, -1, np.int64)
+
+        def i32(v: int) -> np.ndarray:
+            return np.full(n, v, np.int32)
+
+        def i64() -> np.ndarray:
+            return np.full(n, -1, np.int64)
+
         self._state = _State(i32(0), i32(0), i64(), i32(0), i32(0), i64(), i64(),
                              np.zeros((n, 2 * self._m), self._dtype),
                              np.zeros((n, 2 * self._m), self._dtype), 0)

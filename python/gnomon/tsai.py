@@ -42,8 +42,8 @@ nearly parallel to the image plane, where f and Tz cannot be separated).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Sequence
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -151,11 +151,13 @@ def _singular_values(world: np.ndarray) -> np.ndarray:
 def _check_spread(world: np.ndarray, where: str) -> np.ndarray:
     s = _singular_values(world)
     if s[0] == 0.0 or s[1] <= 1e-6 * s[0]:
-        raise GnomonError(f"{where}: the target points are collinear (or all equal); Tsai's method needs a plane or a volume")
+        raise GnomonError(f"{where}: the target points are collinear (or all equal); Tsai's method needs a plane or a "
+                          "volume")
     if s[1] < MIN_TARGET_ASPECT * s[0]:
         raise GnomonError(
             f"{where}: the target points are nearly collinear (their spread across is {s[1] / s[0]:.2%} of their "
-            f"spread along; need ≥ {MIN_TARGET_ASPECT:.0%}): use a target at least 1/{1 / MIN_TARGET_ASPECT:.0f} as wide as it is long"
+            f"spread along; need ≥ {MIN_TARGET_ASPECT:.0%}): use a target at least 1/{1 / MIN_TARGET_ASPECT:.0f} as "
+            "wide as it is long"
         )
     return s
 
@@ -203,7 +205,8 @@ def _std_from_jacobian(J: np.ndarray, res: np.ndarray, names: Sequence[str]) -> 
 # --------------------------------------------------------------------------- stage 1
 
 
-def _ty_sign(r_rows: np.ndarray, tx: float, ty: float, world: np.ndarray, xd: np.ndarray, yd: np.ndarray) -> tuple[float, float]:
+def _ty_sign(r_rows: np.ndarray, tx: float, ty: float, world: np.ndarray, xd: np.ndarray,
+             yd: np.ndarray) -> tuple[float, float]:
     """Tsai's sign test on the point farthest from the centre.
 
     With Ty > 0 assumed, x = r1·xw + r2·yw + r3·zw + Tx and y likewise must
@@ -283,10 +286,12 @@ def _check_rank(A: np.ndarray, where: str) -> None:
     # Columns have different units; normalise them before judging the rank.
     norms = np.linalg.norm(A, axis=0)
     if np.any(norms == 0.0):
-        raise GnomonError(f"{where}: degenerate target: the radial-alignment system has an empty column (all points on an image axis, or on a world axis?)")
+        raise GnomonError(f"{where}: degenerate target: the radial-alignment system has an empty column (all points "
+                          "on an image axis, or on a world axis?)")
     s = np.linalg.svd(A / norms, compute_uv=False)
     if s[-1] <= 1e-10 * s[0]:
-        raise GnomonError(f"{where}: degenerate target: the radial-alignment system is singular (target seen edge-on, or points on a line through the image centre?)")
+        raise GnomonError(f"{where}: degenerate target: the radial-alignment system is singular (target seen edge-on, "
+                          "or points on a line through the image centre?)")
 
 
 # --------------------------------------------------------------------------- stage 2
@@ -314,7 +319,8 @@ def _stage2(R: np.ndarray, tx: float, ty: float, world: np.ndarray, xd: np.ndarr
             break
         R = R * np.array([[1, 1, -1], [1, 1, -1], [-1, -1, 1]])
     else:
-        raise GnomonError(f"{where}: Tsai stage 2 found a negative focal length both ways round (left-handed world coordinates?)")
+        raise GnomonError(f"{where}: Tsai stage 2 found a negative focal length both ways round (left-handed world "
+                          "coordinates?)")
     if tz_lin <= 0 or np.any(wi + tz_lin <= 0):
         raise GnomonError(
             f"{where}: the points fit only a target behind the camera (Tz = {tz_lin:.4g}): the pixels are "
@@ -340,7 +346,8 @@ def _stage2(R: np.ndarray, tx: float, ty: float, world: np.ndarray, xd: np.ndarr
             [np.stack([-xi / z, f * xi / z**2, xd * r2], axis=1), np.stack([-yi / z, f * yi / z**2, yd * r2], axis=1)]
         )
 
-    sol = least_squares(fun, np.array([f_lin, tz_lin, 0.0]), jac=jac, method="lm", x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    sol = least_squares(fun, np.array([f_lin, tz_lin, 0.0]), jac=jac, method="lm", x_scale="jac", xtol=1e-15,
+                        ftol=1e-15, gtol=1e-15)
     f, tz, k = sol.x
     if f <= 0 or tz <= 0:
         raise GnomonError(f"{where}: Tsai's non-linear step diverged (f = {f:.4g} mm, Tz = {tz:.4g})")
@@ -351,7 +358,9 @@ def _stage2(R: np.ndarray, tx: float, ty: float, world: np.ndarray, xd: np.ndarr
 
 
 def _line_of_sight_tilt(world: np.ndarray, pose: Pose) -> float:
-    """Angle (degrees) between a planar target's normal and the line of sight to its centroid: 0 facing the camera, 90 edge-on."""
+    """Angle (degrees) between a planar target's normal and the line of sight to its centroid.
+
+    0 facing the camera, 90 edge-on."""
     n = pose.R[:, 2]
     c = pose.world_to_camera(world.mean(axis=0)[None, :])[0]
     return float(np.degrees(np.arccos(min(abs(n @ c) / np.linalg.norm(c), 1.0))))
@@ -360,7 +369,8 @@ def _line_of_sight_tilt(world: np.ndarray, pose: Pose) -> float:
 def _check_tilt(tilt_deg: float, where: str) -> None:
     if tilt_deg >= MAX_TILT_DEG:
         raise GnomonError(
-            f"{where}: the target is seen nearly edge-on ({tilt_deg:.1f}° from facing the camera, limit {MAX_TILT_DEG:g}°): "
+            f"{where}: the target is seen nearly edge-on ({tilt_deg:.1f}° from facing the camera, limit "
+            f"{MAX_TILT_DEG:g}°): "
             f"its image is too thin to calibrate from; turn it towards the camera (30–60° of tilt is best)"
         )
 
@@ -376,7 +386,8 @@ def _check_image_spread(world: np.ndarray, pixels: np.ndarray, where: str) -> No
         )
 
 
-def _std_two_stage(camera: TsaiCamera, pose: Pose, world: np.ndarray, pixels: np.ndarray, with_sx: bool) -> dict[str, float]:
+def _std_two_stage(camera: TsaiCamera, pose: Pose, world: np.ndarray, pixels: np.ndarray,
+                   with_sx: bool) -> dict[str, float]:
     """1-σ of the estimated parameters, marginal over all of them, as OpenCV reports them for Zhang's method.
 
     Every parameter the two stages estimate is free — the pose, f, κ1, and sx
@@ -470,7 +481,8 @@ def _solve_one(world, pixels, width, height, dx_mm, dy_mm, sx, cx, cy, coplanar,
 
     if agree < 0.9:
         warnings.append(
-            f"{where}: only {agree:.0%} of the points agree on the sign of Ty: some points are mismatched or the centre (Cx, Cy) is far off"
+            f"{where}: only {agree:.0%} of the points agree on the sign of Ty: some points are mismatched or the "
+            "centre (Cx, Cy) is far off"
         )
 
     try:
@@ -480,14 +492,16 @@ def _solve_one(world, pixels, width, height, dx_mm, dy_mm, sx, cx, cy, coplanar,
         if coplanar:
             _check_tilt(float(np.degrees(np.arccos(min(abs(R[2, 2]), 1.0)))), where)
         raise
-    camera = TsaiCamera(width=width, height=height, f_mm=f, kappa1=k, cx=float(cx), cy=float(cy), dx_mm=dx_mm, dy_mm=dy_mm, sx=float(sx))
+    camera = TsaiCamera(width=width, height=height, f_mm=f, kappa1=k, cx=float(cx), cy=float(cy), dx_mm=dx_mm,
+                        dy_mm=dy_mm, sx=float(sx))
     pose = Pose(R=R, t=np.array([tx, ty, tz]))
     if coplanar:
         tilt = _line_of_sight_tilt(world, pose)
         _check_tilt(tilt, where)
     res = _residuals(camera, pose, world, pixels)
     if not np.all(np.isfinite(res)):
-        raise GnomonError(f"{where}: some target points do not project with the calibrated model (behind the camera or beyond the distortion's fold)")
+        raise GnomonError(f"{where}: some target points do not project with the calibrated model (behind the camera "
+                          "or beyond the distortion's fold)")
     std = _std_two_stage(camera, pose, world, pixels, with_sx=not coplanar)
     if coplanar and np.degrees(np.arccos(min(abs(R[2, 2]), 1.0))) < MIN_TILT_DEG:
         tilt_axis = np.degrees(np.arccos(min(abs(R[2, 2]), 1.0)))
@@ -536,7 +550,8 @@ def calibrate_coplanar(
         raise GnomonError(f"{where}: Tsai's coplanar calibration needs at least 5 points, got {len(world)}")
     s = _check_spread(world, where)
     if np.max(np.abs(world[:, 2])) > 1e-9 * s[0]:
-        raise GnomonError(f"{where}: coplanar calibration needs the target on the plane zw = 0 (use calibrate() for a plane in any position)")
+        raise GnomonError(f"{where}: coplanar calibration needs the target on the plane zw = 0 (use calibrate() for a "
+                          "plane in any position)")
     _check_image_spread(world, pix, where)
     return _solve_one(world, pix, width, height, float(dx_mm), float(dy_mm), float(sx), cx, cy, True, where)
 
@@ -696,7 +711,7 @@ def calibrate_views(
         raise GnomonError("Tsai: no views to calibrate")
     names = list(names) if names is not None else [f"view {i}" for i in range(len(views))]
     per_view, kept, dropped = [], [], []
-    for (w, p), n in zip(views, names):
+    for (w, p), n in zip(views, names, strict=True):
         try:
             per_view.append(calibrate(w, p, width, height, dx_mm, dy_mm, sx=sx, where=n))
             kept.append(((w, p), n))
@@ -711,14 +726,16 @@ def calibrate_views(
     warnings = dropped + [w for r in per_view for w in r.warnings]
     if len(views) == 1 and not full:
         r = per_view[0]
-        return TsaiViewsResult(r.camera, (r.pose,), r.rms_px, (r.rms_px,), tuple(per_view), dict(r.std), r.method, tuple(warnings), tuple(names))
+        return TsaiViewsResult(r.camera, (r.pose,), r.rms_px, (r.rms_px,), tuple(per_view), dict(r.std), r.method,
+                               tuple(warnings), tuple(names))
     if len(views) == 1:
         r = refine_full(per_view[0], *views[0], where=names[0])
         warnings = dropped + list(r.warnings)
-        return TsaiViewsResult(r.camera, (r.pose,), r.rms_px, (r.rms_px,), tuple(per_view), dict(r.std), r.method, tuple(warnings), tuple(names))
+        return TsaiViewsResult(r.camera, (r.pose,), r.rms_px, (r.rms_px,), tuple(per_view), dict(r.std), r.method,
+                               tuple(warnings), tuple(names))
 
-    worlds = [_as_world(w, n) for (w, _), n in zip(views, names)]
-    pixs = [_as_pixels(p, len(w), n) for (_, p), w, n in zip(views, worlds, names)]
+    worlds = [_as_world(w, n) for (w, _), n in zip(views, names, strict=True)]
+    pixs = [_as_pixels(p, len(w), n) for (_, p), w, n in zip(views, worlds, names, strict=True)]
     cam0 = per_view[0].camera
     any_noncoplanar = any(r.method.startswith("noncoplanar") for r in per_view)
     f0 = float(np.median([r.camera.f_mm for r in per_view]))
@@ -736,14 +753,16 @@ def calibrate_views(
         else:
             cam = replace(cam0, f_mm=p[0], kappa1=p[1], sx=sx0)
         poses = [
-            Pose(R=Rotation.from_rotvec(p[ns + 6 * i : ns + 6 * i + 3]).as_matrix(), t=p[ns + 6 * i + 3 : ns + 6 * i + 6])
+            Pose(R=Rotation.from_rotvec(p[ns + 6 * i : ns + 6 * i + 3]).as_matrix(),
+                 t=p[ns + 6 * i + 3 : ns + 6 * i + 6])
             for i in range(len(worlds))
         ]
         return cam, poses
 
     def fun(p):
         cam, poses = unpack(p)
-        r = np.concatenate([_residuals(cam, pose, w, px).ravel() for pose, w, px in zip(poses, worlds, pixs)])
+        r = np.concatenate([_residuals(cam, pose, w, px).ravel() for pose, w, px in zip(poses, worlds, pixs,
+                                                                                        strict=True)])
         return np.nan_to_num(r, nan=1e6)
 
     # A dense LM is quick at this size (6 per view + ≤ 5 shared parameters) and
@@ -752,7 +771,7 @@ def calibrate_views(
     if not sol.success:  # pragma: no cover - reported, not hidden
         warnings.append(f"Tsai joint refinement did not converge: {sol.message}")
     cam, poses = unpack(sol.x)
-    per_res = [_residuals(cam, pose, w, px) for pose, w, px in zip(poses, worlds, pixs)]
+    per_res = [_residuals(cam, pose, w, px) for pose, w, px in zip(poses, worlds, pixs, strict=True)]
     all_res = np.concatenate(per_res)
     std_all = _std_from_jacobian(sol.jac, sol.fun, shared_names + [f"p{i}" for i in range(len(p0) - ns)])
     std = {k: std_all[k] for k in shared_names}

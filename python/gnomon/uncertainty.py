@@ -197,7 +197,8 @@ def depth_sigma(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray, dept
     frac = np.nan_to_num(times - np.floor(times))
     with np.errstate(invalid="ignore"):
         st_line = (1 - frac) * line_sigma[idx] + frac * line_sigma[nxt]
-    st_line = np.where(np.isfinite(st_line), st_line, np.nanmedian(line_sigma) if np.isfinite(line_sigma).any() else 0.0)
+    st_line = np.where(np.isfinite(st_line), st_line,
+                       np.nanmedian(line_sigma) if np.isfinite(line_sigma).any() else 0.0)
     total_t = np.sqrt(np.square(sigma_t_pixel) + np.square(st_line))
     sigma_z = (np.abs(dz_dt) * total_t).astype(np.float32)
     sigma_z[~np.isfinite(depth)] = np.nan

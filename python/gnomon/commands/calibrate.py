@@ -42,9 +42,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     c.add_argument("images", nargs="+", metavar="IMAGE", help="chessboard photos (files or directories of images)")
     c.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners per row and per column, e.g. 9x6")
-    c.add_argument("--square", required=True, type=float, metavar="S", help="side of one square, in world units (e.g. mm)")
-    c.add_argument("--model", choices=("zhang", "tsai"), default="zhang", help="calibration method and camera model (default: zhang)")
-    c.add_argument("--out", "-o", default="camera.toml", metavar="FILE", help="camera file to write (default: camera.toml)")
+    c.add_argument("--square", required=True, type=float, metavar="S",
+                   help="side of one square, in world units (e.g. mm)")
+    c.add_argument("--model", choices=("zhang", "tsai"), default="zhang",
+                   help="calibration method and camera model (default: zhang)")
+    c.add_argument("--out", "-o", default="camera.toml", metavar="FILE",
+                   help="camera file to write (default: camera.toml)")
     c.add_argument(
         "--pixel-pitch",
         metavar="DX[,DY]",
@@ -84,9 +87,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     pts.add_argument("points", type=Path, metavar="FILE", help="correspondences, 'xw yw zw Xf Yf' per line")
     pts.add_argument("--size", required=True, metavar="WxH", help="image size in pixels, e.g. 1280x960")
     pts.add_argument("--pixel-pitch", required=True, metavar="DX[,DY]", help="the sensor's pixel pitch in mm")
-    pts.add_argument("--sx", type=float, default=1.0, help="horizontal scale factor a priori for a planar target (default 1)")
-    pts.add_argument("--full", action="store_true", help="also optimise every parameter (Cx, Cy included) from the two-stage result")
-    pts.add_argument("--out", "-o", default="camera.toml", metavar="FILE", help="camera file to write (default: camera.toml)")
+    pts.add_argument("--sx", type=float, default=1.0,
+                     help="horizontal scale factor a priori for a planar target (default 1)")
+    pts.add_argument("--full", action="store_true",
+                     help="also optimise every parameter (Cx, Cy included) from the two-stage result")
+    pts.add_argument("--out", "-o", default="camera.toml", metavar="FILE",
+                     help="camera file to write (default: camera.toml)")
     pts.set_defaults(func=run_points)
 
     lamp = sub.add_parser(
@@ -146,7 +152,7 @@ def _record_calibration(cal, path: Path) -> None:
     with ScanRecording(path, recording_name=f"calibrate camera ({cal.method})", frame_stride=1,
                        image_scale=1.0) as rec:
         rec.log_camera(cam.K, cam.width, cam.height, np.eye(3), np.zeros(3), "board units")
-        for i, (name, pose, rms) in enumerate(zip(cal.names, cal.poses, cal.per_view_rms_px)):
+        for i, (name, pose, rms) in enumerate(zip(cal.names, cal.poses, cal.per_view_rms_px, strict=True)):
             rec.log_frame(i, calibration.read_grey(name))
             rec.log_image_points(i, cam.project(Pose(pose.R, pose.t).world_to_camera(board)), name="board")
             rec.log_metrics({"view_rms_px": float(rms)}, index=i)
@@ -156,10 +162,8 @@ def _record_calibration(cal, path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import calibration
+    from gnomon import calibration, publish, validate
     from gnomon.progress import Progress
-
-    from gnomon import publish, validate
 
     try:
         board = calibration.parse_board(args.board)
@@ -197,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
         _record_calibration(cal, Path(args.rrd) if args.rrd else Path(args.out).with_suffix(".rrd"))
 
     print(f"{'view':40s} {'RMS px':>8s}  status")
-    rms = dict(zip(cal.names, cal.per_view_rms_px))
+    rms = dict(zip(cal.names, cal.per_view_rms_px, strict=True))
     rejected = dict(cal.rejected)
     for p in paths:
         key = str(p)
@@ -219,7 +223,7 @@ def run(args: argparse.Namespace) -> int:
             continue
         if k == "dist":
             names = ("k1", "k2", "p1", "p2", "k3")
-            print("  dist " + ", ".join(f"{n} {_fmt(x, std.get(n))}" for n, x in zip(names, v)))
+            print("  dist " + ", ".join(f"{n} {_fmt(x, std.get(n))}" for n, x in zip(names, v, strict=True)))
         else:
             print(f"  {k} {_fmt(v, std.get(k))}")
     problem = _degenerate_camera(cal)
@@ -303,5 +307,6 @@ def run_lamp(args: argparse.Namespace) -> int:
             raise
         raise GnomonError("calibrate lamp: not available in this build (gnomon.light is missing)") from None
     except ImportError:
-        raise GnomonError("calibrate lamp: not available in this build (gnomon.light has no calibrate_lamp_cli)") from None
+        raise GnomonError("calibrate lamp: not available in this build "
+                          "(gnomon.light has no calibrate_lamp_cli)") from None
     return int(calibrate_lamp_cli(args) or 0)

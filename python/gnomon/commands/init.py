@@ -99,9 +99,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from gnomon import atomic
     from gnomon.errors import GnomonError
-    from gnomon.frames import FrameSource
-
-    from gnomon.frames import natural_key
+    from gnomon.frames import FrameSource, natural_key
     from gnomon.publish import check_output_file
     from gnomon.validate import input_file
 
@@ -134,7 +132,8 @@ def run(args: argparse.Namespace) -> int:
     if args.camera is not None:
         if not args.camera.is_file():
             raise GnomonError(f"{args.camera}: camera file not found")
-        camera = f'file = "{Path(os.path.relpath(os.path.abspath(args.camera), base)).as_posix()}"  # from `gnomon calibrate camera`\n'
+        rel = Path(os.path.relpath(os.path.abspath(args.camera), base)).as_posix()
+        camera = f'file = "{rel}"  # from `gnomon calibrate camera`\n'
     else:
         import math
 

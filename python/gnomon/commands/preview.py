@@ -35,9 +35,8 @@ def run(args: argparse.Namespace) -> int:
     from gnomon.check import MarkerMark, PlaneDrawing, setup_preview
     from gnomon.errors import FieldLogError
     from gnomon.fieldlog import load_field_log
-    from gnomon.scan_setup import first_frame, frame_source, resolve_reference_planes
-
     from gnomon.publish import check_output_file
+    from gnomon.scan_setup import first_frame, frame_source, resolve_reference_planes
 
     if args.out is not None:
         check_output_file(args.out, "--out")
@@ -61,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
         marks, extent = [], None
         entry = measured.get(plane.name)
         if entry is not None and plane.markers:
-            for m, pix in zip(plane.markers, entry["pixels"]):
+            for m, pix in zip(plane.markers, entry["pixels"], strict=True):
                 name = f"{plane.name} marker {m.id}"
                 r = entry["residuals_px"].get(name, [np.nan, np.nan])
                 marks.append(MarkerMark(str(m.id), np.asarray(pix), None if m.exact else m.pixel_hint,
@@ -73,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         elif entry is not None:  # a chessboard: its corners
             pix = np.array(entry["pixels"])
             marks = [MarkerMark("", p, None, float(np.hypot(*r))) for p, r in
-                     zip(pix[[0, -1]], np.array(list(entry["residuals_px"].values()))[[0, -1]])]
+                     zip(pix[[0, -1]], np.array(list(entry["residuals_px"].values()))[[0, -1]], strict=True)]
         mask = plane.region_mask(shape) if plane.has_regions else None
         drawings.append(PlaneDrawing(plane.name, plane.point, x_axis, np.cross(plane.normal, x_axis), plane.normal,
                                      mask, marks, extent))

@@ -67,16 +67,14 @@ def draw_regions(first: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import atomic
+    from gnomon import atomic, validate
     from gnomon.errors import FieldLogError
     from gnomon.fieldlog import load_field_log
+    from gnomon.publish import check_output_folder
     from gnomon.reference_lines import PlaneInCamera
     from gnomon.regions import hull_mask, propose_regions
     from gnomon.scan_setup import frame_source, resolve_reference_planes, tracker_settings
     from gnomon.tracking import track_source
-
-    from gnomon import validate
-    from gnomon.publish import check_output_folder
 
     if args.out is not None:
         check_output_folder(args.out)

@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         f"site: {abs(site.latitude_deg):.6f}° {ns}, {abs(site.longitude_deg):.6f}° {ew}, {site.altitude_m:g} m; "
         f"refraction at {site.effective_pressure_pa:.0f} Pa, {site.effective_temperature_c:g} °C"
     )
-    for i, (text, t) in enumerate(zip(args.time, pos.times)):
+    for i, (text, t) in enumerate(zip(args.time, pos.times, strict=True)):
         if i:
             print()
         local = f" ({t.tz_convert(site.tzinfo).isoformat()} local)" if site.tzinfo is not None else ""

@@ -37,7 +37,8 @@ from gnomon.timestamps import frame_times
 
 __all__ = [
     "EdgePlanes", "EdgeTimes", "LampCalibration", "LampLight", "LightModel", "PencilLog", "ReferenceGeometry",
-    "Screening", "SunClock", "SunWithLines", "SunWithPole", "TwoPlaneLight", "calibrate_lamp_cli", "calibrate_lamp_from_pencil",
+    "Screening", "SunClock", "SunWithLines", "SunWithPole", "TwoPlaneLight", "calibrate_lamp_cli",
+    "calibrate_lamp_from_pencil",
     "detect_missing_tips", "light_from_field_log", "load_pencil_log",
 ]
 

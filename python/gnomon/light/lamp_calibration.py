@@ -518,7 +518,7 @@ def calibrate_lamp_cli(args: argparse.Namespace) -> int:
     )
     print(
         f"position (world, {u}): "
-        + "   ".join(f"{a} = {x:.{dec}f} ± {s:.2g}" for a, x, s in zip("xyz", cal.position_world, sig))
+        + "   ".join(f"{a} = {x:.{dec}f} ± {s:.2g}" for a, x, s in zip("xyz", cal.position_world, sig, strict=True))
     )
     distance = float(np.linalg.norm(cal.position_world - cal.bases_world.mean(axis=0)))
     height_above = float(np.dot(cal.position_world - log.plane_point, cal.plane_normal_world))

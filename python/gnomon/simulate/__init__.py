@@ -30,9 +30,8 @@ from gnomon.simulate.desk_lamp import (
     SweepConfig,
     simulate_desk_lamp,
 )
-from gnomon.simulate.two_plane import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
-
 from gnomon.simulate.facade_sun import FacadeSunConfig, FacadeSunResult, FacadeSunScene, simulate_facade_sun
+from gnomon.simulate.two_plane import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
 
 SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "facade_day")
 

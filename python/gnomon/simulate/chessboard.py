@@ -17,9 +17,9 @@ reports for ``patternSize = (cols, rows)``.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -183,7 +183,8 @@ def random_poses(
     """
     rng = np.random.default_rng(seed)
     outline = np.array(
-        [[-square, -square, 0], [cols * square, -square, 0], [cols * square, rows * square, 0], [-square, rows * square, 0]],
+        [[-square, -square, 0], [cols * square, -square, 0], [cols * square, rows * square, 0],
+         [-square, rows * square, 0]],
         dtype=np.float64,
     )
     centre = np.array([(cols - 1) * square / 2, (rows - 1) * square / 2, 0.0])
@@ -353,8 +354,10 @@ def write_chessboard_views(
         ok, buf = cv2.imencode(".png", img)
         atomic.write_bytes(out / name, buf.tobytes())
         views.append({"image": name, "rvec": cv2.Rodrigues(R)[0].ravel().tolist(), "tvec": list(map(float, t))})
-    truth = {"board": {"cols": cols, "rows": rows, "square": square}, "camera": truth_camera_table(camera), "views": views}
-    toml_io.dump(truth, out / "truth.toml", header="Ground truth of `gnomon simulate chessboard` (board units for lengths).")
+    truth = {"board": {"cols": cols, "rows": rows, "square": square}, "camera": truth_camera_table(camera),
+             "views": views}
+    toml_io.dump(truth, out / "truth.toml", header="Ground truth of `gnomon simulate chessboard` (board units for "
+                                                   "lengths).")
     return truth
 
 

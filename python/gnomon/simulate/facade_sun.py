@@ -185,9 +185,9 @@ import json
 import math
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import cv2
 import numpy as np
@@ -292,7 +292,7 @@ class FacadeSunConfig:
     post: bool = False                   # a street-lamp post casting another moving shadow (facade_day)
 
     @classmethod
-    def day(cls, **overrides) -> "FacadeSunConfig":
+    def day(cls, **overrides) -> FacadeSunConfig:
         """The ``facade_day`` scene: a whole November day (06:40–17:40 local, night at both ends),
         six cloud dips, a lamp post's shadow besides the pole's, 8-bit JPEG."""
         base = {"start": "2026-11-12T06:40:00", "duration_s": 11 * 3600.0, "frames": 400, "clouds": 6,
@@ -499,7 +499,7 @@ class _Building:
             out[r] = ~through
         # Protruding boxes, axis-aligned in the world frame. The ray rises and heads into the
         # street, so only points below a box's top and behind its front can meet it.
-        for j, (lo, hi) in enumerate(zip(self.lo, self.hi)):
+        for j, (lo, hi) in enumerate(zip(self.lo, self.hi, strict=True)):
             s_out = (hi[1] + grow - py) / dy                 # where the ray leaves the box's y slab
             reach_x = px + np.maximum(s_out, 0.0) * dx
             cand = ((own != j) & (s_out > 0) & (pz <= hi[2] + grow)
@@ -661,7 +661,8 @@ class FacadeSunScene:
                 lam = rng.uniform(lam_lo, lam_hi)
                 ang = rng.uniform(0.0, np.pi)
                 amp = rng.uniform(0.5, 1.0)
-                tex += amp * np.sin(2 * np.pi / lam * (a * math.cos(ang) + b * math.sin(ang)) + rng.uniform(0, 2 * np.pi))
+                phase = rng.uniform(0, 2 * np.pi)
+                tex += amp * np.sin(2 * np.pi / lam * (a * math.cos(ang) + b * math.sin(ang)) + phase)
                 total += amp
             return tex / total
 
@@ -988,10 +989,10 @@ class FacadeSunScene:
         cloud_frames = np.nonzero(self.cloud)[0]
         free = self.swept.copy()
         if len(cloud_frames):
-            e, l = enter[self.swept], leave[self.swept]
-            clash = np.zeros(len(e), dtype=bool)
+            e_in, e_out = enter[self.swept], leave[self.swept]
+            clash = np.zeros(len(e_in), dtype=bool)
             for k in cloud_frames:
-                clash |= (k >= e - 1) & (k <= l + 1)
+                clash |= (k >= e_in - 1) & (k <= e_out + 1)
             vals = free[self.swept]
             vals[clash] = False
             free[self.swept] = vals

@@ -24,8 +24,8 @@ bottom-left of the bitmap), are at ``(a0 ∓ size/2, b0 ± size/2)``:
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -118,7 +118,7 @@ class CharucoPrint:
         ids, corners = self._layout()
         white_sq = np.zeros((rows, cols), dtype=bool)
         black = np.zeros(x.shape, dtype=bool)
-        for mid, c in zip(ids, corners):
+        for mid, c in zip(ids, corners, strict=True):
             x0, y0 = c[0]
             white_sq[int(y0 // sq), int(x0 // sq)] = True
             bits = aruco_bits(self.dictionary, int(mid))
@@ -186,7 +186,8 @@ class MarkerScene:
         return (n, d) if d >= 0 else (-n, -d)
 
 
-def look_at(eye: Sequence[float], target: Sequence[float], up: Sequence[float] = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+def look_at(eye: Sequence[float], target: Sequence[float],
+            up: Sequence[float] = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
     """World → camera (R, t) of a camera at ``eye`` looking at ``target`` (OpenCV axes: y down)."""
     eye = np.asarray(eye, dtype=np.float64)
     z = np.asarray(target, dtype=np.float64) - eye
@@ -207,7 +208,8 @@ def _albedo(plane: ScenePlane, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         idx = np.flatnonzero((np.abs(a - m.ab[0]) <= 0.75 * m.size) & (np.abs(b - m.ab[1]) <= 0.75 * m.size))
         da, db = a[idx] - m.ab[0], b[idx] - m.ab[1]
         if m.aruco_id is not None:
-            cls = aruco_class(np.stack([da, db], axis=-1), aruco_bits(plane.aruco_dictionary, m.aruco_id), m.size, 1.5 * m.size)
+            cls = aruco_class(np.stack([da, db], axis=-1), aruco_bits(plane.aruco_dictionary, m.aruco_id), m.size,
+                              1.5 * m.size)
             val[idx] = np.where(cls == 2, 0.06, 0.9)
             continue
         pattern = (np.abs(da) <= 0.5 * m.size) & (np.abs(db) <= 0.5 * m.size) & (da * db > 0)
@@ -218,7 +220,8 @@ def _albedo(plane: ScenePlane, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return val
 
 
-def render(scene: MarkerScene, rays: SampleRays, *, gain: float = 255.0, blur_px: float = 0.7, noise_dn: float = 1.0, seed: int = 0) -> np.ndarray:
+def render(scene: MarkerScene, rays: SampleRays, *, gain: float = 255.0, blur_px: float = 0.7, noise_dn: float = 1.0,
+           seed: int = 0) -> np.ndarray:
     """Ray-cast the planes (nearest hit wins); grey uint8 (H, W)."""
     C = -scene.R.T @ scene.t
     chunk = 262144  # keeps the temporaries in cache
@@ -259,7 +262,8 @@ def desk_and_wall_scene(camera: TruthCamera | None = None, *, marker_size: float
         albedo=0.45,
         markers=tuple(
             PrintedMarker(n, ab, marker_size)
-            for n, ab in (("d1", (-230.0, -170.0)), ("d2", (230.0, -170.0)), ("d3", (230.0, 190.0)), ("d4", (-230.0, 190.0)))
+            for n, ab in (("d1", (-230.0, -170.0)), ("d2", (230.0, -170.0)), ("d3", (230.0, 190.0)),
+                          ("d4", (-230.0, 190.0)))
         ),
     )
     wall = ScenePlane(
@@ -271,7 +275,8 @@ def desk_and_wall_scene(camera: TruthCamera | None = None, *, marker_size: float
         albedo=0.6,
         markers=tuple(
             PrintedMarker(n, ab, marker_size)
-            for n, ab in (("w1", (-230.0, 70.0)), ("w2", (230.0, 70.0)), ("w3", (230.0, 300.0)), ("w4", (-230.0, 300.0)))
+            for n, ab in (("w1", (-230.0, 70.0)), ("w2", (230.0, 70.0)), ("w3", (230.0, 300.0)),
+                          ("w4", (-230.0, 300.0)))
         ),
     )
     return MarkerScene(camera=camera, R=R, t=t, planes=(desk, wall))

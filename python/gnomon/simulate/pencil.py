@@ -371,7 +371,7 @@ def pencil_log(scene, ph: PencilPhotos) -> dict:
             "plane": "desk",
             "photos": [{"base": [round(float(x), 1) for x in b], "tip": [round(float(x), 1) for x in t],
                         "image": img}
-                       for b, t, img in zip(ph.base_pixels, ph.tip_pixels, ph.images)],
+                       for b, t, img in zip(ph.base_pixels, ph.tip_pixels, ph.images, strict=True)],
         },
     }
 

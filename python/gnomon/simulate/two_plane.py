@@ -101,9 +101,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import cv2
 import numpy as np
@@ -111,7 +111,6 @@ import numpy as np
 from gnomon import toml_io
 from gnomon.errors import GnomonError
 from gnomon.simulate import geometry as geo
-from gnomon.simulate.markers import aruco_bits, aruco_class, aruco_corners
 from gnomon.simulate.desk_lamp import (
     AMBIENT,
     BOX,
@@ -127,6 +126,7 @@ from gnomon.simulate.desk_lamp import (
     write_frames,
     write_ground_truth,
 )
+from gnomon.simulate.markers import aruco_bits, aruco_class, aruco_corners
 
 WALL = 4
 OBJECT_NAMES = {DESK: "desk", SPHERE: "sphere", BOX: "box", WALL: "wall"}
@@ -455,7 +455,8 @@ class TwoPlaneScene(DeskLampScene):
                 box = (slice(v0, v1), slice(u0, u1))
                 if not (self.object_id[box][paper[box]] == oid).all():
                     raise GnomonError(f"simulate {self.name}: marker {p_i * 4 + k} is hidden")
-            corner_pix.append(np.array([self.project(plane_to_world(oid, aruco_corners(c, MARKER_CHECKER))) for c in centres]))
+            corner_pix.append(np.array([self.project(plane_to_world(oid, aruco_corners(c, MARKER_CHECKER)))
+                                        for c in centres]))
             ids.append(np.arange(len(X)) + 4 * p_i)
             xy.append(centres)
             world.append(X)
@@ -504,7 +505,8 @@ class TwoPlaneScene(DeskLampScene):
                     "dictionary": ARUCO_DICTIONARY,
                     "size": MARKER_CHECKER,
                     "markers": [
-                        {"id": int(self.marker_ids[p_i, k]), "plane_xy": [float(x) for x in self.marker_plane_xy[p_i, k]]}
+                        {"id": int(self.marker_ids[p_i, k]),
+                         "plane_xy": [float(x) for x in self.marker_plane_xy[p_i, k]]}
                         for k in range(self.marker_ids.shape[1])
                     ],
                 }
