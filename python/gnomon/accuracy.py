@@ -115,20 +115,18 @@ def depth_accuracy(depth: np.ndarray, truth_depth: np.ndarray, swept: np.ndarray
     n_out = int(np.isfinite(depth).sum())
     with_truth = np.isfinite(depth) & np.isfinite(truth_depth)
     all_err = (depth - truth_depth)[with_truth].astype(np.float64)
-    extra = {
-        "output_points": n_out, "false_points": int(false.sum()),
-        "false_point_rate": float(false.sum() / max(n_out, 1)),
-        "gross_points": int(gross.sum()), "gross_rate": float(gross.sum() / max(n_out, 1)),
-        "rms_all_points": float(np.sqrt(np.mean(all_err**2))) if all_err.size else float("nan"),
-    }
-    if err.size == 0:
-        nan = float("nan")
-        return DepthAccuracy(nan, nan, nan, nan, nan, nan, nan, 0.0, n_swept, 0, camera_distance, units, **extra)
-    a = np.abs(err)
-    rms = float(np.sqrt(np.mean(err**2)))
-    med = float(np.median(a))
-    p95 = float(np.percentile(a, 95))
+    if err.size:
+        a = np.abs(err)
+        rms, med, p95, mean = (float(np.sqrt(np.mean(err**2))), float(np.median(a)), float(np.percentile(a, 95)),
+                               float(err.mean()))
+        coverage, n_measured = float(measured.sum() / max(n_swept, 1)), int(measured.sum())
+    else:
+        rms = med = p95 = mean = float("nan")
+        coverage, n_measured = 0.0, 0
     pct = 100.0 / camera_distance
-    return DepthAccuracy(rms, med, p95, float(err.mean()), rms * pct, med * pct, p95 * pct,
-                         float(measured.sum() / max(n_swept, 1)), n_swept, int(measured.sum()), camera_distance,
-                         units, **extra)
+    return DepthAccuracy(
+        rms, med, p95, mean, rms * pct, med * pct, p95 * pct, coverage, n_swept, n_measured, camera_distance, units,
+        output_points=n_out, false_points=int(false.sum()), false_point_rate=float(false.sum() / max(n_out, 1)),
+        gross_points=int(gross.sum()), gross_rate=float(gross.sum() / max(n_out, 1)),
+        rms_all_points=float(np.sqrt(np.mean(all_err**2))) if all_err.size else float("nan"),
+    )
