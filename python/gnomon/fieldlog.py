@@ -25,7 +25,7 @@ VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
 UNITS = ("mm", "m")
 EDGES = ("enter", "leave", "both")
 LIGHT_KINDS = ("lamp", "two-plane", "sun")
-TIMESTAMP_MODES = ("filename", "exif", "start+fps")
+TIMESTAMP_MODES = ("filename", "exif", "start+fps")  # how each frame's time is known (gnomon.timestamps)
 
 
 class _Table:

@@ -39,14 +39,15 @@ import re
 import zoneinfo
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import TypeAlias
 
 import numpy as np
 import pandas as pd
 
 from gnomon.errors import GnomonError
 
-TimeLike = str | dt.datetime | pd.Timestamp | np.datetime64
-TzLike = str | dt.tzinfo | None
+TimeLike: TypeAlias = str | dt.datetime | pd.Timestamp | np.datetime64
+TzLike: TypeAlias = str | dt.tzinfo | None
 
 # Plausible ranges: a value outside is almost certainly a unit mistake
 # (pressure in mbar or kPa instead of Pa, altitude in feet...).
@@ -185,19 +186,31 @@ def parse_time(text: TimeLike, site_tz: TzLike = None) -> pd.Timestamp:
     else:
         raise GnomonError(f"time {text!r} is not an ISO 8601 string or a datetime")
     if ts.tzinfo is None:
-        tz = parse_timezone(site_tz)
-        if tz is None:
-            raise GnomonError(
-                f"naive timestamp '{text}' and the site has no timezone "
-                "(add a UTC offset such as -07:00, or give the site's time zone)"
-            )
-        try:
-            ts = ts.tz_localize(tz, ambiguous="raise", nonexistent="raise")
-        except ValueError:
-            # pandas raises ValueError subclasses for both cases; tell them apart.
-            gap = ts.tz_localize(tz, ambiguous=True, nonexistent="NaT") is pd.NaT
-            what = "does not exist (skipped by a clock change)" if gap else "is ambiguous (repeated by a clock change)"
-            raise GnomonError(f"local time '{text}' {what} in {site_tz}: give an explicit UTC offset") from None
+        return localize(ts, site_tz, f"time '{text}'")
+    return ts.tz_convert("UTC")
+
+
+def localize(naive: dt.datetime | pd.Timestamp, tz: TzLike, where: str) -> pd.Timestamp:
+    """A naive local time in the zone ``tz`` → a tz-aware ``pd.Timestamp`` in UTC.
+
+    ``tz`` as for :func:`parse_timezone`. Raises :class:`GnomonError` starting
+    with ``where`` (e.g. the file the time came from) when there is no zone,
+    or when the local time does not exist or is ambiguous (a daylight-saving
+    change) in it.
+    """
+    zone = parse_timezone(tz)
+    if zone is None:
+        raise GnomonError(f"{where}: no UTC offset, and the site has no timezone "
+                          "(give the site's time zone, or times with a UTC offset such as -07:00)")
+    ts = pd.Timestamp(naive)
+    try:
+        ts = ts.tz_localize(zone, ambiguous="raise", nonexistent="raise")
+    except ValueError:
+        # pandas raises ValueError subclasses for both cases; tell them apart.
+        gap = ts.tz_localize(zone, ambiguous=True, nonexistent="NaT") is pd.NaT
+        what = "does not exist (skipped by a clock change)" if gap else "is ambiguous (repeated by a clock change)"
+        raise GnomonError(f"{where}: local time {ts.isoformat()} {what} in {tz}: "
+                          "give an explicit UTC offset") from None
     return ts.tz_convert("UTC")
 
 

@@ -41,14 +41,14 @@ import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TypeAlias
 
 import numpy as np
 import pandas as pd
 
 from gnomon.errors import GnomonError
-from gnomon.sun import parse_time, parse_timezone
-
-MODES = ("filename", "exif", "start+fps")
+from gnomon.fieldlog import TIMESTAMP_MODES as MODES
+from gnomon.sun import localize, parse_time
 
 _EXIF_IFD = 0x8769
 _DATETIME_ORIGINAL = 0x9003
@@ -58,7 +58,7 @@ _EXIF_FORMAT = "%Y:%m:%d %H:%M:%S"
 _EXIF_OFFSET = re.compile(r"^([+-])(\d{2}):?(\d{2})$")
 _EXIF_BLANK_OFFSET = re.compile(r"^\s*:\s*$")
 
-FileLike = str | os.PathLike
+FileLike: TypeAlias = str | os.PathLike
 
 
 def frame_times(files: Sequence[FileLike] | int, mode: str, *, pattern: str | None = None,
@@ -120,22 +120,6 @@ def interpolate_times(frame_times, fractional_frames) -> np.ndarray:
 
 # --------------------------------------------------------------------------- helpers
 
-def _localise(naive: dt.datetime, tz, where: str) -> int:
-    """A naive local time in ``tz`` → UTC nanoseconds since the epoch."""
-    zone = parse_timezone(tz)
-    if zone is None:
-        raise GnomonError(f"{where}: the time has no UTC offset and the site has no timezone "
-                          "(give [site] timezone, or timestamps with an offset)")
-    ts = pd.Timestamp(naive)
-    try:
-        ts = ts.tz_localize(zone, ambiguous="raise", nonexistent="raise")
-    except ValueError:
-        gap = ts.tz_localize(zone, ambiguous=True, nonexistent="NaT") is pd.NaT
-        what = "does not exist (skipped by a clock change)" if gap else "is ambiguous (repeated by a clock change)"
-        raise GnomonError(f"{where}: local time {naive.isoformat()} {what} in {tz}") from None
-    return int(ts.tz_convert("UTC").value)
-
-
 def _aware_ns(aware: dt.datetime) -> int:
     return int(pd.Timestamp(aware).tz_convert("UTC").value)
 
@@ -173,7 +157,7 @@ def _from_name(path: Path, pattern: str, kind: str, site_tz) -> int:
         return _aware_ns(parsed)
     if kind == "utc":
         return _aware_ns(parsed.replace(tzinfo=dt.UTC))
-    return _localise(parsed, site_tz, str(path))
+    return int(localize(parsed, site_tz, str(path)).value)
 
 
 def _exif_text(value) -> str | None:
@@ -212,7 +196,7 @@ def _from_exif(path: Path, site_tz) -> int:
     if offset is not None and _EXIF_BLANK_OFFSET.match(offset):
         offset = None  # "   :  ": the camera did not know
     if offset is None:
-        return _localise(parsed, site_tz, str(path))
+        return int(localize(parsed, site_tz, str(path)).value)
     m = _EXIF_OFFSET.match(offset)
     if not m or int(m.group(2)) > 14 or int(m.group(3)) >= 60:
         raise GnomonError(f"{path}: EXIF OffsetTimeOriginal {offset!r} is not a UTC offset such as +02:00")
