@@ -278,7 +278,7 @@ def _plane_coords(xy: np.ndarray, R: np.ndarray, t: np.ndarray) -> tuple[np.ndar
 
 def finish_image(radiance: np.ndarray, *, blur_px: float = 0.5, noise_dn: float = 1.0, seed: int = 0) -> np.ndarray:
     """Optics and sensor: Gaussian PSF, Gaussian read noise (DN), 8-bit quantisation."""
-    img = radiance.astype(np.float32)
+    img: np.ndarray = radiance.astype(np.float32)
     if blur_px > 0:
         img = cv2.GaussianBlur(img, (0, 0), blur_px)
     if noise_dn > 0:

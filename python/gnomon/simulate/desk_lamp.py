@@ -121,7 +121,6 @@ truth so that every pixel in them is bare desk and swept.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import time
 from collections.abc import Callable
@@ -159,7 +158,7 @@ DESK, SPHERE, BOX, CYLINDER = 0, 1, 2, 3
 OBJECT_NAMES = {DESK: "desk", SPHERE: "sphere", BOX: "box", CYLINDER: "cylinder"}
 
 
-def _objects() -> dict[int, tuple[object, float]]:
+def _objects() -> dict[int, tuple[geo.Surface, float]]:
     """The three objects and their albedos."""
     yaw = math.radians(12.0)
     return {
@@ -320,27 +319,28 @@ class DeskLampScene:
         self.crop = (slice(p, p + self.H), slice(p, p + self.W))
         self._cast_primary_rays()
         self._light()
-        for name in ("hit", "object_id", "points", "depth", "normals", "albedo", "direct", "ambient",
-                     "lit", "receives_light", "in_cast_shadow", "cos_incidence", "dist_to_lamp"):
-            setattr(self, name, getattr(self, name + "_f")[self.crop])
+        # The per-pixel maps on the image proper (the *_f maps cover the padded grid).
+        c = self.crop
+        self.hit, self.object_id, self.points = self.hit_f[c], self.object_id_f[c], self.points_f[c]
+        self.depth, self.normals, self.albedo = self.depth_f[c], self.normals_f[c], self.albedo_f[c]
+        self.direct, self.ambient, self.lit = self.direct_f[c], self.ambient_f[c], self.lit_f[c]
+        self.receives_light, self.in_cast_shadow = self.receives_light_f[c], self.in_cast_shadow_f[c]
+        self.cos_incidence, self.dist_to_lamp = self.cos_incidence_f[c], self.dist_to_lamp_f[c]
         self._setup_stick()
         self._ground_truth()
 
     # ------------------------------------------------------------- camera
     def _setup_camera(self) -> None:
-        c = self.config
-        sx, sy = self.W / REF_WIDTH, self.H / REF_HEIGHT
-        fx, fy = REF_FX * sx, REF_FY * sy
-        cx, cy = (REF_CX + 0.5) * sx - 0.5, (REF_CY + 0.5) * sy - 0.5
-        dist = DISTORTION if c.distortion else (0.0,) * 5
-        self.lens = geo.PinholeLens(fx, fy, cx, cy, dist)
         el, az = math.radians(self.CAMERA_ELEVATION_DEG), math.radians(self.CAMERA_AZIMUTH_DEG)
         centre = np.asarray(self.SCENE_CENTRE, dtype=np.float64)
         eye = centre + self.CAMERA_DISTANCE * np.array(
             [math.sin(az) * math.cos(el), -math.cos(az) * math.cos(el), math.sin(el)])
-        self.R, self.t = geo.look_at(eye, centre, roll_deg=self.CAMERA_ROLL_DEG)
-        self.rvec = geo.rodrigues_from_rotation(self.R)
-        self.C = -self.R.T @ self.t
+        self.camera = geo.SceneCamera.scaled(
+            self.W, self.H, ref_size=(REF_WIDTH, REF_HEIGHT), ref_focal_px=(REF_FX, REF_FY),
+            ref_centre_px=(REF_CX, REF_CY), dist=DISTORTION if self.config.distortion else (0.0,) * 5,
+            eye=eye, target=centre, roll_deg=self.CAMERA_ROLL_DEG)
+        self.lens, self.R, self.t = self.camera.lens, self.camera.R, self.camera.t
+        self.rvec, self.C = self.camera.rvec, self.camera.centre
         self.camera_distance = float(np.linalg.norm(self.C - centre))
 
     def lamp_position(self) -> np.ndarray:
@@ -351,10 +351,12 @@ class DeskLampScene:
         scene and the desk as the left one, on the other side of the view.
         """
         S = LAMP.astype(np.float64)
-        if getattr(self.config, "lamp_height", None) is not None:
-            S[2] = float(self.config.lamp_height)
-        if getattr(self.config, "lamp_side", "left") == "right":
-            S = mirror_across_view(S, self.C, self.SCENE_CENTRE)
+        c = self.config
+        if isinstance(c, DeskLampConfig):
+            if c.lamp_height is not None:
+                S[2] = float(c.lamp_height)
+            if c.lamp_side == "right":
+                S = mirror_across_view(S, self.C, self.SCENE_CENTRE)
         return S
 
     def project(self, X_world: np.ndarray) -> np.ndarray:
@@ -419,7 +421,7 @@ class DeskLampScene:
         self.normals_f = n
         self.albedo_f = np.where(hit, self._albedo(P), 0.0)
 
-    def _objects(self) -> dict[int, tuple[object, float]]:
+    def _objects(self) -> dict[int, tuple[geo.Surface, float]]:
         return _objects()
 
     def _planes(self) -> dict[int, geo.Plane]:
@@ -774,37 +776,40 @@ class DeskLampScene:
             "scan": {"min_contrast": 20},
         }
 
-    def summary(self) -> dict:
+    def summary_common(self) -> dict:
+        """The ground-truth entries every lamp-and-stick scene has (see :meth:`summary`)."""
         c = self.config
-        lit_desk = self.receives_light & (self.object_id == DESK)
         return {
             "scene": self.name,
-            "lamp_side": c.lamp_side,
             "seed": c.seed,
             "config": dataclasses.asdict(c),
             "units": "mm",
             "image_size": [self.W, self.H],
             "frame_count": self.N,
             "camera_distance_mm": self.camera_distance,
-            "camera_centre_world": self.C.tolist(),
-            "scene_centre_world": SCENE_CENTRE.tolist(),
+            **self.camera.summary(),
+            "scene_centre_world": np.asarray(self.SCENE_CENTRE).tolist(),
             "lamp": self.S.tolist(),
-            "lamp_distance_mm": float(np.linalg.norm(self.S - SCENE_CENTRE)),
+            "lamp_distance_mm": float(np.linalg.norm(self.S - self.SCENE_CENTRE)),
             "lamp_radius_mm": c.lamp_radius,
             "stick_radius_mm": c.stick_radius,
             "stick_fraction_from_lamp": STICK_FRACTION,
-            "K": self.lens.K.tolist(),
-            "dist": self.lens.dist.tolist(),
-            "rvec": self.rvec.tolist(),
-            "tvec": self.t.tolist(),
             "irradiance_scale_E": self.E,
             "ambient_irradiance": AMBIENT,
-            "brightest_lit_desk": float(np.max(np.where(lit_desk, self.ambient + self.direct, 0.0))),
             "brightest_surface": float(np.max(self.ambient + self.direct)),
             "sweep_columns": list(self.u_range),
-            "regions": self.regions,
             "swept_pixels": int(self.swept.sum()),
             "swept_fraction": float(self.swept.mean()),
+        }
+
+    def summary(self) -> dict:
+        lit_desk = self.receives_light & (self.object_id == DESK)
+        c = self.config
+        return {
+            **self.summary_common(),
+            "lamp_side": c.lamp_side if isinstance(c, DeskLampConfig) else "left",
+            "brightest_lit_desk": float(np.max(np.where(lit_desk, self.ambient + self.direct, 0.0))),
+            "regions": self.regions,
             "objects": {
                 "sphere": {"id": SPHERE, "centre": [-100.0, 40.0, 40.0], "radius": 40.0, "albedo": 0.70},
                 "box": {"id": BOX, "centre": [75.0, 55.0, 25.0], "size": [80.0, 60.0, 50.0],
@@ -867,16 +872,6 @@ def write_frames(scene: DeskLampScene, out: Path, rng: np.random.Generator,
     return paths
 
 
-def write_ground_truth(out: Path, arrays: dict, summary: dict) -> tuple[Path, Path]:
-    gt_path = out / "ground_truth.npz"
-    with atomic.atomic_path(gt_path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-    json_path = out / "ground_truth.json"
-    atomic.write_text(json_path, json.dumps(summary, indent=2) + "\n")
-    return gt_path, json_path
-
-
 def nuisance_text(config: SweepConfig) -> str:
     ext = config.extension
     return (f"{config.width}x{config.height}, {config.frames} frames, noise {config.noise} DN, "
@@ -918,7 +913,7 @@ def simulate_desk_lamp(out_dir, config: DeskLampConfig | None = None, *,
         pencil = pencil_mod.write_pencil_photos(scene, out, config.pencil_photos)
     arrays.update(pencil_mod.ground_truth_arrays(pencil))
     summary["pencil"] = pencil_mod.ground_truth_summary(pencil)
-    gt_path, json_path = write_ground_truth(out, arrays, summary)
+    gt_path, json_path = sensor.write_ground_truth(out, arrays, summary)
     if pencil is not None:
         pencil_mod.write_pencil_log(scene, pencil, out / "pencil_log.toml")
     log_path = out / "field_log.toml"
@@ -929,7 +924,7 @@ def simulate_desk_lamp(out_dir, config: DeskLampConfig | None = None, *,
     return SimulationResult(
         out_dir=out, field_log=log_path, frames=paths, ground_truth=gt_path,
         ground_truth_json=json_path, camera_distance_mm=scene.camera_distance,
-        lamp=tuple(float(x) for x in scene.S), regions=scene.regions,
+        lamp=(float(scene.S[0]), float(scene.S[1]), float(scene.S[2])), regions=scene.regions,
         swept_pixels=int(scene.swept.sum()), swept_fraction=float(scene.swept.mean()),
         seconds=time.perf_counter() - t0, config=config,
         pencil_log=(out / "pencil_log.toml") if pencil is not None else None,

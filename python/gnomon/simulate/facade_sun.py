@@ -181,13 +181,13 @@ from __future__ import annotations
 import dataclasses
 import datetime as dt
 import io
-import json
 import math
 import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -295,7 +295,7 @@ class FacadeSunConfig:
     def day(cls, **overrides) -> FacadeSunConfig:
         """The ``facade_day`` scene: a whole November day (06:40–17:40 local, night at both ends),
         six cloud dips, a lamp post's shadow besides the pole's, 8-bit JPEG."""
-        base = {"start": "2026-11-12T06:40:00", "duration_s": 11 * 3600.0, "frames": 400, "clouds": 6,
+        base: dict[str, Any] = {"start": "2026-11-12T06:40:00", "duration_s": 11 * 3600.0, "frames": 400, "clouds": 6,
                 "full_day": True, "post": True}
         base.update(overrides)
         return cls(**base)
@@ -450,8 +450,7 @@ class _Building:
             n_rec[inside] = nl
             back = axis == 1
             rec_id = np.where(back, WINDOW, REVEAL)
-        ts = [tg, np.where(inside, np.inf, tw), t_rec] + [b.intersect(o, d) for b in self.boxes]
-        ts = np.stack(ts)
+        ts = np.stack([tg, np.where(inside, np.inf, tw), t_rec] + [b.intersect(o, d) for b in self.boxes])
         k = np.argmin(ts, axis=0)
         t = np.take_along_axis(ts, k[None], 0)[0]
         ids = np.full(shape, -1, dtype=np.int8)
@@ -566,14 +565,12 @@ class FacadeSunScene:
 
     # ------------------------------------------------------------- camera
     def _setup_camera(self) -> None:
-        c = self.config
-        sx, sy = self.W / REF_WIDTH, self.H / REF_HEIGHT
-        fx, fy = REF_FX * sx, REF_FY * sy
-        cx, cy = (REF_CX + 0.5) * sx - 0.5, (REF_CY + 0.5) * sy - 0.5
-        self.lens = geo.PinholeLens(fx, fy, cx, cy, DISTORTION if c.distortion else (0.0,) * 5)
-        self.R, self.t = geo.look_at(CAMERA_EYE, CAMERA_TARGET, roll_deg=CAMERA_ROLL_DEG)
-        self.rvec = geo.rodrigues_from_rotation(self.R)
-        self.C = -self.R.T @ self.t
+        self.camera = geo.SceneCamera.scaled(
+            self.W, self.H, ref_size=(REF_WIDTH, REF_HEIGHT), ref_focal_px=(REF_FX, REF_FY),
+            ref_centre_px=(REF_CX, REF_CY), dist=DISTORTION if self.config.distortion else (0.0,) * 5,
+            eye=CAMERA_EYE, target=CAMERA_TARGET, roll_deg=CAMERA_ROLL_DEG)
+        self.lens, self.R, self.t = self.camera.lens, self.camera.R, self.camera.t
+        self.rvec, self.C = self.camera.rvec, self.camera.centre
         self.camera_distance = float(np.linalg.norm(self.C - FACADE_CENTRE))
 
     def project(self, X_world: np.ndarray) -> np.ndarray:
@@ -756,8 +753,7 @@ class FacadeSunScene:
                     break
             centres.append(k0)
             depth = rng.uniform(0.4, 0.8)
-            k = np.arange(N)
-            x = (k - k0) / width
+            x = (np.arange(N) - k0) / width
             bump = np.where((x > 0) & (x < 1), np.sin(np.pi * np.clip(x, 0, 1)) ** 2, 0.0)
             if bump.max() < 0.5:  # a very short dip still covers a frame fully
                 bump[int(round(k0 + width / 2))] = 1.0
@@ -991,8 +987,8 @@ class FacadeSunScene:
         if len(cloud_frames):
             e_in, e_out = enter[self.swept], leave[self.swept]
             clash = np.zeros(len(e_in), dtype=bool)
-            for k in cloud_frames:
-                clash |= (k >= e_in - 1) & (k <= e_out + 1)
+            for kc in cloud_frames:
+                clash |= (kc >= e_in - 1) & (kc <= e_out + 1)
             vals = free[self.swept]
             vals[clash] = False
             free[self.swept] = vals
@@ -1196,12 +1192,8 @@ class FacadeSunScene:
             "sun_elevation_range_deg": [float(self.elevation.min()), float(self.elevation.max())],
             "sun_angular_diameter_deg": SUN_ANGULAR_DIAMETER_DEG,
             "camera_distance": self.camera_distance,
-            "camera_centre_world": self.C.tolist(),
+            **self.camera.summary(),
             "facade_centre_world": FACADE_CENTRE.tolist(),
-            "K": self.lens.K.tolist(),
-            "dist": self.lens.dist.tolist(),
-            "rvec": self.rvec.tolist(),
-            "tvec": self.t.tolist(),
             "pole": {"base": self.Q.tolist(), "top": self.Qtop.tolist(), "radius": c.pole_radius},
             "gnomon_observation": {"frame": self.frame_name(self.gnomon_obs["k"]), **self.gnomon_obs},
             "cloud_frames": [int(k) for k in np.nonzero(self.cloud)[0]],
@@ -1320,12 +1312,7 @@ def simulate_facade_sun(out_dir, config: FacadeSunConfig | None = None, *,
         paths.append(path)
         if progress is not None:
             progress(k + 1, config.frames)
-    gt_path = out / "ground_truth.npz"
-    with atomic.atomic_path(gt_path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **scene.ground_truth_arrays())
-    json_path = out / "ground_truth.json"
-    atomic.write_text(json_path, json.dumps(scene.summary(), indent=2) + "\n")
+    gt_path, json_path = sensor.write_ground_truth(out, scene.ground_truth_arrays(), scene.summary())
     log_path = out / "field_log.toml"
     ext = config.extension
     header = (f"Synthetic capture written by `gnomon simulate facade_sun` (seed {config.seed}).\n"

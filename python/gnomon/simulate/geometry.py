@@ -19,6 +19,10 @@ pipeline, because they are part of the file formats:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
 import numpy as np
 
 EPS_T = 1e-6  # smallest accepted ray parameter (mm for unit rays)
@@ -155,11 +159,58 @@ class PinholeLens:
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+@dataclass(frozen=True)
+class SceneCamera:
+    """A scene's camera: its lens and its pose ``X_cam = R·X_world + t``."""
+
+    lens: PinholeLens
+    R: np.ndarray
+    t: np.ndarray
+
+    @classmethod
+    def scaled(cls, width: int, height: int, *, ref_size: tuple[int, int], ref_focal_px: tuple[float, float],
+               ref_centre_px: tuple[float, float], dist: Sequence[float], eye: np.ndarray, target: np.ndarray,
+               roll_deg: float) -> SceneCamera:
+        """A reference camera rescaled to ``width`` × ``height`` pixels (the same field of view), placed at
+        ``eye`` looking at ``target``.
+
+        ``ref_focal_px`` (fx, fy) and ``ref_centre_px`` (cx, cy) are in pixels of an image of
+        ``ref_size`` (width, height), pixel-centre convention.
+        """
+        sx, sy = width / ref_size[0], height / ref_size[1]
+        lens = PinholeLens(ref_focal_px[0] * sx, ref_focal_px[1] * sy, (ref_centre_px[0] + 0.5) * sx - 0.5,
+                           (ref_centre_px[1] + 0.5) * sy - 0.5, dist)
+        R, t = look_at(eye, target, roll_deg=roll_deg)
+        return cls(lens, R, t)
+
+    @property
+    def rvec(self) -> np.ndarray:
+        return rodrigues_from_rotation(self.R)
+
+    @property
+    def centre(self) -> np.ndarray:
+        """The camera centre in the world frame."""
+        return -self.R.T @ self.t
+
+    def summary(self) -> dict:
+        """The camera's entries of a scene's ground truth (world units of the scene)."""
+        return {"camera_centre_world": self.centre.tolist(), "K": self.lens.K.tolist(),
+                "dist": self.lens.dist.tolist(), "rvec": self.rvec.tolist(), "tvec": self.t.tolist()}
+
+
 # --------------------------------------------------------------------------- primitives
 # Every intersect(o, d) takes origins o (..., 3) (or one origin, broadcast) and
 # directions d (..., 3) and returns the smallest ray parameter t > EPS_T at which
 # the ray o + t·d enters the solid (inf when it misses). ``normal(X)`` gives the
 # outward unit normal at surface points X.
+
+class Surface(Protocol):
+    """A ray-castable primitive (the classes below)."""
+
+    def intersect(self, o: np.ndarray, d: np.ndarray) -> np.ndarray: ...
+
+    def normal(self, X: np.ndarray) -> np.ndarray: ...
+
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("...i,...i->...", a, b)

@@ -31,6 +31,7 @@ import cv2
 import numpy as np
 
 from gnomon.simulate.chessboard import SampleRays, TruthCamera, default_truth_camera, finish_image
+from gnomon.simulate.geometry import look_at
 
 
 @functools.lru_cache(maxsize=256)
@@ -184,19 +185,6 @@ class MarkerScene:
         n = self.R @ plane.normal
         d = float(n @ (self.R @ np.asarray(plane.origin) + self.t))
         return (n, d) if d >= 0 else (-n, -d)
-
-
-def look_at(eye: Sequence[float], target: Sequence[float],
-            up: Sequence[float] = (0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
-    """World → camera (R, t) of a camera at ``eye`` looking at ``target`` (OpenCV axes: y down)."""
-    eye = np.asarray(eye, dtype=np.float64)
-    z = np.asarray(target, dtype=np.float64) - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    R = np.stack([x, y, z])
-    return R, -R @ eye
 
 
 def _albedo(plane: ScenePlane, a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -321,8 +321,8 @@ def write_pencil_photos(scene, out: Path, n: int) -> PencilPhotos:
         tips.append(pencil.shadow_tip(scene.S))
         paths.append(folder / name)
         images.append(f"pencil/{name}")
-    bases, tops, tips = np.array(bases), np.array(tops), np.array(tips)
-    return PencilPhotos(bases, tops, tips, scene.project(bases), scene.project(tips), paths, images)
+    return PencilPhotos(np.array(bases), np.array(tops), np.array(tips), scene.project(np.array(bases)),
+                        scene.project(np.array(tips)), paths, images)
 
 
 def ground_truth_arrays(ph: PencilPhotos | None) -> dict[str, np.ndarray]:
@@ -335,8 +335,8 @@ def ground_truth_arrays(ph: PencilPhotos | None) -> dict[str, np.ndarray]:
         "pencil_tips_world": ph.tips_world,
         "pencil_base_pixels": ph.base_pixels,
         "pencil_tip_pixels": ph.tip_pixels,
-        "pencil_height": np.float64(ph.height),
-        "pencil_radius": np.float64(ph.radius),
+        "pencil_height": np.array(ph.height, dtype=np.float64),
+        "pencil_radius": np.array(ph.radius, dtype=np.float64),
     }
 
 

@@ -3,17 +3,24 @@
 Linear radiance → optical blur (Gaussian, on the linear image rendered with a
 margin, then cropped: border pixels are blurred with the real scene beyond the
 border) → gamma encoding → Gaussian sensor noise in DN → quantisation to u8.
+Also the ground-truth files every scene writes beside its capture.
 """
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+from typing import Any
+
 import cv2
 import numpy as np
+
+from gnomon import atomic
 
 
 def blur_and_crop(L_full: np.ndarray, sigma_px: float, crop) -> np.ndarray:
     """Blur the padded linear image by ``sigma_px`` (0 = none) and crop it to the frame."""
-    L = np.asarray(L_full, dtype=np.float32)
+    L: np.ndarray = np.asarray(L_full, dtype=np.float32)
     if sigma_px > 0:
         L = cv2.GaussianBlur(L, (0, 0), sigmaX=sigma_px, sigmaY=sigma_px, borderType=cv2.BORDER_REFLECT)
     return np.ascontiguousarray(L[crop])
@@ -25,3 +32,14 @@ def encode_dn(L_blurred: np.ndarray, gamma: float, noise_dn: float, rng: np.rand
     if noise_dn > 0:
         dn += np.float32(noise_dn) * rng.standard_normal(dn.shape, dtype=np.float32)
     return np.clip(np.rint(dn), 0, 255).astype(np.uint8)
+
+
+def write_ground_truth(out: Path, arrays: dict[str, Any], summary: dict) -> tuple[Path, Path]:
+    """Write ``out/ground_truth.npz`` (the arrays) and ``out/ground_truth.json`` (the summary), atomically."""
+    gt_path = out / "ground_truth.npz"
+    with atomic.atomic_path(gt_path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+    json_path = out / "ground_truth.json"
+    atomic.write_text(json_path, json.dumps(summary, indent=2) + "\n")
+    return gt_path, json_path

@@ -98,12 +98,12 @@ projections of each marker's corners in OpenCV's order.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -111,12 +111,11 @@ import numpy as np
 from gnomon import toml_io
 from gnomon.errors import GnomonError
 from gnomon.simulate import geometry as geo
+from gnomon.simulate import sensor
 from gnomon.simulate.desk_lamp import (
-    AMBIENT,
     BOX,
     DESK,
     SPHERE,
-    STICK_FRACTION,
     DeskLampScene,
     SimulationResult,
     SweepConfig,
@@ -124,7 +123,6 @@ from gnomon.simulate.desk_lamp import (
     nuisance_text,
     prepare_out_dir,
     write_frames,
-    write_ground_truth,
 )
 from gnomon.simulate.markers import aruco_bits, aruco_class, aruco_corners
 
@@ -134,8 +132,9 @@ WALL_Y = 160.0
 LAMP = np.array([-380.0, -130.0, 430.0])
 SCENE_CENTRE = np.array([0.0, 70.0, 60.0])
 
-SPHERE_SPEC = {"centre": (-105.0, -15.0, 32.0), "radius": 32.0, "albedo": 0.70}
-BOX_SPEC = {"centre": (85.0, -20.0, 22.0), "size": (70.0, 50.0, 44.0), "yaw_deg": 20.0, "albedo": 0.60}
+SPHERE_SPEC: dict[str, Any] = {"centre": (-105.0, -15.0, 32.0), "radius": 32.0, "albedo": 0.70}
+BOX_SPEC: dict[str, Any] = {"centre": (85.0, -20.0, 22.0), "size": (70.0, 50.0, 44.0), "yaw_deg": 20.0,
+                            "albedo": 0.60}
 
 # Plane frames (see the module docstring): point, normal, x_axis.
 PLANE_FRAMES = {
@@ -216,6 +215,7 @@ class TwoPlaneScene(DeskLampScene):
     # the lamp — which this scene's scan must estimate from the planes — is
     # fixed only along that line.
     TILT_WOBBLE_DEG = 8.0
+    config: TwoPlaneConfig
 
     SCENE_CENTRE = SCENE_CENTRE
     CAMERA_DISTANCE = 650.0
@@ -232,7 +232,7 @@ class TwoPlaneScene(DeskLampScene):
         return LAMP.astype(np.float64)
 
     # ------------------------------------------------------------- surfaces
-    def _objects(self) -> dict[int, tuple[object, float]]:
+    def _objects(self) -> dict[int, tuple[geo.Surface, float]]:
         s, b = SPHERE_SPEC, BOX_SPEC
         return {
             SPHERE: (geo.Sphere(s["centre"], s["radius"]), s["albedo"]),
@@ -307,8 +307,8 @@ class TwoPlaneScene(DeskLampScene):
             self.marker_lo_f[vv, uu] = cls_sub.min(axis=1)
             self.marker_hi_f[vv, uu] = cls_sub.max(axis=1)
             self.near_marker_f[vv, uu] = True
-        for obj_id, (_, a) in self.objects.items():
-            albedo = np.where(oid == obj_id, a, albedo)
+        for obj_id, (_, obj_albedo) in self.objects.items():
+            albedo = np.where(oid == obj_id, obj_albedo, albedo)
         return albedo
 
     # ------------------------------------------------------------- the stick's reference surface
@@ -397,7 +397,7 @@ class TwoPlaneScene(DeskLampScene):
             v_range = range(edge, H - edge - band + 1)
             # Runs of columns good on every row of the band [v0, v0 + band), per half and whole.
             full = []                # (v0, u0, u1) with u1 - u0 >= W/2
-            halves = ([], [])        # (v0, u0, u1) inside each half, >= 0.35 W
+            halves: tuple[list, list] = ([], [])        # (v0, u0, u1) inside each half, >= 0.35 W
             for v0 in v_range:
                 cols = (cum[v0 + band] - cum[v0]) == band
                 if not cols.any():
@@ -475,7 +475,7 @@ class TwoPlaneScene(DeskLampScene):
         frames = [PLANE_FRAMES[oid] for oid in PLANE_ORDER]
         arrays.update({
             "cuts_both": self.cuts_both.copy(),
-            "wall_y": np.float64(WALL_Y),
+            "wall_y": np.array(WALL_Y, dtype=np.float64),
             "plane_points": np.array([f[0] for f in frames]),
             "plane_normals": np.array([f[1] for f in frames]),
             "plane_x_axes": np.array([f[2] for f in frames]),
@@ -490,7 +490,7 @@ class TwoPlaneScene(DeskLampScene):
         return arrays
 
     def field_log(self) -> dict:
-        planes = []
+        planes: list[dict[str, Any]] = []
         for p_i, oid in enumerate(PLANE_ORDER):
             point, normal, x_axis = PLANE_FRAMES[oid]
             planes.append({
@@ -526,33 +526,11 @@ class TwoPlaneScene(DeskLampScene):
         }
 
     def summary(self) -> dict:
-        c = self.config
         ref = self.receives_light & np.isin(self.object_id, self.REFERENCE_IDS)
         return {
-            "scene": self.name,
-            "seed": c.seed,
-            "config": dataclasses.asdict(c),
-            "units": "mm",
-            "image_size": [self.W, self.H],
-            "frame_count": self.N,
-            "camera_distance_mm": self.camera_distance,
-            "camera_centre_world": self.C.tolist(),
-            "scene_centre_world": SCENE_CENTRE.tolist(),
-            "lamp": self.S.tolist(),
+            **self.summary_common(),
             "lamp_in_field_log": False,
-            "lamp_distance_mm": float(np.linalg.norm(self.S - SCENE_CENTRE)),
-            "lamp_radius_mm": c.lamp_radius,
-            "stick_radius_mm": c.stick_radius,
-            "stick_fraction_from_lamp": STICK_FRACTION,
-            "K": self.lens.K.tolist(),
-            "dist": self.lens.dist.tolist(),
-            "rvec": self.rvec.tolist(),
-            "tvec": self.t.tolist(),
-            "irradiance_scale_E": self.E,
-            "ambient_irradiance": AMBIENT,
             "brightest_lit_plane": float(np.max(np.where(ref, self.ambient + self.direct, 0.0))),
-            "brightest_surface": float(np.max(self.ambient + self.direct)),
-            "sweep_columns": list(self.u_range),
             "frames_cutting_both_planes": int(self.cuts_both.sum()),
             "planes": {
                 OBJECT_NAMES[oid]: {
@@ -574,8 +552,6 @@ class TwoPlaneScene(DeskLampScene):
             "marker": {"paper_mm": MARKER_PAPER, "checker_mm": MARKER_CHECKER,
                        "white": MARKER_WHITE, "black": MARKER_BLACK,
                        "hint_offset_px": list(HINT_OFFSET_PX)},
-            "swept_pixels": int(self.swept.sum()),
-            "swept_fraction": float(self.swept.mean()),
             "objects": {
                 "sphere": {"id": SPHERE, **{k: list(v) if isinstance(v, tuple) else v for k, v in SPHERE_SPEC.items()}},
                 "box": {"id": BOX, **{k: list(v) if isinstance(v, tuple) else v for k, v in BOX_SPEC.items()}},
@@ -610,7 +586,7 @@ def simulate_two_plane(out_dir, config: TwoPlaneConfig | None = None, *,
     out.mkdir(parents=True, exist_ok=True)
     clear_previous(out)
     paths = write_frames(scene, out, np.random.default_rng([config.seed, 3, 2]), progress)
-    gt_path, json_path = write_ground_truth(out, scene.ground_truth_arrays(), scene.summary())
+    gt_path, json_path = sensor.write_ground_truth(out, scene.ground_truth_arrays(), scene.summary())
     log_path = out / "field_log.toml"
     header = (f"Synthetic capture written by `gnomon simulate two_plane` (seed {config.seed}).\n"
               "Ground truth: ground_truth.npz and ground_truth.json beside this file (the lamp is\n"
@@ -621,7 +597,7 @@ def simulate_two_plane(out_dir, config: TwoPlaneConfig | None = None, *,
     return SimulationResult(
         out_dir=Path(out), field_log=log_path, frames=paths, ground_truth=gt_path,
         ground_truth_json=json_path, camera_distance_mm=scene.camera_distance,
-        lamp=tuple(float(x) for x in scene.S),
+        lamp=(float(scene.S[0]), float(scene.S[1]), float(scene.S[2])),
         regions={OBJECT_NAMES[k]: v for k, v in scene.regions.items()},
         swept_pixels=int(scene.swept.sum()), swept_fraction=float(scene.swept.mean()),
         seconds=time.perf_counter() - t0, config=config)
