@@ -636,7 +636,7 @@ class _Background:
         except BaseException as exc:  # re-raised by join, in the caller's thread
             self._error = exc
 
-    def __enter__(self) -> "_Background":
+    def __enter__(self) -> _Background:
         self._thread.start()
         return self
 

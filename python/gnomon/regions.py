@@ -146,11 +146,11 @@ def shadow_lines(times: np.ndarray, n_frames: int, planes: list[PlaneInCamera], 
     shadow plane (an object inside its mask) has no line then.
     """
     lines = [lines_on_plane(times, n_frames, p, m, camera, nm, ransac_tolerance=tol)
-             for p, m, nm, tol in zip(planes, masks, names, tolerance)]
+             for p, m, nm, tol in zip(planes, masks, names, tolerance, strict=True)]
     if len(planes) < 2:
         return lines
     pts, lab, frm, pixs = [], [], [], []
-    for k, (plane, mask) in enumerate(zip(planes, masks)):
+    for k, (plane, mask) in enumerate(zip(planes, masks, strict=True)):
         f, pix = mask_crossings(times, mask, n_frames)
         on = plane.intersect(camera.rays(pix)) if len(f) else np.zeros((0, 3))
         good = np.isfinite(on[:, 0])

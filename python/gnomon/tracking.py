@@ -277,7 +277,8 @@ class ShadowTracker:
                  crop: tuple[slice, slice] | None = None):
         self.settings = settings
         self.input_lut = decoding_lut(settings.gamma, dtype)
-        self.normalizer = IlluminationNormalizer(self.input_lut, max_run=settings.max_width) if settings.normalize_illumination else None
+        self.normalizer = (IlluminationNormalizer(self.input_lut, max_run=settings.max_width)
+                           if settings.normalize_illumination else None)
         wide = self.normalizer is not None or np.dtype(dtype) != np.uint8
         # ``crop`` (rows, columns): track only this part of each frame; the normalisation still sees the
         # whole frame, so a tile's shadow times equal the same pixels' in an untiled pass.
