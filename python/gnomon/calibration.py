@@ -138,14 +138,13 @@ def fit_camera_to_frames(
     if abs(sw / sh - 1.0) > 0.01:
         raise GnomonError(
             f"{frame_name} is {width}x{height} but the camera's {w0}x{h0} ({where}) has another aspect ratio "
-            f"({w0 / h0:.3f} vs {width / height:.3f}): the frames are a crop of the sensor, which rescaling cannot "
-            "fix; "
-            f"calibrate the camera from frames of the capture itself"
+            f"({w0 / h0:.3f} vs {width / height:.3f}): the frames are a crop of the sensor, which rescaling "
+            "cannot fix; calibrate the camera from frames of the capture itself"
         )
     if isinstance(camera, OpenCVCamera):
         new: OpenCVCamera | TsaiCamera = OpenCVCamera(
             width=int(width), height=int(height), fx=camera.fx * sw, fy=camera.fy * sh,
-            cx=(camera.cx + 0.5) * sw - 0.5, cy=(camera.cy + 0.5) * sh - 0.5, dist=tuple(camera.dist),
+            cx=(camera.cx + 0.5) * sw - 0.5, cy=(camera.cy + 0.5) * sh - 0.5, dist=camera.dist,
         )
     else:
         new = TsaiCamera(
@@ -308,7 +307,7 @@ def _zhang_once(objs, pixs, size, flags):
         fy=float(K[1, 1]),
         cx=float(K[0, 2]),
         cy=float(K[1, 2]),
-        dist=tuple(float(x) for x in dist),
+        dist=_dist5(dist),
     )
     poses = [Pose.from_rvec_tvec(r, t) for r, t in zip(rvecs, tvecs, strict=True)]
     # Our own per-view RMS in float64 (length of the 2D residual, as OpenCV's).
@@ -517,6 +516,7 @@ def calibrate_images(
 
     if len(names) < 1:
         raise GnomonError(f"none of the {len(paths)} images shows the {board[0]}x{board[1]} chessboard")
+    assert pixel_pitch_mm is not None  # checked on entry, before the images are read
     dx, dy = pixel_pitch_mm
     r = tsai.calibrate_views([(obj, c) for c in corners], size[0], size[1], dx, dy, sx=sx, full=full, names=names)
     method = "tsai-coplanar" if len(r.names) == 1 else "tsai-views"
@@ -603,6 +603,12 @@ def write_camera_file(path: str | os.PathLike, cal: CameraCalibration | OpenCVCa
     toml_io.dump(table, path, header=_HEADER)
 
 
+def _dist5(values: Any) -> tuple[float, float, float, float, float]:
+    """OpenCV's five distortion coefficients (k1, k2, p1, p2, k3) as floats."""
+    k1, k2, p1, p2, k3 = (float(x) for x in values)
+    return k1, k2, p1, p2, k3
+
+
 def _number(table: Mapping[str, Any], key: str, where: str, *, positive: bool = False, integer: bool = False) -> float:
     if key not in table:
         raise GnomonError(f"{where}: missing key '{key}'")
@@ -650,7 +656,7 @@ def camera_from_table(table: Mapping[str, Any], where: str, *,
             fy=float(_number(table, "fy", where, positive=True)),
             cx=float(_number(table, "cx", where)),
             cy=float(_number(table, "cy", where)),
-            dist=tuple(float(x) for x in dist),
+            dist=_dist5(dist),
         )
     return TsaiCamera(
         width=width,

@@ -16,7 +16,7 @@ all the per-pixel pipeline ever asks of a model.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, TypeAlias
 
 import cv2
 import numpy as np
@@ -27,8 +27,18 @@ _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-
 
 
 class CameraModel(Protocol):
-    width: int
-    height: int
+    """What the scan needs of a camera model (:class:`OpenCVCamera` and :class:`TsaiCamera` are ones)."""
+
+    @property
+    def width(self) -> int: ...
+
+    @property
+    def height(self) -> int: ...
+
+    @property
+    def K(self) -> np.ndarray:
+        """The pinhole intrinsic matrix (pixels)."""
+        ...
 
     def project(self, points_cam: np.ndarray) -> np.ndarray: ...
 
@@ -244,3 +254,7 @@ class TsaiCamera:
     def ray_map(self) -> np.ndarray:
         """Unit camera-frame ray of every pixel centre, (H, W, 3) float64."""
         return self.rays(pixel_grid(self.width, self.height)).reshape(self.height, self.width, 3)
+
+
+# The camera models a camera file (or a field log's inline [camera]) describes.
+CalibratedCamera: TypeAlias = OpenCVCamera | TsaiCamera

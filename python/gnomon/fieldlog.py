@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from gnomon import toml_io
-from gnomon.camera import CameraModel, Pose
+from gnomon.camera import CalibratedCamera, Pose
 from gnomon.errors import FieldLogError
 from gnomon.frames import glob_frames, image_size, video_size
 from gnomon.validate import check_field_log
@@ -282,7 +282,7 @@ class GnomonSpec:
 class FieldLog:
     path: Path
     capture: CaptureSpec
-    camera: CameraModel  # OpenCVCamera or TsaiCamera
+    camera: CalibratedCamera  # OpenCVCamera or TsaiCamera
     pose: Pose | None  # None: measured from the planes' markers by the scan
     planes: tuple[PlaneSpec, ...]
     light: LightSpec
@@ -317,7 +317,10 @@ def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
     if timestamps == "start+fps" and (start is None or fps is None):
         raise FieldLogError(f"{t.path}: [capture] timestamps = 'start+fps' needs 'start' and 'fps'")
     t.done()
-    extra = dict(timestamps=timestamps, time_pattern=time_pattern, start=start, fps=fps)
+
+    def spec(files: tuple[Path, ...], video: Path | None) -> CaptureSpec:
+        return CaptureSpec(pattern, files, video, units, gamma, frame_count, timestamps=timestamps,
+                           time_pattern=time_pattern, start=start, fps=fps)
 
     if not pattern.strip():
         raise t.error("frames", "is empty; give a glob such as 'frames/*.png' or a video file")
@@ -329,7 +332,7 @@ def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
         video = base / pattern
         if not video.is_file():
             raise FieldLogError(f"{t.where('frames')}: video {video} not found")
-        return CaptureSpec(pattern, (), video, units, gamma, frame_count, **extra)
+        return spec((), video)
     folder = (base / pattern).parent
     if not folder.is_dir():
         raise FieldLogError(f"{t.where('frames')}: frames folder {folder} not found")
@@ -342,10 +345,10 @@ def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
         raise FieldLogError(
             f"{t.where('frames')}: {len(files)} files match {pattern!r}, frame_count says {frame_count}"
         )
-    return CaptureSpec(pattern, files, None, units, gamma, frame_count, **extra)
+    return spec(files, None)
 
 
-def _parse_camera(t: _Table, base: Path) -> tuple[CameraModel, Pose | None, Path | None, dict]:
+def _parse_camera(t: _Table, base: Path) -> tuple[CalibratedCamera, Pose | None, Path | None, dict]:
     """[camera]: a camera file (``file = ...``) or inline keys (OpenCV or Tsai model), and [camera.pose]."""
     from gnomon.calibration import camera_from_table, load_calibration_info, load_camera_file
 
@@ -366,14 +369,15 @@ def _parse_camera(t: _Table, base: Path) -> tuple[CameraModel, Pose | None, Path
     return camera_from_table(table, f"{t.path}: [camera]"), pose, None, calibration
 
 
-def _fit_camera(camera: CameraModel, calibration: dict, capture: CaptureSpec, where: str) -> tuple[CameraModel, dict]:
+def _fit_camera(camera: CalibratedCamera, calibration: dict, capture: CaptureSpec,
+                where: str) -> tuple[CalibratedCamera, dict]:
     """The camera rescaled to the frames' size when it was calibrated at another one (same aspect)."""
     from gnomon.calibration import fit_camera_to_frames
 
     first = capture.video if capture.video is not None else capture.image_files[0]
     size = video_size(first) if capture.video is not None else image_size(first)
     fitted, note = fit_camera_to_frames(camera, size[0], size[1], where,
-                                        frame_name=f"frame 0 ({first.name})")  # type: ignore[arg-type]
+                                        frame_name=f"frame 0 ({first.name})")
     if note is None:
         return camera, calibration
     return fitted, {**calibration, "rescaled_from": [int(camera.width), int(camera.height)]}
