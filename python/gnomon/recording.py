@@ -66,6 +66,16 @@ Entities (paths as stored; rerun shows them with a leading ``/``)
     ``maps/coverage``
         static ``SegmentationImage`` (uint8 class per pixel) with its
         ``AnnotationContext`` naming the classes (:data:`gnomon.preview.COVERAGE_CLASSES`).
+    ``world/live_points/<chunk>``
+        ``gnomon live`` only: the points triangulated while the shadow was
+        still moving, on the ``frame`` timeline at the frame they were
+        found; one entity per chunk of frames (``chunk`` = frame // chunk
+        size, zero-padded), each log holding that chunk's points so far, so
+        the cloud grows as the time cursor advances. ``Points3D`` coloured by
+        σ (green small, red large) with ``GnomonPoints:sigma`` and ``:uv``.
+    ``live/shadow_time``
+        ``gnomon live`` only: the provisional shadow-time map (leaving edge,
+        capture frames) as it fills in, downscaled, every few frames.
     ``log``
         ``TextLog`` of the run's warnings (level WARN) on the ``frame``
         timeline: at the frame they concern, or at frame 0 for the whole run,
@@ -143,6 +153,8 @@ ENTITY = {
     "sigma": "maps/sigma",
     "coverage": "maps/coverage",
     "camera_depth": "world/camera/depth",
+    "live_points": "world/live_points",
+    "live_shadow_time": "live/shadow_time",
     "log": "log",
     "metrics": "metrics",
 }
@@ -227,6 +239,7 @@ def default_blueprint():
                 rrb.Spatial2DView(name="Camera", origin=ENTITY["image"]),
                 rrb.Tabs(
                     rrb.Spatial2DView(name="Shadow time", origin=ENTITY["shadow_time"]),
+                    rrb.Spatial2DView(name="Live shadow time", origin=ENTITY["live_shadow_time"]),
                     rrb.Spatial2DView(name="Depth", origin=ENTITY["depth"]),
                     rrb.Spatial2DView(name="σ", origin=ENTITY["sigma"]),
                     rrb.Spatial2DView(name="Coverage", origin=ENTITY["coverage"]),
@@ -823,6 +836,37 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
             self.set_time(index)
         for name, value in _flatten_numbers(metrics):
             self._rec.log(f"{ENTITY['metrics']}/{name}", rr.Scalars(value), static=index is None)
+
+    # ------------------------------------------------------------------ live view (gnomon live)
+
+    def log_live_points(self, index: int, chunk: int, xyz_world: np.ndarray, rgb: np.ndarray,
+                        sigma: np.ndarray, uv: np.ndarray) -> None:
+        """At frame ``index``: chunk ``chunk``'s points so far at ``world/live_points/<chunk>``
+        (float32 (N, 3) world, uint8 (N, 3), σ (N,), pixel uv (N, 2))."""
+        if not self.enabled:
+            return
+        rr = _rr()
+        self.set_time(index)
+        xyz = np.ascontiguousarray(np.asarray(xyz_world, dtype=np.float32).reshape(-1, 3))
+        n = len(xyz)
+        extra: dict[str, Any] = {
+            "sigma": np.ascontiguousarray(np.asarray(sigma, dtype=np.float32).reshape(n)),
+            "uv": np.ascontiguousarray(np.asarray(uv, dtype=np.float32).reshape(n, 2)).ravel(),
+        }
+        self._rec.log(f"{ENTITY['live_points']}/{int(chunk):05d}",
+                      rr.Points3D(xyz, colors=np.ascontiguousarray(np.asarray(rgb, dtype=np.uint8).reshape(n, 3)),
+                                  radii=rr.Radius.ui_points(1.5)),
+                      rr.DynamicArchetype("GnomonPoints", components=extra))
+
+    def log_live_map(self, index: int, shadow_time: np.ndarray) -> None:
+        """At frame ``index``: the provisional shadow-time map (H, W) float32 (NaN = none)."""
+        if not self.enabled:
+            return
+        rr = _rr()
+        self.set_time(index)
+        a = np.ascontiguousarray(np.asarray(shadow_time, dtype=np.float32))
+        self._rec.log(ENTITY["live_shadow_time"],
+                      rr.DepthImage(a, meter=1.0, colormap="turbo", depth_range=_finite_range(a)))
 
     # ------------------------------------------------------------------ closing
 

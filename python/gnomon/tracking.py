@@ -309,6 +309,35 @@ class ShadowTracker:
         at = np.interp(np.nan_to_num(centre, nan=0.0), np.arange(len(gains)), gains)
         return np.where(np.isfinite(centre), at, np.median(gains)).astype(np.float32)
 
+    def watch(self, min_contrast: float, recover: int = 3) -> None:
+        """Start the kernel's live watch (:meth:`gnomon._kernel.TemporalTracker.watch`) from the next frame.
+
+        ``min_contrast`` (DN of the input) opens a dip; ``recover`` frames back above the
+        mid-level end it. With illumination normalisation the kernel sees normalised linear
+        irradiance: the contrast is carried there at mid-grey. The provisional times are
+        decoded with the same table as :meth:`finish`'s.
+        """
+        if self.normalizer is None:
+            self._tracker.watch(float(min_contrast), int(recover), self.input_lut)
+            return
+        top = len(self.input_lut) - 1
+        mid = top // 2
+        half = max(float(min_contrast) / 2.0, 0.5)
+        lo, hi = int(max(mid - half, 0)), int(min(mid + half, top))
+        contrast = max(float(self.input_lut[hi] - self.input_lut[lo]) * LINEAR_SCALE, 1.0)
+        lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
+        self._tracker.watch(contrast, int(recover), lut)
+
+    def take_finished(self) -> _kernel.FinishedPixels:
+        """The pixels whose dip ended since the last call (:meth:`watch` first); indices are
+        row-major in the tracked frame (the crop, when there is one)."""
+        return self._tracker.take_finished()
+
+    @property
+    def watch_counts(self) -> tuple[int, int, int] | None:
+        """Pixels of the live watch lit, in a dip and finished (None before :meth:`watch`)."""
+        return self._tracker.watch_counts
+
     def finish(self) -> tuple[ShadowTimes, np.ndarray]:
         """The shadow times and the decoding table (DN fed to the kernel → linear) they were measured with."""
         if self.normalizer is None:
@@ -372,6 +401,7 @@ def track_source(
     progress: bool = False,
     where: str = "[camera]",
     crop: tuple[slice, slice] | None = None,
+    on_update: Callable[[Frame, ShadowTracker], None] | None = None,
 ) -> TrackedSequence:
     """One streaming pass over a capture's frames through the kernel tracker.
 
@@ -381,7 +411,9 @@ def track_source(
     are then the tile's; everything per frame is still measured on the whole
     frame, see :class:`ShadowTracker`);
     ``on_frame(frame)`` is called for every frame (skipped ones too), e.g. to
-    record it. Raises :class:`FrameError` for a frame of another size, a
+    record it; ``on_update(frame, tracker)`` after each frame the tracker took
+    (a live view reads the tracker's watch there, :mod:`gnomon.live`).
+    Raises :class:`FrameError` for a frame of another size, a
     source with fewer frames than expected, or fewer than two usable frames.
     """
     tracker: ShadowTracker | None = None
@@ -409,7 +441,12 @@ def track_source(
             if skip is not None and skip[frame.index]:
                 continue
             assert tracker is not None
-            (used if tracker.update(frame.grey) else dips).append(frame.index)
+            if tracker.update(frame.grey):
+                used.append(frame.index)
+                if on_update is not None:
+                    on_update(frame, tracker)
+            else:
+                dips.append(frame.index)
     if tracker is None or first is None:
         raise FrameError(f"{source.name}: no frames")
     if source.expected_count is not None and seen < source.expected_count:
