@@ -13,6 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+
 from gnomon import ply
 from gnomon.cli import main
 from gnomon.frames import FrameSource
@@ -37,9 +38,12 @@ def _h264(frame_files: list[Path], path: Path, fps: int = 30) -> None:
     out.close()
 
 
+def _natural(p: Path) -> list[int | str]:
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", p.name)]
+
+
 def _frame_files(capture: Path) -> list[Path]:
-    key = lambda p: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", p.name)]
-    return sorted((capture / "frames").glob("*.jpg"), key=key)
+    return sorted((capture / "frames").glob("*.jpg"), key=_natural)
 
 
 @pytest.fixture(scope="module")
@@ -96,7 +100,7 @@ def test_points_are_logged_while_the_shadow_moves(live_run):
             frames = batch.column("frame").to_pylist()
             pos = batch.column("Points3D:positions").to_pylist()
             uvs = batch.column("GnomonPoints:uv").to_pylist()
-            for f, p, q in zip(frames, pos, uvs):
+            for f, p, q in zip(frames, pos, uvs, strict=True):
                 if p:
                     frames_with_points.append(f)
                     xyz.append(np.asarray(p, dtype=np.float64))
@@ -106,7 +110,7 @@ def test_points_are_logged_while_the_shadow_moves(live_run):
     assert len(set(map_frames)) > 10
     # the frame at which each pixel's point first appeared
     first_seen: dict[tuple[int, int], int] = {}
-    for f, q in zip(frames_with_points, uv):
+    for f, q in zip(frames_with_points, uv, strict=True):
         for u, v in np.round(q).astype(int):
             first_seen.setdefault((u, v), f)
     seen = np.array(list(first_seen.values()))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from gnomon import _kernel
 from gnomon.errors import KernelArrayError, KernelParameterError
 from gnomon.tracking import decoding_lut

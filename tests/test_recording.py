@@ -189,8 +189,8 @@ def test_recording_properties_and_blueprint(scan):
         if "ViewBlueprint:space_origin" in c.to_record_batch().schema.names
     ]
     assert sorted(v.strip("/") for v in views) == sorted(
-        ["world", "world/camera/image", "maps/shadow_time", "maps/depth", "maps/sigma", "maps/coverage", "log",
-         "metrics"]
+        ["world", "world/camera/image", "maps/shadow_time", "live/shadow_time", "maps/depth", "maps/sigma",
+         "maps/coverage", "log", "metrics"]
     )
 
 

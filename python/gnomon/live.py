@@ -658,7 +658,7 @@ class LiveView:
             if not ready.size:
                 continue
             e.dirty.difference_update(ready.tolist())
-            for ln, members in zip(e.lines, self.plane_masks):
+            for ln, members in zip(e.lines, self.plane_masks, strict=True):
                 ln.measure(e.times, ready, n, self.setup.camera, candidates_all[members[candidates_all]])
             self._last_lines_frame = max(self._last_lines_frame, int(ready.max()))
             measured[e] = ready
