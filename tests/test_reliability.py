@@ -731,3 +731,93 @@ def test_recording_streamed_to_a_viewer_is_written_by_gnomon(tmp_path: Path, vie
         if server is not None:
             server.kill()
             server.wait(timeout=30)
+
+
+def _marker_log(capture: Path, name: str, edit_markers) -> Path:
+    """The capture's field log with its desk markers edited, beside it (the frames glob is relative)."""
+    d = tomllib.loads((capture / "field_log.toml").read_text())
+    edit_markers(d["planes"][0]["markers"])
+    path = capture / name
+    toml_io.dump(d, path)
+    return path
+
+
+def _found_marker_pixels(log: Path) -> np.ndarray:
+    from gnomon.fieldlog import load_field_log
+    from gnomon.scan_setup import frame_source, resolve_reference_planes
+
+    fl = load_field_log(log)
+    return np.array(resolve_reference_planes(fl, frame_source(fl))[1][0]["pixels"])
+
+
+@pytest.mark.slow
+def test_a_marker_a_few_pixels_off_is_a_warning_everywhere(two_plane_small: Path, tmp_path: Path, capsys) -> None:
+    """A desk marker clicked 12 px beside its centre (`pixel`, used as given): the four markers no longer fit
+    one plane at their localisation σ (χ² test), but the plane is still a few degrees from the declared
+    one: the scan runs and says so on stderr, in report.json and in the recording's warnings."""
+    from rerun.chunk import RrdReader
+
+    from gnomon.scan_setup import CLICKED_SIGMA_PX, MARKER_SIGMA_PX
+
+    found = _found_marker_pixels(two_plane_small / "field_log.toml")
+
+    def click_off(markers: list) -> None:
+        markers[2].pop("pixel_hint")
+        markers[2]["pixel"] = [float(found[2, 0]) + 12.0, float(found[2, 1])]
+
+    log = _marker_log(two_plane_small, "marker_clicked_off.toml", click_off)
+    out = tmp_path / "scan"
+    assert main(["scan", str(log), "--out", str(out), "--quiet", "--frame-stride", "40"]) == 0
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if "do not fit one plane" in ln]
+    assert len(lines) == 1 and lines[0].startswith(f"gnomon: warning: {log}: [[planes]] desk:"), err
+    assert "worst marker 2" in lines[0]
+    warning = lines[0].removeprefix("gnomon: warning: ")
+    report = json.loads((out / "report.json").read_text())
+    assert warning in report["warnings"]
+    assert report["reference_planes"][0]["marker_warning"] == warning
+    # residuals beyond what the markers' σ allows, a plane tilted less than the error's 5°
+    rms = float(warning.split("residuals ")[1].split(" px rms")[0])
+    allowed = float(warning.split("leaves at most ")[1].split(" px rms")[0])
+    assert f"found to {MARKER_SIGMA_PX:g} px and clicked to {CLICKED_SIGMA_PX:g} px" in warning
+    assert rms > allowed and 0.5 < float(warning.split("the plane is ")[1].split("°")[0]) < 5.0
+    # the same capture with its markers as simulated passes the check on both planes
+    from gnomon.fieldlog import load_field_log
+    from gnomon.scan_setup import frame_source, resolve_reference_planes
+
+    good = load_field_log(two_plane_small / "field_log.toml")
+    entries = resolve_reference_planes(good, frame_source(good))[1]
+    assert [e["plane"] for e in entries] == ["desk", "wall"] and not any("marker_warning" in e for e in entries)
+    assert max(e["rms_px"] for e in entries) < allowed / 10
+    texts = []
+    for chunk in RrdReader(out / "scan.rrd").stream():
+        if chunk.entity_path == "/log":
+            texts += [t[0] for t in chunk.to_record_batch().column("TextLog:text").to_pylist() if t]
+    assert warning in texts
+
+
+@pytest.mark.slow
+def test_a_marker_hint_on_another_marker_is_an_error(two_plane_small: Path, tmp_path: Path, capsys) -> None:
+    """Desk markers 0 and 1 with each other's pixel hint (each finds the other's checker): the plane through
+    them is ~40° off the declared one, meaningless: one line naming the plane and a swapped marker, exit 2,
+    nothing written. Without a declared camera pose the same markers would place the desk: still an error."""
+    def swap(markers: list) -> None:
+        markers[0]["pixel_hint"], markers[1]["pixel_hint"] = markers[1]["pixel_hint"], markers[0]["pixel_hint"]
+
+    log = _marker_log(two_plane_small, "markers_swapped.toml", swap)
+    out = tmp_path / "scan"
+    assert main(["scan", str(log), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(f"gnomon: error: {log}: [[planes]] desk: marker "), err
+    assert err.split("desk: marker ")[1][0] in "01"  # one of the swapped pair
+    assert "from the declared one" in err
+    assert not out.exists()
+
+    d = tomllib.loads(log.read_text())
+    d["camera"].pop("pose")
+    unposed = two_plane_small / "markers_swapped_no_pose.toml"
+    toml_io.dump(d, unposed)
+    assert main(["scan", str(unposed), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"{unposed}: [[planes]] desk: marker " in err and "uncertain by" in err, err
+    assert not out.exists()

@@ -78,7 +78,7 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
     log, planes_report = resolve_reference_planes(log, source)
     assert log.pose is not None  # resolve_reference_planes sets it
     pose = log.pose
-    warnings: list[str] = []
+    warnings: list[str] = [e["marker_warning"] for e in planes_report if "marker_warning" in e]
     light = light_from_field_log(log, pose, source.count, warnings)
     shape = (log.camera.height, log.camera.width)
     planes = tuple(ReferencePlane(p.name, PlaneInCamera.from_world(p.point, p.normal, pose), p.region_mask(shape),
@@ -172,6 +172,70 @@ def _measure_planes(log: FieldLog, source: FrameSource) -> list[tuple[PlaneSpec,
     return measured
 
 
+#: σ (px, per axis) of a marker centre or board corner found in the image, against where the plane
+#: puts it: the localisation and the marker's hand-measured position on its plane. The fits leave
+#: 0.01–0.03 px rms on the simulated two_plane capture, 0.2 px (desk) and 1.1 px (wall) on the real
+#: frog capture (CMU 15-463).
+MARKER_SIGMA_PX = 1.0
+#: ... of a marker pixel given as it is (``pixel``: a clicked cross).
+CLICKED_SIGMA_PX = 1.5
+#: Chance that a correct plane's markers fail the consistency check (a χ² test of their residuals).
+MARKER_CHECK_P = 1e-3
+#: A plane whose orientation is off by more than this (from the declared plane, or as the 1-σ
+#: uncertainty of its markers' fit when nothing is declared) is no reference: an error.
+MAX_PLANE_TILT_DEG = 5.0
+
+
+def _marker_sigmas(plane: PlaneSpec, n: int) -> np.ndarray:
+    """The localisation σ (px) of each of a plane's ``n`` fitted points."""
+    if plane.markers and len(plane.markers) == n:
+        return np.array([CLICKED_SIGMA_PX if m.exact else MARKER_SIGMA_PX for m in plane.markers])
+    return np.full(n, MARKER_SIGMA_PX)
+
+
+def check_plane_markers(log: FieldLog, plane: PlaneSpec, pp: PlanePose, declared: Pose | None) -> str | None:
+    """Whether a plane's markers fit one plane: a warning (returned) when their residuals fail a χ² test
+    at the markers' localisation σ (p = :data:`MARKER_CHECK_P`); a :class:`FieldLogError` naming the
+    plane and its worst marker when the plane they give would be meaningless (tilted more than
+    :data:`MAX_PLANE_TILT_DEG` from the declared plane, or that uncertain on its own)."""
+    from scipy.stats import chi2
+
+    n = len(pp.pixels)
+    dof = 2 * n - 6
+    if dof <= 0:
+        return None
+    sigmas = _marker_sigmas(plane, n)
+    lengths = np.linalg.norm(pp.residuals_px, axis=1)
+    statistic = float(np.sum((lengths / sigmas) ** 2))
+    limit = float(chi2.ppf(1.0 - MARKER_CHECK_P, dof))
+    # the culprit: with a declared pose, the marker farthest from where the declared plane puts it
+    # (a swapped pair fits a wrong plane with every residual alike); else the largest residual
+    offsets = lengths
+    if declared is not None and plane.markers and len(plane.markers) == n and plane.image is None:
+        predicted = log.camera.project(declared.world_to_camera(plane.marker_world()))
+        offsets = np.nan_to_num(np.linalg.norm(pp.pixels - predicted, axis=1), nan=np.inf)
+    worst = int(np.argmax(offsets))
+    worst_name = pp.names[worst].removeprefix(f"{plane.name} ") if worst < len(pp.names) else f"point {worst}"
+    tilt = (_angle_deg(declared.R @ plane.normal, pp.normal_cam) if declared is not None
+            else float(pp.std_normal_deg))
+    residuals = f"residuals {pp.rms_px:.1f} px rms, {lengths.max():.1f} px at most"
+    if np.isfinite(tilt) and tilt > MAX_PLANE_TILT_DEG:
+        what = (f"the plane through its markers is {tilt:.0f}° from the declared one" if declared is not None
+                else f"the plane through its markers is uncertain by {tilt:.0f}° (1 σ)")
+        near = (f" ({offsets[worst]:.1f} px from where the declared plane puts it)"
+                if declared is not None and offsets is not lengths else "")
+        raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: {worst_name}{near} does not fit: {what} "
+                            f"({residuals}); check its pixel_hint and id")
+    if statistic > limit:
+        expected = float(np.sqrt(np.mean(sigmas**2) * limit / (2 * n)))
+        return (f"{log.path}: [[planes]] {plane.name}: its markers do not fit one plane ({residuals}, worst "
+                f"{worst_name}; a correct plane leaves at most {expected:.1f} px rms with markers found to "
+                f"{MARKER_SIGMA_PX:g} px and clicked to {CLICKED_SIGMA_PX:g} px); the plane is {tilt:.1f}° "
+                + ("from the declared one" if declared is not None else "uncertain (1 σ)")
+                + "; check the markers' pixel_hint and id")
+    return None
+
+
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     """Angle between two unit normals, ignoring their sense."""
     return float(np.degrees(np.arccos(min(1.0, abs(float(a @ b))))))
@@ -200,6 +264,10 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
     placed = {}
     for plane, pp in measured:
         entry = {"plane": plane.name, **pp.to_report(), "pixels": pp.pixels.tolist()}
+        warning = check_plane_markers(log, plane, pp, log.pose)
+        if warning is not None:
+            entry["warnings"] = [*entry["warnings"], warning]
+            entry["marker_warning"] = warning
         if declared:
             entry["angle_to_declared_deg"] = _angle_deg(pose.R @ plane.normal, pp.normal_cam)
         else:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -50,5 +51,5 @@ def run(args: argparse.Namespace) -> int:
     print(f"{cov['points']} points ({100 * cov['fraction_of_image']:.1f} % of the image), "
           f"shadow planes: {planes}; {cov['mesh_faces']} mesh faces -> {out}")
     for w in s.warnings:
-        print(f"warning: {w}")
+        print(f"gnomon: warning: {w}", file=sys.stderr)
     return 0
