@@ -188,9 +188,9 @@ class IlluminationNormalizer:
         self._previous = 0.0  # the previous frame's log level
         self._run_min = np.inf  # the lowest log level of the current run of skipped frames
 
-    def log_gain(self, linear: np.ndarray) -> float:
-        """log of the frame's global level relative to the first frame (the reference's chain)."""
-        sub = linear[:: self.step, :: self.step]
+    def log_gain(self, sub: np.ndarray) -> float:
+        """log of the frame's global level relative to the first frame (the reference's chain), from
+        the frame's linear irradiance at every ``step``-th pixel."""
         if self.reference is None:
             return 0.0
         ok = self.reference > GAIN_FLOOR
@@ -210,10 +210,12 @@ class IlluminationNormalizer:
         return float(np.clip(DIP_SIGMAS * scatter * gap, MIN_DIP, -np.log(CLOUD_DROP)))
 
     def normalize(self, frame: np.ndarray) -> np.ndarray | None:
-        linear = self.lut[frame]
+        # Only the pixels the gain needs are decoded; the frame itself goes through one table
+        # (per input DN: the same float32 arithmetic per pixel, so the same values).
+        sub = self.lut[frame[:: self.step, :: self.step]]
         index = self.frames
         self.frames += 1
-        lg = self.log_gain(linear)
+        lg = self.log_gain(sub)
         self.gains.append(float(np.exp(lg)))
         previous, self._previous = self._previous, lg
         if self.reference is not None:
@@ -237,11 +239,12 @@ class IlluminationNormalizer:
             else:
                 self.steps.append((lg - self.reference_log_gain) / gap)
                 self.residuals.append(lg - expected)
-        self.reference = linear[:: self.step, :: self.step].copy()
+        self.reference = sub
         self.reference_log_gain = lg
         self.reference_frame = index
         self.accepted_gains.append(float(np.exp(lg)))
-        return np.clip(linear * (LINEAR_SCALE / max(float(np.exp(lg)), 1e-6)), 0, 65535).astype(np.uint16)
+        table = np.clip(self.lut * (LINEAR_SCALE / max(float(np.exp(lg)), 1e-6)), 0, 65535).astype(np.uint16)
+        return table[frame]
 
 
 @dataclass(frozen=True)
