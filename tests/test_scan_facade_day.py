@@ -53,7 +53,7 @@ def test_no_point_leaves_before_it_enters(day) -> None:
 
 @pytest.mark.slow
 def test_refusals_are_never_silent(day) -> None:
-    _, _, result, acc = day
+    _, _, result, _ = day
     rejected = result.report["edges"]["centre"]["rejected"]
     print(rejected)
     # the clouds' frames are skipped, the dips that are not the pole's refused, and warnings say so

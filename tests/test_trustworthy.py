@@ -217,3 +217,47 @@ def test_lamp_from_planes_sharing_one_direction_is_a_line() -> None:
     # the lamp lies on the reported line (to the noise), wherever along it the point was put
     off = (lamp - est.point) - ((lamp - est.point) @ est.direction) * est.direction
     assert np.linalg.norm(off) < 0.5
+
+
+def _jitter_regions(folder: Path, shift_px: float, seed: int) -> None:
+    """Shift the band by a random amount on every row of the reference regions (6 rows at the top and
+    the bottom): their crossings scatter across the line as on a region that is not flat or not bare."""
+    rng = np.random.default_rng(seed)
+    rows = list(range(6)) + list(range(30, 36))
+    shifts = {r: int(v) for r, v in zip(rows, np.rint(rng.uniform(-shift_px, shift_px, len(rows))))}
+
+    def shifted(i, im):
+        im = im.copy()
+        for r, s in shifts.items():
+            im[r] = np.roll(im[r], s)
+        return im
+
+    _refill_frames(folder, shifted)
+
+
+@pytest.mark.slow
+def test_reference_line_residuals_far_above_sigma_warn(tmp_path: Path) -> None:
+    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.validity import LINE_RESIDUAL_WARN_RATIO
+
+    clean = run_scan(write_tiny_capture(tmp_path / "clean"), tmp_path / "s0", ScanOptions(progress=False, rrd=False))
+    assert not any("residual" in w for w in clean.warnings), clean.warnings
+    log = write_tiny_capture(tmp_path / "capture")
+    # ±1 px on a band moving 3.1 px per frame: ≈ 0.2 frames of scatter, far above the times' noise
+    _jitter_regions(tmp_path / "capture", 1.0, seed=2)
+    result = run_scan(log, tmp_path / "scan", ScanOptions(progress=False, rrd=False))
+    warned = [w for w in result.warnings if "residual" in w]
+    assert warned and "'desk'" in warned[0] and "times what" in warned[0], result.warnings
+    ratio = float(warned[0].split(" times what")[0].split(", ")[-1])
+    assert ratio > LINE_RESIDUAL_WARN_RATIO
+
+
+@pytest.mark.slow
+def test_meaningless_reference_lines_are_an_error(tmp_path: Path, capsys) -> None:
+    # A slow sweep (0.76 px per frame) and ±2 px: the lines are long and straight enough to be
+    # fitted, but scattered across by more than the shadow moves in a frame
+    log = write_tiny_capture(tmp_path / "capture", n_frames=96)
+    _jitter_regions(tmp_path / "capture", 2.0, seed=3)
+    code, err = _scan(log, tmp_path / "scan", capsys)
+    assert code == 2 and "meaningless" in err and "'desk'" in err and "\n" not in err, err
+    assert not (tmp_path / "scan").exists()

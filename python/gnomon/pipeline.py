@@ -52,7 +52,13 @@ from gnomon.uncertainty import (
     linear_noise_at_threshold,
     undersampled,
 )
-from gnomon.validity import MIN_CONTRAST_SIGMAS, contrast_above_noise
+from gnomon.validity import (
+    LINE_RESIDUAL_MAX_FRAMES,
+    LINE_RESIDUAL_WARN_RATIO,
+    MIN_CONTRAST_SIGMAS,
+    contrast_above_noise,
+    reference_line_residuals,
+)
 
 # Quality gates: share of the sweep's frames with a measured shadow plane (error below / warning
 # below), and the longest gap (frames) to a plane over which a pixel's depth may be interpolated.
@@ -264,11 +270,34 @@ def _check_plane_coverage(edges: list[EdgeResult], path: Path, warnings: list[st
             warnings.append(msg)
 
 
+def _check_line_residuals(edge: EdgeResult, sigma_t: np.ndarray, path: Path, warnings: list[str]) -> None:
+    """The shadow lines must fit their crossings about as well as the pixel times' noise allows.
+
+    Far worse (a region that is not bare or not flat, a wrong plane, several
+    shadows on it) is a warning with the numbers; lines scattered by more than
+    the shadow moves in a frame locate nothing, and the scan is an error.
+    """
+    for lines in edge.lines:
+        r = reference_line_residuals(lines, sigma_t)
+        if r is None:
+            continue
+        what = (f"{edge.name} edge: the shadow lines on [[planes]] '{r.plane}' fit their pixels with a median "
+                f"residual of {r.residual_frames:.2f} frames of shadow motion, {r.ratio:.1f} times what the pixels' "
+                f"time noise ({r.expected_frames:.2f} frames) explains ({r.frames} lines)")
+        if r.residual_frames > LINE_RESIDUAL_MAX_FRAMES:
+            raise FrameError(f"{path}: {what}: the lines are meaningless (check the regions are bare, flat and on "
+                             "that plane)")
+        if r.ratio > LINE_RESIDUAL_WARN_RATIO:
+            warnings.append(f"{what}; check the regions are bare, flat and on that plane")
+
+
 def _reconstruct_edges(setup: ScanSetup, tracked: TrackedSequence, ray_map: np.ndarray,
                        warnings: list[str]) -> list[EdgeResult]:
     geometry = ReferenceGeometry(setup.camera, setup.planes, tracked.n_frames)
-    edges = [_reconstruct_edge(e, setup.light.shadow_planes(e, geometry), ray_map, setup, tracked)
-             for e in setup.light.edges(*_edge_times(tracked), setup.edge)]
+    times = setup.light.edges(*_edge_times(tracked), setup.edge)
+    edges = [_reconstruct_edge(e, setup.light.shadow_planes(e, geometry), ray_map, setup, tracked) for e in times]
+    for e, t in zip(edges, times):
+        _check_line_residuals(e, t.sigma_t, setup.inputs.field_log, warnings)
     for e in edges:
         if e.degenerate:
             warnings.append(f"{e.name} edge: {e.degenerate} frames dropped as degenerate shadow planes")

@@ -37,6 +37,8 @@ __all__ = [
     "contrast_like_neighbours",
     "inside_sequence",
     "light_point_or_line",
+    "LineResiduals",
+    "reference_line_residuals",
     "not_in_global_event",
     "event_order",
     "pole_shadow_consistency",
@@ -213,6 +215,66 @@ def pole_shadow_consistency(points_cam: np.ndarray, enter: np.ndarray, leave: np
         predicted[idx] = pred.astype(np.float32)
     return PoleConsistency((side & duration).reshape(shape), side.reshape(shape), duration.reshape(shape),
                            predicted.reshape(shape))
+
+
+# Reference-line residuals: a warning when they are this many times what the pixel times' noise
+# explains; an error when they exceed the shadow's own motion in one frame (the line of frame t
+# can no longer be told from those of t ± 1: its plane means nothing).
+LINE_RESIDUAL_WARN_RATIO = 3.0
+LINE_RESIDUAL_MAX_FRAMES = 1.0
+
+
+@dataclass(frozen=True)
+class LineResiduals:
+    """How well one plane's shadow lines fit their crossings, in frames of shadow motion.
+
+    ``residual_frames``: the median over frames of each line's residual RMS
+    divided by how far the line moves across itself per frame; ``expected_frames``:
+    the median time σ of the crossing pixels (the scatter their noise explains);
+    ``frames``: lines that entered the medians.
+    """
+
+    plane: str
+    residual_frames: float
+    expected_frames: float
+    frames: int
+
+    @property
+    def ratio(self) -> float:
+        return self.residual_frames / self.expected_frames if self.expected_frames > 0 else float("inf")
+
+
+def reference_line_residuals(lines, sigma_t: np.ndarray) -> LineResiduals | None:
+    """Residuals of one plane's lines (:class:`gnomon.reference_lines.ReferenceLines`) against the time
+    σ map ``sigma_t`` (H, W, frames) of the pixels they were fitted to; None when fewer than three
+    lines have a neighbour to measure their motion against."""
+    n = len(lines.point)
+    found = lines.found
+    residual, expected = [], []
+    h, w = sigma_t.shape
+    for t in np.flatnonzero(found):
+        if lines.count[t] < 3 or lines.extrapolated[t] or not np.isfinite(lines.rms[t]):
+            continue
+        moves = []
+        for s in (t - 1, t + 1):
+            if 0 <= s < n and found[s]:
+                d = lines.direction[t]
+                delta = lines.point[s] - lines.point[t]
+                moves.append(float(np.linalg.norm(delta - (delta @ d) * d)))
+        speed = float(np.mean(moves)) if moves else 0.0
+        if speed <= 0:
+            continue
+        px = np.rint(lines.pixels[t]).astype(np.int64)
+        u, v = np.clip(px[:, 0], 0, w - 1), np.clip(px[:, 1], 0, h - 1)
+        sig = sigma_t[v, u]
+        sig = sig[np.isfinite(sig)]
+        if sig.size == 0:
+            continue
+        residual.append(float(lines.rms[t]) / speed)
+        expected.append(float(np.median(sig)))
+    if len(residual) < 3:
+        return None
+    return LineResiduals(lines.plane_name, float(np.median(residual)), float(np.median(expected)), len(residual))
 
 
 @dataclass(frozen=True)
