@@ -54,6 +54,9 @@ def register(subparsers) -> None:
                    "default 3, facade_day 6")
     p.add_argument("--markers", choices=("checker", "aruco"), default="checker",
                    help="two_plane: printed 2x2 checkers (pixel hints in the field log) or ArUco markers (ids only)")
+    p.add_argument("--stick", choices=("rocked", "translated"), default="rocked",
+                   help="two_plane: the stick rocked as it sweeps (the lamp is a point), or only translated "
+                   "parallel to itself (the shadow planes fix the lamp only along a line)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -77,6 +80,7 @@ def _options(args: argparse.Namespace) -> dict:
     opts.update(lamp_radius=args.lamp_radius, stick_radius=args.stick_radius)
     if args.scene == "two_plane":
         opts["markers"] = args.markers
+        opts["stick"] = args.stick
     else:
         opts["pencil_photos"] = args.pencil_photos
     return opts

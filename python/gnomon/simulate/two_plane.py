@@ -156,6 +156,7 @@ MARKER_KEEP_OUT_PX = 3        # regions stay this far from any marker paper
 HINT_OFFSET_PX = (3.0, 8.0)
 ARUCO_DICTIONARY = "DICT_4X4_50"
 MARKER_KINDS = ("checker", "aruco")
+STICK_MOTIONS = ("rocked", "translated")
 
 
 @dataclass(frozen=True)
@@ -165,10 +166,16 @@ class TwoPlaneConfig(SweepConfig):
     ``markers``: ``"checker"`` (2×2 checkers, pixel hints in the field log) or
     ``"aruco"`` (ArUco markers of ``ARUCO_DICTIONARY``, ids 0–7, each
     ``MARKER_CHECKER`` wide on the same white paper; the field log gives their
-    ids and plane coordinates only, no pixels).
+    ids and plane coordinates only, no pixels). ``stick``: ``"rocked"`` (tilted
+    by ±``TwoPlaneScene.TILT_WOBBLE_DEG`` as it sweeps, so the shadow planes
+    turn about several directions and fix the lamp at a point) or
+    ``"translated"`` (moved parallel to itself: every shadow plane contains
+    the stick's one direction, and the planes fix the lamp only along the
+    line through it in that direction).
     """
 
     markers: str = "checker"
+    stick: str = "rocked"
 
     @property
     def scene_name(self) -> str:
@@ -178,6 +185,8 @@ class TwoPlaneConfig(SweepConfig):
         super().validate()
         if self.markers not in MARKER_KINDS:
             raise self.error(f"--markers {self.markers!r}: expected one of {', '.join(MARKER_KINDS)}")
+        if self.stick not in STICK_MOTIONS:
+            raise self.error(f"--stick {self.stick!r}: expected one of {', '.join(STICK_MOTIONS)}")
 
 
 def plane_y_axis(normal, x_axis) -> np.ndarray:
@@ -230,6 +239,18 @@ class TwoPlaneScene(DeskLampScene):
 
     def lamp_position(self) -> np.ndarray:
         return LAMP.astype(np.float64)
+
+    def _stick_motion(self, u_start: float, u_end: float, tt: np.ndarray):
+        """The rocked sweep's stick, or (``stick = "translated"``) one that keeps the direction it has
+        half-way through the sweep: each pose keeps the rocked pose's centre and length."""
+        QA, QB = super()._stick_motion(u_start, u_end, tt)
+        if self.config.stick != "translated":
+            return QA, QB
+        mid_a, mid_b = super()._stick_motion(u_start, u_end, np.array([(self.N - 1) / 2.0]))
+        axis = (mid_b[0] - mid_a[0]) / np.linalg.norm(mid_b[0] - mid_a[0])
+        centre = 0.5 * (QA + QB)
+        half = 0.5 * np.linalg.norm(QB - QA, axis=-1, keepdims=True)
+        return centre - half * axis, centre + half * axis
 
     # ------------------------------------------------------------- surfaces
     def _objects(self) -> dict[int, tuple[geo.Surface, float]]:
@@ -475,6 +496,7 @@ class TwoPlaneScene(DeskLampScene):
         frames = [PLANE_FRAMES[oid] for oid in PLANE_ORDER]
         arrays.update({
             "cuts_both": self.cuts_both.copy(),
+            "stick_directions": ((self.QB - self.QA) / np.linalg.norm(self.QB - self.QA, axis=1, keepdims=True)),
             "wall_y": np.array(WALL_Y, dtype=np.float64),
             "plane_points": np.array([f[0] for f in frames]),
             "plane_normals": np.array([f[1] for f in frames]),
@@ -530,6 +552,7 @@ class TwoPlaneScene(DeskLampScene):
         return {
             **self.summary_common(),
             "lamp_in_field_log": False,
+            "stick_motion": self.config.stick,
             "brightest_lit_plane": float(np.max(np.where(ref, self.ambient + self.direct, 0.0))),
             "frames_cutting_both_planes": int(self.cuts_both.sum()),
             "planes": {
