@@ -342,7 +342,7 @@ def test_field_log(small):
                            "timezone": "Europe/Zurich", "heading_deg": float(gt["heading_deg"])}
     assert log["pole"] == {"base": list(gt["pole_base"]), "top": list(gt["pole_top"]),
                            "radius": float(gt["pole_radius"])}
-    assert log["scan"]["normalize_illumination"] is True and log["scan"]["min_contrast"] > 0
+    assert log["scan"] == {"normalize_illumination": True}  # the contrast floor from the noise
     info = json.loads(result.ground_truth_json.read_text())
     assert info["scene"] == "facade_sun" and info["seed"] == SMALL.seed
     assert info["camera_distance"] == pytest.approx(float(gt["camera_distance"]))

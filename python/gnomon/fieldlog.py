@@ -221,7 +221,7 @@ class LightSpec:
 
 @dataclass(frozen=True)
 class ScanSettings:
-    min_contrast: float = 20.0
+    min_contrast: float | None = None  # DN of the input; None: MIN_CONTRAST_SIGMAS × the measured image noise
     window: int = 4
     edge: str = "both"
     max_depth_jump: float = 0.02
@@ -582,7 +582,7 @@ def _parse_scan(t: _Table | None) -> ScanSettings:
     if t is None:
         return ScanSettings()
     s = ScanSettings(
-        min_contrast=t.number("min_contrast", 20.0, positive=True),
+        min_contrast=t.number("min_contrast", positive=True) if "min_contrast" in t.data else None,
         window=t.integer("window", 4, minimum=1),
         edge=t.string("edge", "both", EDGES),
         max_depth_jump=t.number("max_depth_jump", 0.02, positive=True),

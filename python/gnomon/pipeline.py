@@ -197,7 +197,8 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
     """Triangulate one edge against its shadow planes (keeping the points the light accepts), with σZ."""
     scaled = (edge.times * planes.time_scale).astype(np.float32)
     tri = triangulate(ray_map, scaled, planes.planes)
-    screening = setup.light.screen(edge, points_from_depth(ray_map, tri.depth), tracked.times, tracked.n_frames)
+    screening = setup.light.screen(edge, points_from_depth(ray_map, tri.depth), tracked.times, tracked.n_frames,
+                                   relative_depth=_relative_depth(tracked))
     if screening.keep is not None:
         tri.depth[~screening.keep] = np.nan
     unc = depth_sigma(ray_map, scaled, planes.planes, tri.depth, edge.sigma_t * planes.time_scale,
@@ -207,7 +208,15 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
                       screening.rejected, screening.notes)
 
 
-def _check_contrast(times: ShadowTimes, noise_dn: float, min_contrast: float, name: str) -> None:
+def _relative_depth(tracked: TrackedSequence) -> np.ndarray:
+    """(H, W) each dip's depth over its lit level, ``(Imax − Imin)/Imax``, in linear irradiance."""
+    lut, times = tracked.lut, tracked.times
+    hi, lo = lut[_dn_index(times.imax, lut)], lut[_dn_index(times.imin, lut)]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(hi > 0, (hi - lo) / hi, np.nan).astype(np.float32)
+
+
+def _check_contrast(times: ShadowTimes, noise_dn: float, min_contrast: float | None, name: str) -> None:
     """Only pixels whose dip stands out of the image noise are events; none at all is an error.
 
     Random frames have a large ``imax − imin`` everywhere but never many σ of
@@ -222,13 +231,21 @@ def _check_contrast(times: ShadowTimes, noise_dn: float, min_contrast: float, na
     n_pixels = times.valid.size
     if times.valid.sum() <= 0.001 * n_pixels:
         largest = float(np.nanmax(times.contrast)) if np.isfinite(times.contrast).any() else 0.0
-        if largest < min_contrast:
-            why = (f"no pixel changes by min_contrast = {min_contrast:g} DN (largest change {largest:.1f} DN): "
+        floor = min_contrast if min_contrast is not None else MIN_CONTRAST_SIGMAS * noise_dn
+        if largest < floor or largest <= 0:
+            what = (f"min_contrast = {min_contrast:g} DN" if min_contrast is not None
+                    else f"{MIN_CONTRAST_SIGMAS:g} σ of the image noise ({floor:.1f} DN)")
+            why = (f"no pixel changes by {what} (largest change {largest:.1f} DN): "
                    "the frames are (nearly) identical, or the shadow never crossed the view")
         else:
             why = (f"the image noise is {noise_dn:.1f} DN between frames, so no pixel's dip stands "
                    f"{MIN_CONTRAST_SIGMAS:g} σ out of it: the frames look like noise, not a shadow sweep")
         raise FrameError(f"{name}: {why}")
+
+
+def _min_contrast_dn(min_contrast: float | None, noise_dn: float) -> float:
+    """The contrast floor in force (DN of the input): the field log's, else MIN_CONTRAST_SIGMAS σ of the noise."""
+    return float(min_contrast) if min_contrast is not None else MIN_CONTRAST_SIGMAS * noise_dn
 
 
 def _check_plane_coverage(edges: list[EdgeResult], path: Path, warnings: list[str]) -> None:
@@ -759,7 +776,9 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
         "calibration": inputs.calibration,
         **setup.light.report([e.planes for e in edges], warnings),
         "settings": {
-            "min_contrast_dn": tr.min_contrast, "window": tr.window, "edge": setup.edge,
+            "min_contrast_dn": _min_contrast_dn(tr.min_contrast, tracked.noise_dn),
+            "min_contrast_from": "field log" if tr.min_contrast is not None else "image noise",
+            "window": tr.window, "edge": setup.edge,
             "max_depth_jump": setup.max_depth_jump, "gamma": tr.gamma,
         },
         "noise": {"image_noise_dn": tracked.noise_dn,
@@ -779,7 +798,8 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
             "saturated": (int((times.imax >= len(tracked.input_lut) - 1).sum())
                           if not tr.normalize_illumination else None),
             # pixels with two comparable dips (no point), and with clipped samples
-            "ambiguous": int(np.count_nonzero(times.ambiguous & (times.contrast >= tr.min_contrast))),
+            "ambiguous": int(np.count_nonzero(times.ambiguous
+                                              & (times.contrast >= _min_contrast_dn(tr.min_contrast, tracked.noise_dn)))),
             "clipped": int(np.count_nonzero(times.clipped)),
             "mesh_vertices": int(len(mesh.vertices)),
             "mesh_faces": int(len(mesh.faces)),

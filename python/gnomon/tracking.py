@@ -252,7 +252,8 @@ class TrackerSettings:
     """How frames become shadow times: plain values, resolved from the field log.
 
     ``gamma``: the frames' encoding (:func:`decoding_lut`); ``min_contrast``:
-    DN of the input; ``window``: the half-width ``m`` of the kept windows;
+    DN of the input (None: no floor here; the scan keeps the dips that stand
+    ``MIN_CONTRAST_SIGMAS`` σ of the measured image noise out of it); ``window``: the half-width ``m`` of the kept windows;
     ``normalize_illumination``: divide every frame by its global gain and skip
     sudden dips (:class:`IlluminationNormalizer`); ``max_width`` (frames): the
     widest dip always found; ``ambiguity``: the rival/contrast ratio from which
@@ -260,7 +261,7 @@ class TrackerSettings:
     """
 
     gamma: float | str = "srgb"
-    min_contrast: float = 20.0
+    min_contrast: float | None = 20.0
     window: int = 4
     normalize_illumination: bool = False
     max_width: int = 32
@@ -344,7 +345,7 @@ class ShadowTracker:
     def finish(self) -> tuple[ShadowTimes, np.ndarray]:
         """The shadow times and the decoding table (DN fed to the kernel → linear) they were measured with."""
         if self.normalizer is None:
-            times = ShadowTimes.from_kernel(self._tracker.finish(self.settings.min_contrast, self.input_lut))
+            times = ShadowTimes.from_kernel(self._tracker.finish(self.settings.min_contrast or 0.0, self.input_lut))
             return times, self.input_lut
         lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
         times = ShadowTimes.from_kernel(self._tracker.finish(0.0, lut))
@@ -357,7 +358,7 @@ class ShadowTracker:
         # The contrast test stays in the input's DN: back through the encoding.
         code = lambda lin: np.searchsorted(self.input_lut, lin.astype(np.float32))  # noqa: E731
         contrast_dn = (code(times.imax / LINEAR_SCALE) - code(times.imin / LINEAR_SCALE)).astype(np.float32)
-        valid = times.valid & (contrast_dn >= self.settings.min_contrast)
+        valid = times.valid & (contrast_dn >= (self.settings.min_contrast or 0.0))
         times.enter[~valid] = np.nan
         times.leave[~valid] = np.nan
         times.valid = valid

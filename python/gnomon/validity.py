@@ -35,6 +35,8 @@ __all__ = [
     "MIN_LAMP_CONDITIONING",
     "global_event_frames",
     "contrast_like_neighbours",
+    "fully_lit_like_neighbours",
+    "occluded_fraction",
     "inside_sequence",
     "light_point_or_line",
     "LineResiduals",
@@ -133,6 +135,44 @@ class PoleConsistency:
     shadow_side: np.ndarray  # behind the pole from the sun, and below its top
     duration: np.ndarray  # the dip lasts as long as the pole's shadow lasts there
     predicted_frames: np.ndarray  # float32 (H, W): the shadow's predicted duration, NaN = none
+    occlusion: np.ndarray  # float32 (H, W): the share of the sun's disc the pole hides there, NaN = none
+
+
+def occluded_fraction(pole_radius: float, distance: np.ndarray,
+                      angular_radius: float = SUN_ANGULAR_RADIUS_RAD) -> np.ndarray:
+    """The share of the sun's disc a pole of ``pole_radius`` hides, seen from ``distance`` (same units)
+    along the sun ray, when the ray passes its axis: 1 inside the umbra (the pole wider than the
+    disc there), else the area of the band of half-width ``r`` across a disc of radius ``ρ·s``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.clip(pole_radius / (angular_radius * np.abs(distance)), 0.0, 1.0)
+        return (2.0 / np.pi) * (np.arcsin(u) + u * np.sqrt(1.0 - u * u))
+
+
+def fully_lit_like_neighbours(relative_depth: np.ndarray, occlusion: np.ndarray, candidates: np.ndarray, *,
+                              size: int = 9) -> np.ndarray:
+    """Candidates that saw at least half the sun's disc when the pole's shadow passed, judged against
+    the fully lit surface around them.
+
+    A pixel whose light is ``a·(v·D + A)`` (direct sun D of which the share v
+    of the disc is seen past other objects, ambient A) loses ``f·v·D`` when
+    the pole hides the share ``f`` of the disc (``occlusion``): its relative
+    dip ``relative_depth = (Imax − Imin)/Imax`` (linear) over ``f`` is
+    ``q = v·D/(v·D + A)``. Another object's penumbra or a footprint that
+    straddles a shadow's edge only lowers q, so the fully lit surface nearby is
+    the best 3×3 patch (mean q) within the ``size`` × ``size`` neighbourhood:
+    its ``Q = D/(D + A)``. Half the disc seen gives ``Q/(2 − Q)``; below that
+    the pixel's dip is not the pole's alone and its time is biased.
+    """
+    from scipy.ndimage import maximum_filter, uniform_filter
+
+    with np.errstate(invalid="ignore", divide="ignore"):
+        q = np.where(candidates, relative_depth / occlusion, np.nan)
+    ok = candidates & np.isfinite(q)
+    n = uniform_filter(ok.astype(np.float64), 3, mode="constant")
+    patch = np.where(n > 0.5, uniform_filter(np.where(ok, q, 0.0), 3, mode="constant") / np.maximum(n, 1e-9), 0.0)
+    best = np.clip(maximum_filter(patch, size, mode="constant"), 0.0, 1.0)
+    with np.errstate(invalid="ignore"):
+        return candidates & ~(ok & (q < best / (2.0 - best)))
 
 
 def _sun_at(sun_dirs: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -181,6 +221,7 @@ def pole_shadow_consistency(points_cam: np.ndarray, enter: np.ndarray, leave: np
     side = np.zeros(P.shape[0], dtype=bool)
     duration = np.zeros(P.shape[0], dtype=bool)
     predicted = np.full(P.shape[0], np.nan, dtype=np.float32)
+    occlusion = np.full(P.shape[0], np.nan, dtype=np.float32)
     if have.any() and len(sun_dirs_cam) >= 2:
         idx = np.flatnonzero(have)
         X = P[idx]
@@ -213,8 +254,9 @@ def pole_shadow_consistency(points_cam: np.ndarray, enter: np.ndarray, leave: np
         side[idx] = ok_side
         duration[idx] = ok_dur
         predicted[idx] = pred.astype(np.float32)
+        occlusion[idx] = occluded_fraction(pole_radius, s, angular_radius).astype(np.float32)
     return PoleConsistency((side & duration).reshape(shape), side.reshape(shape), duration.reshape(shape),
-                           predicted.reshape(shape))
+                           predicted.reshape(shape), occlusion.reshape(shape))
 
 
 # Reference-line residuals: a warning when they are this many times what the pixel times' noise

@@ -150,8 +150,10 @@ class LightModel:
         """(N, 4) camera-frame planes, one per tracker frame, and the frames dropped as degenerate."""
         raise NotImplementedError
 
-    def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int) -> Screening:
-        """The triangulated points (H, W, 3, camera frame) this light's shadow can explain; all by default."""
+    def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int,
+               relative_depth: np.ndarray | None = None) -> Screening:
+        """The triangulated points (H, W, 3, camera frame) this light's shadow can explain; all by default.
+        ``relative_depth`` (H, W): each dip's ``(Imax − Imin)/Imax`` in linear irradiance."""
         return Screening()
 
     def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:

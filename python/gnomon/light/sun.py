@@ -46,6 +46,7 @@ from gnomon.timestamps import interpolate_times
 from gnomon.tracking import ShadowTimes
 from gnomon.validity import (
     contrast_like_neighbours,
+    fully_lit_like_neighbours,
     event_order,
     global_event_frames,
     inside_sequence,
@@ -280,7 +281,8 @@ class SunWithPole(SunLight):
                                  self.pose)
         return EdgePlanes(table, 0, [], np.zeros(len(table)), SUBSTEPS, measured=False)
 
-    def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int) -> Screening:
+    def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int,
+               relative_depth: np.ndarray | None = None) -> Screening:
         """Only points where the pole's shadow can fall, lasting as long as it lasts there."""
         c, pose = self.clock, self.pose
         check = pole_shadow_consistency(points_cam, times.enter, times.leave,
@@ -299,7 +301,10 @@ class SunWithPole(SunLight):
                                                         & ~check.duration).sum()),
         }
         sound = ordered & calm & check.ok
-        deep = contrast_like_neighbours(times.contrast, sound)
+        if relative_depth is not None:
+            deep = fully_lit_like_neighbours(relative_depth, check.occlusion, sound)
+        else:
+            deep = contrast_like_neighbours(times.contrast, sound)
         rejected["dip_shallower_than_its_neighbours"] = int((had & sound & ~deep).sum())
         sound &= deep
         notes = []
