@@ -224,7 +224,7 @@ def _jitter_regions(folder: Path, shift_px: float, seed: int) -> None:
     the bottom): their crossings scatter across the line as on a region that is not flat or not bare."""
     rng = np.random.default_rng(seed)
     rows = list(range(6)) + list(range(30, 36))
-    shifts = {r: int(v) for r, v in zip(rows, np.rint(rng.uniform(-shift_px, shift_px, len(rows))))}
+    shifts = {r: int(v) for r, v in zip(rows, np.rint(rng.uniform(-shift_px, shift_px, len(rows))), strict=True)}
 
     def shifted(i, im):
         im = im.copy()
@@ -261,3 +261,18 @@ def test_meaningless_reference_lines_are_an_error(tmp_path: Path, capsys) -> Non
     code, err = _scan(log, tmp_path / "scan", capsys)
     assert code == 2 and "meaningless" in err and "'desk'" in err and "\n" not in err, err
     assert not (tmp_path / "scan").exists()
+
+
+def test_share_of_the_sun_a_pole_hides() -> None:
+    from gnomon.validity import SUN_ANGULAR_RADIUS_RAD as rho
+    from gnomon.validity import occluded_fraction
+
+    r = 0.05  # m
+    umbra = r / rho  # ≈ 10.7 m: the pole as wide as the disc
+    np.testing.assert_allclose(occluded_fraction(r, np.array([1.0, 0.5 * umbra, umbra])), 1.0)
+    # far away a band of width 2r across a disc of radius ρs: area 2r·2ρs / (π ρ² s²)
+    s = 200.0 * umbra
+    assert occluded_fraction(r, np.array([s]))[0] == pytest.approx(4 * r / (np.pi * rho * s), rel=1e-3)
+    # in between it falls monotonically
+    f = occluded_fraction(r, np.linspace(umbra, 10 * umbra, 50))
+    assert np.all(np.diff(f) < 0) and 0 < f[-1] < 1

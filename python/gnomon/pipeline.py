@@ -198,7 +198,7 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
     scaled = (edge.times * planes.time_scale).astype(np.float32)
     tri = triangulate(ray_map, scaled, planes.planes)
     screening = setup.light.screen(edge, points_from_depth(ray_map, tri.depth), tracked.times, tracked.n_frames,
-                                   relative_depth=_relative_depth(tracked))
+                                   *_relative_depth(tracked))
     if screening.keep is not None:
         tri.depth[~screening.keep] = np.nan
     unc = depth_sigma(ray_map, scaled, planes.planes, tri.depth, edge.sigma_t * planes.time_scale,
@@ -208,12 +208,17 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
                       screening.rejected, screening.notes)
 
 
-def _relative_depth(tracked: TrackedSequence) -> np.ndarray:
-    """(H, W) each dip's depth over its lit level, ``(Imax − Imin)/Imax``, in linear irradiance."""
+def _relative_depth(tracked: TrackedSequence) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) each dip's depth over its lit level, ``r = (Imax − Imin)/Imax`` in linear irradiance,
+    and its 1σ from the image noise at both levels."""
     lut, times = tracked.lut, tracked.times
     hi, lo = lut[_dn_index(times.imax, lut)], lut[_dn_index(times.imin, lut)]
+    s_hi = linear_noise_at_threshold(tracked.noise_dn, hi, tracked.input_lut)
+    s_lo = linear_noise_at_threshold(tracked.noise_dn, lo, tracked.input_lut)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(hi > 0, (hi - lo) / hi, np.nan).astype(np.float32)
+        r = np.where(hi > 0, (hi - lo) / hi, np.nan)
+        sigma = np.where(hi > 0, np.hypot(s_lo / hi, lo * s_hi / hi**2), np.nan)
+    return r.astype(np.float32), sigma.astype(np.float32)
 
 
 def _check_contrast(times: ShadowTimes, noise_dn: float, min_contrast: float | None, name: str) -> None:
@@ -313,7 +318,7 @@ def _reconstruct_edges(setup: ScanSetup, tracked: TrackedSequence, ray_map: np.n
     geometry = ReferenceGeometry(setup.camera, setup.planes, tracked.n_frames)
     times = setup.light.edges(*_edge_times(tracked), setup.edge)
     edges = [_reconstruct_edge(e, setup.light.shadow_planes(e, geometry), ray_map, setup, tracked) for e in times]
-    for e, t in zip(edges, times):
+    for e, t in zip(edges, times, strict=True):
         _check_line_residuals(e, t.sigma_t, setup.inputs.field_log, warnings)
     for e in edges:
         if e.degenerate:
@@ -798,8 +803,8 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
             "saturated": (int((times.imax >= len(tracked.input_lut) - 1).sum())
                           if not tr.normalize_illumination else None),
             # pixels with two comparable dips (no point), and with clipped samples
-            "ambiguous": int(np.count_nonzero(times.ambiguous
-                                              & (times.contrast >= _min_contrast_dn(tr.min_contrast, tracked.noise_dn)))),
+            "ambiguous": int(np.count_nonzero(
+                times.ambiguous & (times.contrast >= _min_contrast_dn(tr.min_contrast, tracked.noise_dn)))),
             "clipped": int(np.count_nonzero(times.clipped)),
             "mesh_vertices": int(len(mesh.vertices)),
             "mesh_faces": int(len(mesh.faces)),

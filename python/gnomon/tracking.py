@@ -253,7 +253,8 @@ class TrackerSettings:
 
     ``gamma``: the frames' encoding (:func:`decoding_lut`); ``min_contrast``:
     DN of the input (None: no floor here; the scan keeps the dips that stand
-    ``MIN_CONTRAST_SIGMAS`` σ of the measured image noise out of it); ``window``: the half-width ``m`` of the kept windows;
+    ``MIN_CONTRAST_SIGMAS`` σ of the measured image noise out of it); ``window``: the half-width
+    ``m`` of the kept windows;
     ``normalize_illumination``: divide every frame by its global gain and skip
     sudden dips (:class:`IlluminationNormalizer`); ``max_width`` (frames): the
     widest dip always found; ``ambiguity``: the rival/contrast ratio from which

@@ -151,9 +151,11 @@ class LightModel:
         raise NotImplementedError
 
     def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int,
-               relative_depth: np.ndarray | None = None) -> Screening:
+               relative_depth: np.ndarray | None = None,
+               relative_depth_sigma: np.ndarray | None = None) -> Screening:
         """The triangulated points (H, W, 3, camera frame) this light's shadow can explain; all by default.
-        ``relative_depth`` (H, W): each dip's ``(Imax − Imin)/Imax`` in linear irradiance."""
+        ``relative_depth`` (H, W): each dip's ``(Imax − Imin)/Imax`` in linear irradiance, and its 1σ
+        from the image noise."""
         return Screening()
 
     def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:

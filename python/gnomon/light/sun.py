@@ -46,8 +46,8 @@ from gnomon.timestamps import interpolate_times
 from gnomon.tracking import ShadowTimes
 from gnomon.validity import (
     contrast_like_neighbours,
-    fully_lit_like_neighbours,
     event_order,
+    fully_lit_like_neighbours,
     global_event_frames,
     inside_sequence,
     not_in_global_event,
@@ -63,6 +63,8 @@ __all__ = [
 SUBSTEPS = 8
 # A warning lists the pole checks' refusals when they refuse more than this share of the candidates.
 REFUSED_NOTE = 0.1
+# A dip deeper than the share of the disc the pole hides by more than this many σ is not the pole's.
+DEPTH_SIGMAS = 4.0
 
 
 def sun_world(times: Any, site: Site, heading_deg: float) -> np.ndarray:
@@ -282,8 +284,10 @@ class SunWithPole(SunLight):
         return EdgePlanes(table, 0, [], np.zeros(len(table)), SUBSTEPS, measured=False)
 
     def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int,
-               relative_depth: np.ndarray | None = None) -> Screening:
-        """Only points where the pole's shadow can fall, lasting as long as it lasts there."""
+               relative_depth: np.ndarray | None = None,
+               relative_depth_sigma: np.ndarray | None = None) -> Screening:
+        """Only points where the pole's shadow can fall, lasting as long as it lasts there, and (given
+        the dips' relative depths) no deeper than it can be there, nor in another object's penumbra."""
         c, pose = self.clock, self.pose
         check = pole_shadow_consistency(points_cam, times.enter, times.leave,
                                         sun_directions_camera(self._timeline(), c.site, c.heading_deg, pose),
@@ -301,6 +305,14 @@ class SunWithPole(SunLight):
                                                         & ~check.duration).sum()),
         }
         sound = ordered & calm & check.ok
+        if relative_depth is not None:
+            # The pole hides the share f of the disc there: it removes at most f of the light
+            # (all of it direct). A deeper dip is another, wider object's shadow (a lamp post).
+            sigma = relative_depth_sigma if relative_depth_sigma is not None else 0.0
+            with np.errstate(invalid="ignore"):
+                too_deep = relative_depth - DEPTH_SIGMAS * sigma > check.occlusion
+            rejected["dip_deeper_than_the_pole_makes_there"] = int((had & sound & too_deep).sum())
+            sound &= ~too_deep
         if relative_depth is not None:
             deep = fully_lit_like_neighbours(relative_depth, check.occlusion, sound)
         else:
