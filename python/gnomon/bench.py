@@ -236,9 +236,15 @@ class ScanBench:
         """Whole-scan wall time over decode-alone wall time."""
         return self.scan_seconds / self.decode.seconds if self.decode.seconds > 0 else float("inf")
 
+    @property
+    def cpu_ratio(self) -> float:
+        """Whole-scan CPU time over decode-alone CPU time (all threads; less sensitive to other load)."""
+        return self.scan_cpu_seconds / self.decode.cpu_seconds if self.decode.cpu_seconds > 0 else float("inf")
+
     def to_dict(self) -> dict:
         d = asdict(self)
         d["ratio"] = self.ratio
+        d["cpu_ratio"] = self.cpu_ratio
         return d
 
 
@@ -272,7 +278,7 @@ def format_scan_table(r: ScanBench) -> str:
         (f"  decode alone  {r.decode.seconds:8.2f} s wall {r.decode.cpu_seconds:8.2f} s CPU "
          f"({r.decode.fps:.0f} frames/s)"),
         (f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
-         f"{r.ratio:.2f}x the decode-alone wall time"),
+         f"{r.ratio:.2f}x the decode-alone wall time, {r.cpu_ratio:.2f}x its CPU time"),
         *(f"    {name:<28} {sec:8.2f} s" for name, sec in r.stages.items()),
     ]
     return "\n".join(lines)

@@ -505,15 +505,17 @@ def write_scan(folder: Path, result: ScanResult, started: float | None = None,
     """
     t = time.perf_counter()
     setup, surface = result.setup, result.surface
-    write_surface(folder, surface, setup.units)
-    atomic.save_npy(folder / "undersampled.npy", result.undersampled)
-    atomic.save_npy(folder / "shadow_time.npy", result.shadow_time.astype(np.float32))
-    write_depth_npz(folder / "depth.npz", surface.depth, surface.sigma, result.report["camera"], setup.units)
-    if result.coverage is not None:
-        write_preview(folder / "preview.png", surface.rgb, surface.depth, surface.sigma, result.coverage,
-                      units=setup.units)
-    if "site" in result.report:
-        write_enu_points(folder / "points_enu.ply", surface, result.report["site"])
+    with _Writers() as writers:
+        write_surface(folder, surface, setup.units, writers)
+        writers.add(atomic.save_npy, folder / "undersampled.npy", result.undersampled)
+        writers.add(atomic.save_npy, folder / "shadow_time.npy", result.shadow_time.astype(np.float32))
+        writers.add(write_depth_npz, folder / "depth.npz", surface.depth, surface.sigma, result.report["camera"],
+                    setup.units)
+        if result.coverage is not None:
+            writers.add(write_preview, folder / "preview.png", surface.rgb, surface.depth, surface.sigma,
+                        result.coverage, units=setup.units)
+        if "site" in result.report:
+            writers.add(write_enu_points, folder / "points_enu.ply", surface, result.report["site"])
     timings = result.report["timings_s"]
     timings["outputs_s"] = time.perf_counter() - t
     if before_report is not None:
@@ -556,22 +558,54 @@ def build_surface(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np.
                    rgb.reshape(-1, 3)[mesh.pixel_index], normals[valid], rgb)
 
 
-def write_surface(folder: Path, surface: Surface, units: str) -> None:
-    """points.ply, mesh.ply, mesh.obj (+ .mtl, .png texture), mesh.stl, depth.npy, sigma.npy (each atomically)."""
+class _Writers:
+    """Output files written on a few worker threads (numpy, the kernel, zlib and the file
+    system release the GIL); leaving the ``with`` block waits for every one and re-raises the
+    first failure, in the order they were added."""
+
+    WORKERS = 3
+
+    def __init__(self) -> None:
+        self._pool = ThreadPoolExecutor(max_workers=self.WORKERS, thread_name_prefix="gnomon-writer")
+        self._jobs: list[Any] = []
+
+    def add(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+        self._jobs.append(self._pool.submit(fn, *args, **kwargs))
+
+    def __enter__(self) -> "_Writers":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._pool.shutdown(wait=True)
+        if exc[0] is None:
+            for job in self._jobs:
+                job.result()
+
+
+def write_surface(folder: Path, surface: Surface, units: str, writers: "_Writers | None" = None) -> None:
+    """points.ply, mesh.ply, mesh.obj (+ .mtl, .png texture), mesh.stl, depth.npy, sigma.npy (each atomically).
+
+    ``writers``: write on its threads (waited for by its owner), else here, concurrently."""
+    if writers is None:
+        with _Writers() as own:
+            write_surface(folder, surface, units, own)
+        return
     comments = [f"gnomon {__version__}", ply.units_comment(units), "frame world"]
-    ply.write_points_ply(folder / "points.ply", surface.points_world, surface.colors,
-                         surface.sigma[surface.valid], surface.uv, comments=comments, normals=surface.normals)
     mesh = surface.mesh
-    ply.write_mesh_ply(folder / "mesh.ply", mesh.vertices, mesh.faces, surface.vertex_rgb,
-                       comments=comments, normals=mesh.normals)
     h, w = surface.valid.shape
     tex_uv = (mesh.pixel_uv(w) + 0.5) / np.array([w, h], dtype=np.float32)
     tex_uv[:, 1] = 1.0 - tex_uv[:, 1]  # OBJ: v up from the image's bottom
-    write_obj(folder / "mesh.obj", mesh.vertices, mesh.faces, normals=mesh.normals, uv=tex_uv,
-              texture=surface.rgb, comment=f"gnomon {__version__}, units {units}, frame world")
-    write_stl(folder / "mesh.stl", mesh.vertices, mesh.faces, header=f"gnomon {__version__} mesh, units {units}")
-    atomic.save_npy(folder / "depth.npy", surface.depth)
-    atomic.save_npy(folder / "sigma.npy", surface.sigma)
+    # the longest first
+    writers.add(write_obj, folder / "mesh.obj", mesh.vertices, mesh.faces, normals=mesh.normals, uv=tex_uv,
+                texture=surface.rgb, comment=f"gnomon {__version__}, units {units}, frame world")
+    writers.add(write_stl, folder / "mesh.stl", mesh.vertices, mesh.faces,
+                header=f"gnomon {__version__} mesh, units {units}")
+    writers.add(ply.write_points_ply, folder / "points.ply", surface.points_world, surface.colors,
+                surface.sigma[surface.valid], surface.uv, comments=comments, normals=surface.normals)
+    writers.add(ply.write_mesh_ply, folder / "mesh.ply", mesh.vertices, mesh.faces, surface.vertex_rgb,
+                comments=comments, normals=mesh.normals)
+    writers.add(atomic.save_npy, folder / "depth.npy", surface.depth)
+    writers.add(atomic.save_npy, folder / "sigma.npy", surface.sigma)
 
 
 def write_depth_npz(path: Path, depth: np.ndarray, sigma: np.ndarray, camera: dict[str, Any], units: str) -> None:
