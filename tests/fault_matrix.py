@@ -353,6 +353,9 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
         dd["capture"].pop("time_pattern", None)
     sun_case("fps = 1e-300", fps_zero_edit, "fps")
     sun_case("latitude = nan", lambda dd: dd["site"].update(latitude=float("nan")), "latitude")
+    sun_case("altitude = 1e6", lambda dd: dd["site"].update(altitude=1e6), "[site] altitude")
+    sun_case("pressure_pa = 950 (mbar)", lambda dd: dd["site"].update(pressure_pa=950.0), "[site] pressure_pa")
+    sun_case("temperature_c = 99", lambda dd: dd["site"].update(temperature_c=99.0), "[site] temperature_c")
     scan_case(geo, "timezone 'Mars/Olympus' in a lamp scan",
               lambda dd: dd.update(site={"latitude": 47.0, "longitude": 8.0, "timezone": "Mars/Olympus"}),
               needle="timezone")
@@ -487,14 +490,17 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
                                                       "--quiet"), needle="--seed", check=absent(d / "o")))
     for arg, val in (("--noise", "nan"), ("--width", "0"), ("--frames", "1"), ("--gamma", "inf"),
                      ("--blur", "-1"), ("--jpeg-quality", "101")):
-        needle = "image size" if arg == "--width" else arg  # the scene configuration names the size
+        needle = arg
         d = fresh("sim" + arg)
         out.append(Case(oth, f"simulate {arg} {val}", gnomon("simulate", "desk_lamp", "--out", str(d / "o"),
                                                              f"{arg}={val}", "--quiet"), needle=needle,
                         check=absent(d / "o")))
     for args, needle in ((("--lat", "nan", "--lon", "8", "--time", "2026-06-01T12:00Z"), "--lat"),
                          (("--lat", "47", "--lon", "inf", "--time", "2026-06-01T12:00Z"), "--lon"),
-                         (("--lat", "95", "--lon", "8", "--time", "2026-06-01T12:00Z"), "latitude"),
+                         (("--lat", "95", "--lon", "8", "--time", "2026-06-01T12:00Z"), "--lat"),
+                         (("--lat", "47", "--lon", "8", "--time", "2026-06-01T12:00Z", "--alt", "1e6"), "--alt"),
+                         (("--lat", "47", "--lon", "8", "--time", "2026-06-01T12:00Z", "--tz", "Mars/Olympus"),
+                          "--tz"),
                          (("--lat", "47", "--lon", "8", "--time", "2026-06-01T12:00Z", "--heading", "nan"),
                           "--heading"),
                          (("--lat", "47", "--lon", "8", "--time", "2026-06-01T12:00Z", "--pressure", "-5"),

@@ -821,3 +821,44 @@ def test_a_marker_hint_on_another_marker_is_an_error(two_plane_small: Path, tmp_
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"{unposed}: [[planes]] desk: marker " in err and "uncertain by" in err, err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("args, line", [
+    (("--lat", "95"), "--lat: 95.0 is outside ±90°"),
+    (("--lat", "47", "--alt", "1e6"), "--alt: 1000000.0 m is outside"),
+    (("--lat", "47", "--pressure", "950"), "--pressure: 950 Pa is outside 10000..120000 Pa (give it in pascals"),
+    (("--lat", "47", "--temperature", "99"), "--temperature: 99 °C is outside"),
+    (("--lat", "47", "--tz", "Mars/Olympus"), "--tz: unknown time zone 'Mars/Olympus'"),
+])
+def test_sun_site_messages_name_the_option(args: tuple, line: str, capsys) -> None:
+    code = main(["sun", *args, "--lon", "8", "--time", "2026-06-01T12:00"])
+    assert one_line(code, capsys).startswith(f"gnomon: error: {line}")
+
+
+@pytest.mark.parametrize("key, value, detail", [
+    ("altitude", 1e6, "1000000.0 m is outside"),
+    ("pressure_pa", 950.0, "950 Pa is outside"),
+    ("temperature_c", 99.0, "99 °C is outside"),
+])
+def test_field_log_site_messages_name_the_key(tmp_path: Path, key: str, value: float, detail: str, capsys) -> None:
+    """[site] values that only the site model checks: the message names the field log and the key."""
+    src = ROOT / "field_logs" / "facade_sun_small"
+    shutil.copytree(src, tmp_path / "cap", ignore=shutil.ignore_patterns("scan*"))
+    log = edit(tmp_path / "cap" / "field_log.toml", lambda d: d["site"].update({key: value}))
+    code = main(["scan", str(log), "--out", str(tmp_path / "out"), "--quiet", "--no-rrd"])
+    assert one_line(code, capsys).startswith(f"gnomon: error: {log}: [site] {key}: {detail}")
+
+
+@pytest.mark.parametrize("scene, options, needle", [
+    ("desk_lamp", {"width": 20}, "simulate desk_lamp: --width/--height 20x600:"),
+    ("two_plane", {"markers": "qr"}, "simulate two_plane: --markers 'qr'"),
+    ("facade_day", {"start": "noon"}, "simulate facade_day: --start 'noon'"),
+    ("facade_sun", {"gain_drift": 2.0}, "simulate facade_sun: gain_drift 2.0"),
+    ("desk_lamp", {"seed": 2**40}, "--seed"),
+])
+def test_scene_configuration_messages_name_the_option(tmp_path: Path, scene: str, options: dict,
+                                                      needle: str) -> None:
+    with pytest.raises(GnomonError) as err:
+        gnomon.simulate(scene, tmp_path / "x", **options)
+    assert needle in str(err.value), err.value
+    assert not (tmp_path / "x" / "field_log.toml").exists()

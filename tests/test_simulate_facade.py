@@ -446,13 +446,15 @@ def test_determinism_png_and_rerun(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("kwargs, message", [
     (dict(frames=3), "need 8 to"),
-    (dict(width=20), "image size"),
+    (dict(width=20), "--width/--height 20x120"),
     (dict(noise=-1.0), "noise"),
     (dict(pole_radius=0.0), "pole-radius"),
-    (dict(start="noon"), "not an ISO 8601"),
-    (dict(start="2026-11-12T19:00:00"), "below 3° or behind"),
+    (dict(start="noon"), "--start 'noon' is not an ISO 8601"),
+    (dict(start="2026-11-12T19:00:00"), "--start .* below 3° or behind"),
+    (dict(gain_drift=0.9), "gain_drift 0.9"),
+    (dict(duration_s=60.0), "duration_s 60"),
     (dict(clouds=11), "clouds"),
-    (dict(frames=20000, duration_s=3600), "at least 1 s apart"),
+    (dict(frames=20000, duration_s=3600), "--frames 20000 over duration_s 3600 s: .* at least 1 s apart"),
 ])
 def test_bad_configurations_are_user_errors(tmp_path, kwargs, message):
     with pytest.raises(GnomonError, match=message):

@@ -110,13 +110,13 @@ def test_parse_time_forms():
 @pytest.mark.parametrize(
     "call, expected",
     [
-        (lambda: Site(95.0, 0.0), "latitude 95.0 is outside ±90°"),
-        (lambda: Site(-90.5, 0.0), "latitude -90.5 is outside ±90°"),
-        (lambda: Site(0.0, 181.0), "longitude 181.0 is outside ±180°"),
-        (lambda: Site(float("nan"), 0.0), "latitude nan is not a finite number"),
+        (lambda: Site(95.0, 0.0), "Site latitude_deg: 95.0 is outside ±90°"),
+        (lambda: Site(-90.5, 0.0), "Site latitude_deg: -90.5 is outside ±90°"),
+        (lambda: Site(0.0, 181.0), "Site longitude_deg: 181.0 is outside ±180°"),
+        (lambda: Site(float("nan"), 0.0), "Site latitude_deg: nan is not a finite number"),
         (lambda: Site(0.0, 0.0, pressure_pa=820.0), "(give it in pascals: 820 mbar = 82000 Pa)"),
-        (lambda: Site(0.0, 0.0, temperature_c=300.0), "temperature 300 °C is outside"),
-        (lambda: Site(0.0, 0.0, timezone="Mars/Olympus"), "unknown time zone 'Mars/Olympus'"),
+        (lambda: Site(0.0, 0.0, temperature_c=300.0), "Site temperature_c: 300 °C is outside"),
+        (lambda: Site(0.0, 0.0, timezone="Mars/Olympus"), "Site timezone: unknown time zone 'Mars/Olympus'"),
         (lambda: parse_time("2003-10-17T12:30:30"),
          "time '2003-10-17T12:30:30': no UTC offset, and the site has no timezone"),
         (lambda: sun_position("2003-10-17T12:30:30", Site(0.0, 0.0)),
@@ -170,7 +170,7 @@ def test_sun_command_several_times_without_heading(capsys):
 @pytest.mark.parametrize(
     "argv, expected",
     [
-        (["--lat", "95", "--lon", "0", "--time", "2003-10-17T12:30:30Z"], "latitude 95.0 is outside ±90°"),
+        (["--lat", "95", "--lon", "0", "--time", "2003-10-17T12:30:30Z"], "--lat: 95.0 is outside ±90°"),
         (["--lat", "45", "--lon", "0", "--time", "2003-10-17T12:30:30"], "and the site has no timezone"),
         (["--lat", "45", "--lon", "0", "--time", "noon"], "is not an ISO 8601 timestamp"),
         (["--lat", "45", "--lon", "0", "--time", "2003-10-17T12:30:30Z", "--pressure", "1013"], "mbar"),

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -278,6 +278,8 @@ def load_scan(folder: str | os.PathLike) -> Scan:
 
 def _scene_config(scene: str, options: dict[str, Any]) -> tuple[Any, Any]:
     """``(config, render)`` of a shadow-sweep scene from its options (the configuration's fields)."""
+    make: Callable[..., Any]
+    render: Callable[..., Any]
     if scene in ("desk_lamp", "desk_lamp_right"):
         from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
@@ -336,7 +338,7 @@ def simulate(scene: str, out: str | os.PathLike, *, progress: bool = False, **op
         width, height, seed = options.pop("width", 1280), options.pop("height", 960), options.pop("seed", 0)
         if options:
             raise GnomonError(f"simulate chessboard: unknown options {sorted(options)} (width, height, seed)")
-        write_chessboard_views(out, camera=default_truth_camera(width, height), cols=9, rows=6, square=25.0,
+        write_chessboard_views(Path(out), camera=default_truth_camera(width, height), cols=9, rows=6, square=25.0,
                                n_views=12, seed=seed)
         return Path(out)
     config, render = _scene_config(scene, options)

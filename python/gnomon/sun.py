@@ -37,7 +37,7 @@ import datetime as dt
 import math
 import re
 import zoneinfo
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TypeAlias
 
@@ -103,34 +103,38 @@ class Site:
     timezone: TzLike = None
 
     def __post_init__(self) -> None:
-        lat = _finite("latitude", self.latitude_deg)
-        lon = _finite("longitude", self.longitude_deg)
-        alt = _finite("altitude", self.altitude_m)
+        lat = _site_number("latitude_deg", self.latitude_deg)
+        lon = _site_number("longitude_deg", self.longitude_deg)
+        alt = _site_number("altitude_m", self.altitude_m)
         if abs(lat) > 90.0:
-            raise GnomonError(f"latitude {lat} is outside ±90°")
+            raise SiteError("latitude_deg", f"{lat} is outside ±90°")
         if abs(lon) > 180.0:
-            raise GnomonError(f"longitude {lon} is outside ±180°")
+            raise SiteError("longitude_deg", f"{lon} is outside ±180°")
         if not _ALTITUDE_RANGE_M[0] <= alt <= _ALTITUDE_RANGE_M[1]:
-            raise GnomonError(f"altitude {alt} m is outside {_ALTITUDE_RANGE_M[0]:g}..{_ALTITUDE_RANGE_M[1]:g} m")
+            raise SiteError("altitude_m", f"{alt} m is outside {_ALTITUDE_RANGE_M[0]:g}..{_ALTITUDE_RANGE_M[1]:g} m")
         object.__setattr__(self, "latitude_deg", lat)
         object.__setattr__(self, "longitude_deg", lon)
         object.__setattr__(self, "altitude_m", alt)
         if self.pressure_pa is not None:
-            p = _finite("pressure", self.pressure_pa)
+            p = _site_number("pressure_pa", self.pressure_pa)
             if not _PRESSURE_RANGE_PA[0] <= p <= _PRESSURE_RANGE_PA[1]:
                 hint = f" (give it in pascals: {p:g} mbar = {p * 100:g} Pa)" if 100 <= p <= 1200 else ""
-                raise GnomonError(
-                    f"pressure {p:g} Pa is outside {_PRESSURE_RANGE_PA[0]:g}..{_PRESSURE_RANGE_PA[1]:g} Pa{hint}"
+                raise SiteError(
+                    "pressure_pa", f"{p:g} Pa is outside {_PRESSURE_RANGE_PA[0]:g}..{_PRESSURE_RANGE_PA[1]:g} Pa{hint}"
                 )
             object.__setattr__(self, "pressure_pa", p)
         if self.temperature_c is not None:
-            t = _finite("temperature", self.temperature_c)
+            t = _site_number("temperature_c", self.temperature_c)
             if not _TEMPERATURE_RANGE_C[0] <= t <= _TEMPERATURE_RANGE_C[1]:
-                raise GnomonError(
-                    f"temperature {t:g} °C is outside {_TEMPERATURE_RANGE_C[0]:g}..{_TEMPERATURE_RANGE_C[1]:g} °C"
+                raise SiteError(
+                    "temperature_c",
+                    f"{t:g} °C is outside {_TEMPERATURE_RANGE_C[0]:g}..{_TEMPERATURE_RANGE_C[1]:g} °C",
                 )
             object.__setattr__(self, "temperature_c", t)
-        parse_timezone(self.timezone)  # validate now, not at the first naive timestamp
+        try:
+            parse_timezone(self.timezone)  # validate now, not at the first naive timestamp
+        except GnomonError as exc:
+            raise SiteError("timezone", str(exc)) from None
 
     @property
     def tzinfo(self) -> dt.tzinfo | None:
@@ -149,6 +153,31 @@ class Site:
     def effective_temperature_c(self) -> float:
         """The temperature used for refraction: given, or pvlib's default 12 °C."""
         return 12.0 if self.temperature_c is None else self.temperature_c
+
+
+class SiteError(GnomonError):
+    """An invalid :class:`Site` value. ``field`` is the :class:`Site` field it concerns
+    (``latitude_deg``, …) and ``detail`` the problem, so that a caller can name its own
+    option or key for it (:meth:`SiteError.named`)."""
+
+    def __init__(self, field: str, detail: str) -> None:
+        super().__init__(f"Site {field}: {detail}")
+        self.field = field
+        self.detail = detail
+
+    def named(self, names: Mapping[str, str], prefix: str = "") -> GnomonError:
+        """The same error naming the caller's option or key for the field, e.g.
+        ``err.named({"latitude_deg": "--lat"})`` → ``--lat: 95.0 is outside ±90°``."""
+        return GnomonError(f"{prefix}{names.get(self.field, self.field)}: {self.detail}")
+
+
+def _site_number(field: str, value: object) -> float:
+    try:
+        return _finite("value", value)
+    except GnomonError:
+        number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+        kind = "a finite number" if number else "a number"
+        raise SiteError(field, f"{value!r} is not {kind}") from None
 
 
 def _finite(name: str, value: object) -> float:

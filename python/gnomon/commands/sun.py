@@ -12,7 +12,11 @@ import argparse
 
 import numpy as np
 
-from gnomon.sun import Site, enu_to_world, parse_time, sun_position
+from gnomon.sun import Site, SiteError, enu_to_world, parse_time, sun_position
+
+#: The option of each :class:`gnomon.sun.Site` field, for messages.
+OPTIONS = {"latitude_deg": "--lat", "longitude_deg": "--lon", "altitude_m": "--alt", "pressure_pa": "--pressure",
+           "temperature_c": "--temperature", "timezone": "--tz"}
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -61,7 +65,10 @@ def run(args: argparse.Namespace) -> int:
     for name in ("pressure", "temperature", "heading"):
         if getattr(args, name) is not None:
             validate.number(getattr(args, name), f"--{name}", positive=name == "pressure")
-    site = Site(args.lat, args.lon, args.alt, args.pressure, args.temperature, args.tz)
+    try:
+        site = Site(args.lat, args.lon, args.alt, args.pressure, args.temperature, args.tz)
+    except SiteError as exc:
+        raise exc.named(OPTIONS) from None
     times = [parse_time(t, site.timezone) for t in args.time]
     pos = sun_position(times, site)
     enu = pos.direction_enu

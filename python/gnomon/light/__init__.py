@@ -18,7 +18,7 @@ import pandas as pd
 
 from gnomon.camera import Pose
 from gnomon.errors import FrameError, GnomonError
-from gnomon.fieldlog import FieldLog, GnomonSpec, SiteSpec
+from gnomon.fieldlog import FieldLog, GnomonSpec
 from gnomon.light.base import EdgePlanes, EdgeTimes, LightModel, ReferenceGeometry, Screening
 from gnomon.light.lamp import LampLight
 from gnomon.light.lamp_calibration import (
@@ -32,7 +32,7 @@ from gnomon.light.lamp_calibration import (
 from gnomon.light.sun import HeadingEstimate, SunClock, SunWithLines, SunWithPole, heading_from_gnomon
 from gnomon.light.two_plane import TwoPlaneLight
 from gnomon.reference_lines import PlaneInCamera
-from gnomon.sun import Site
+from gnomon.sun import Site, SiteError
 from gnomon.timestamps import frame_times
 
 __all__ = [
@@ -63,8 +63,18 @@ def light_from_field_log(log: FieldLog, pose: Pose, n_frames: int, warnings: lis
     raise GnomonError(f"{log.path}: [light] kind {kind!r} is not supported by this version")
 
 
-def _site(s: SiteSpec) -> Site:
-    return Site(s.latitude_deg, s.longitude_deg, s.altitude_m, s.pressure_pa, s.temperature_c, s.timezone)
+#: The field log's [site] key of each :class:`Site` field.
+SITE_KEYS = {"latitude_deg": "latitude", "longitude_deg": "longitude", "altitude_m": "altitude",
+             "pressure_pa": "pressure_pa", "temperature_c": "temperature_c", "timezone": "timezone"}
+
+
+def _site(log: FieldLog) -> Site:
+    s = log.site
+    assert s is not None
+    try:
+        return Site(s.latitude_deg, s.longitude_deg, s.altitude_m, s.pressure_pa, s.temperature_c, s.timezone)
+    except SiteError as exc:
+        raise exc.named(SITE_KEYS, prefix=f"{log.path}: [site] ") from None
 
 
 def _capture_times(log: FieldLog, n_frames: int) -> pd.DatetimeIndex:
@@ -98,7 +108,7 @@ def _gnomon_heading(log: FieldLog, g: GnomonSpec, pose: Pose, times: pd.Datetime
 def _sun_clock(log: FieldLog, pose: Pose, n_frames: int, warnings: list[str]) -> SunClock:
     """Frame times, the heading of the world frame ([site] or a gnomon), and the sun over the capture."""
     assert log.site is not None  # the field log requires [site] for the sun
-    site = _site(log.site)
+    site = _site(log)
     times = _capture_times(log, n_frames)
     heading, source, sigma, est = log.site.heading_deg, "[site] heading_deg", None, None
     if log.gnomon is not None:

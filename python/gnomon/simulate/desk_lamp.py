@@ -205,7 +205,7 @@ class SweepConfig:
     def validate(self) -> None:
         bad = self.error
         if not (128 <= self.width <= 8192 and 96 <= self.height <= 8192):
-            raise bad(f"image size {self.width}x{self.height} out of range (128..8192 x 96..8192)")
+            raise bad(f"--width/--height {self.width}x{self.height}: the image size must be 128..8192 x 96..8192 px")
         if not 8 <= self.frames <= 100000:
             raise bad(f"--frames {self.frames}: need 8 to 100000 frames")
         if not (math.isfinite(self.noise) and self.noise >= 0):

@@ -303,17 +303,17 @@ class FacadeSunConfig:
 
     def validate(self) -> None:
         def bad(msg: str) -> GnomonError:
-            return GnomonError(f"simulate facade_sun: {msg}")
+            return GnomonError(f"simulate {'facade_day' if self.full_day else 'facade_sun'}: {msg}")
 
         if not (128 <= self.width <= 8192 and 96 <= self.height <= 8192):
-            raise bad(f"image size {self.width}x{self.height} out of range (128..8192 x 96..8192)")
+            raise bad(f"--width/--height {self.width}x{self.height}: the image size must be 128..8192 x 96..8192 px")
         if not 8 <= self.frames <= 20000:
             raise bad(f"--frames {self.frames}: need 8 to 20000 frames")
         longest = 24 if self.full_day else 6
         if not (math.isfinite(self.duration_s) and 600 <= self.duration_s <= longest * 3600):
-            raise bad(f"duration {self.duration_s} s: must be 600 s to {longest} h")
+            raise bad(f"duration_s {self.duration_s}: must be 600 s to {longest} h")
         if round(self.duration_s / (self.frames - 1)) < 1:
-            raise bad(f"{self.frames} frames over {self.duration_s:g} s: frames must be at least 1 s apart")
+            raise bad(f"--frames {self.frames} over duration_s {self.duration_s:g} s: frames must be at least 1 s apart")
         if not (math.isfinite(self.noise) and self.noise >= 0):
             raise bad(f"--noise {self.noise}: must be >= 0")
         if not 0 <= self.jpeg_quality <= 100:
@@ -327,7 +327,7 @@ class FacadeSunConfig:
         if not 0 <= self.clouds <= 10:
             raise bad(f"--clouds {self.clouds}: must be 0 to 10")
         if not (math.isfinite(self.gain_drift) and 0 <= self.gain_drift <= 0.5):
-            raise bad(f"gain drift {self.gain_drift}: must be 0 to 0.5")
+            raise bad(f"gain_drift {self.gain_drift}: must be 0 to 0.5")
         self.start_time()
 
     def start_time(self) -> pd.Timestamp:
@@ -335,7 +335,8 @@ class FacadeSunConfig:
         try:
             t = pd.Timestamp(dt.datetime.fromisoformat(str(self.start).strip()))
         except ValueError:
-            raise GnomonError(f"simulate facade_sun: start {self.start!r} is not an ISO 8601 time") from None
+            raise GnomonError(f"simulate {'facade_day' if self.full_day else 'facade_sun'}: --start {self.start!r} "
+                              "is not an ISO 8601 time") from None
         if t.tzinfo is None:
             t = t.tz_localize(SITE_TIMEZONE, ambiguous="raise", nonexistent="raise")
         return t.tz_convert("UTC").floor("s")
@@ -599,8 +600,8 @@ class FacadeSunScene:
         self.sun_world = self.sun_enu @ self.R_we.T
         if not c.full_day and (self.elevation.min() < 3.0 or (self.sun_world[:, 1] <= 0.05).any()):
             raise GnomonError(
-                f"simulate facade_sun: from {c.start} for {c.duration_s:g} s the sun is below 3° or behind "
-                "the facade (it faces 205°); choose a start nearer midday")
+                f"simulate facade_sun: --start {c.start} (for duration_s {c.duration_s:g} s): the sun is below 3° "
+                "or behind the facade (it faces 205°); choose a start nearer midday")
         up = self.elevation > 0.0
         am = np.asarray(get_relative_airmass(90.0 - np.where(up, self.elevation, 45.0), model="kastenyoung1989"),
                         dtype=np.float64)
