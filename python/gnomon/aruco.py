@@ -109,7 +109,7 @@ def _refine_by_edges(lin: np.ndarray, corners: np.ndarray, n_cells: int) -> np.n
         if n @ ((a + b) / 2 - centre) < 0:
             n = -n  # outward
         # Across this side the black border is one cell deep, the white paper 1.5 cells wide.
-        cell = 0.5 * (np.linalg.norm(c[(k + 2) % 4] - b) + np.linalg.norm(a - c[(k + 3) % 4])) / n_cells
+        cell = float(0.5 * (np.linalg.norm(c[(k + 2) % 4] - b) + np.linalg.norm(a - c[(k + 3) % 4])) / n_cells)
         h_in, h_out = float(min(3.0, 0.8 * cell)), float(min(3.0, 1.2 * cell))
         if h_in < 1.0:
             return None  # too small to resolve the border: keep OpenCV's corners
@@ -137,9 +137,9 @@ def _refine_by_edges(lin: np.ndarray, corners: np.ndarray, n_cells: int) -> np.n
             pts.append(base[i] + s_star * n)
         if len(pts) < 4:
             return None
-        pts = np.array(pts)
-        m = pts.mean(axis=0)
-        _, _, vt = np.linalg.svd(pts - m)
+        line_pts = np.array(pts)
+        m = line_pts.mean(axis=0)
+        _, _, vt = np.linalg.svd(line_pts - m)
         lines.append((m, vt[0]))
     out = np.empty((4, 2))
     for k in range(4):

@@ -130,7 +130,7 @@ def _symmetric_centre(img: np.ndarray, start: tuple[float, float], radius: int, 
 
 def find_marker(
     image: np.ndarray,
-    hint: Sequence[float],
+    hint: Sequence[float] | np.ndarray,
     *,
     name: str = "marker",
     search_px: float = 30.0,
@@ -317,6 +317,7 @@ def _fit_pose_planar(camera, local2d: np.ndarray, pixels: np.ndarray, where: str
         err = float(np.sum(np.nan_to_num(res, nan=1e6) ** 2))
         if best is None or err < best[0]:
             best = (err, np.asarray(rv, dtype=np.float64).ravel(), np.asarray(tv, dtype=np.float64).ravel())
+    assert best is not None  # n_sol > 0 solutions were compared
     return _refine(camera, obj, pixels, best[1], best[2])
 
 

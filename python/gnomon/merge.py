@@ -108,7 +108,7 @@ def _check_same_camera(a: ScanOnDisk, b: ScanOnDisk) -> None:
     probe = np.array([[0.0, 0.0], [a.camera.width - 1.0, a.camera.height - 1.0], [a.camera.width / 2, 0.0]])
     rays_differ = np.max(np.abs(a.camera.rays(probe) - b.camera.rays(probe))) > 1e-4
     moved = np.linalg.norm(a.pose.camera_centre_world - b.pose.camera_centre_world)
-    scale = max(np.linalg.norm(a.pose.t), 1e-9)
+    scale = max(float(np.linalg.norm(a.pose.t)), 1e-9)
     if rays_differ or moved > 1e-3 * scale:
         raise GnomonError(f"{b.folder}: its camera (intrinsics or pose) differs from {a.folder}'s; "
                           "merge fuses scans taken with one fixed camera")

@@ -28,6 +28,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -38,8 +39,22 @@ __all__ = [
     "write_points_ply",
     "write_mesh_ply",
     "read_ply",
+    "PlyData",
     "units_comment",
 ]
+
+
+class PlyData(TypedDict, total=False):
+    """What :func:`read_ply` returns (the array keys only when the file has those properties)."""
+
+    xyz: np.ndarray
+    normals: np.ndarray
+    rgb: np.ndarray
+    sigma: np.ndarray
+    uv: np.ndarray
+    faces: np.ndarray
+    elements: dict[str, dict[str, np.ndarray]]
+    comments: list[str]
 
 # PLY scalar type names → numpy kinds (both the classic and the sized names).
 _PLY_TYPES: dict[str, str] = {
@@ -272,7 +287,7 @@ def _read_binary_element(buf: memoryview, pos: int, el: _Element, endian: str, w
     if pos < len(buf):
         first_len = None
         off = pos
-        fields = []
+        fields: list[tuple[Any, ...]] = []
         for n, t in el.props:
             if isinstance(t, tuple):
                 cnt_t, item_t = t
@@ -360,7 +375,7 @@ def _read_ascii_elements(body: bytes, elements: list[_Element], where: str) -> d
     return result
 
 
-def read_ply(path: str | os.PathLike) -> dict[str, object]:
+def read_ply(path: str | os.PathLike) -> PlyData:
     """Read a PLY file into a dict of numpy arrays.
 
     Keys (present only when the file has the matching properties):
@@ -395,7 +410,7 @@ def read_ply(path: str | os.PathLike) -> dict[str, object]:
         for el in elements:
             data[el.name], pos = _read_binary_element(buf, pos, el, endian, where)
 
-    out: dict[str, object] = {"elements": data, "comments": comments}
+    out: PlyData = {"elements": data, "comments": comments}
     v = data.get("vertex", {})
     if all(k in v for k in ("x", "y", "z")):
         out["xyz"] = np.stack([v["x"], v["y"], v["z"]], axis=1)

@@ -177,7 +177,8 @@ _units_per_metre = {"mm": 1000.0, "cm": 100.0, "m": 1.0, "in": 1000.0 / 25.4, "f
 
 def display_available() -> bool:
     """Whether a viewer window could open here (X11/Wayland on Linux; assumed elsewhere)."""
-    if sys.platform.startswith("linux") or "bsd" in sys.platform:
+    platform: str = sys.platform  # a plain str: mypy would judge the branches for its own platform only
+    if platform.startswith("linux") or "bsd" in platform:
         return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
     return True
 
@@ -442,7 +443,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
             dist = float(np.linalg.norm(centre))
             image_plane_distance = 0.25 * dist if dist > 0 else 1.0
         static = index is None
-        if not static:
+        if index is not None:
             self.set_time(index, capture_time)
         self._rec.log(
             ENTITY["camera"],
@@ -776,7 +777,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         if not self.enabled:
             return
         rr = _rr()
-        d = np.asarray(depth, dtype=np.float32)
+        d: np.ndarray = np.asarray(depth, dtype=np.float32)
         if d.ndim != 2:
             raise ValueError(f"depth must be (H, W), got {d.shape}")
         h, w = d.shape

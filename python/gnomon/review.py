@@ -272,8 +272,8 @@ def summarize(path: str | Path) -> RecordingSummary:
         if ent == "/__properties":
             if "RecordingInfo:name" in comps:
                 col = batch.column(comps["RecordingInfo:name"])
-                for r in range(batch.num_rows):
-                    name = _cell_str(col, r) or name
+                for row in range(batch.num_rows):
+                    name = _cell_str(col, row) or name
             continue
         entities[ent] = entities.get(ent, 0) + batch.num_rows
         idx = _index_columns(batch)
@@ -287,8 +287,8 @@ def summarize(path: str | Path) -> RecordingSummary:
             lo, hi = pc.min(ints).as_py(), pc.max(ints).as_py()
             rows = len(col) - col.null_count
             if tl in ranges:
-                r = ranges[tl]
-                r[1], r[2], r[3] = min(r[1], lo), max(r[2], hi), r[3] + rows
+                span = ranges[tl]
+                span[1], span[2], span[3] = min(span[1], lo), max(span[2], hi), span[3] + rows
             else:
                 ranges[tl] = [kind, lo, hi, rows]
         if ent == "/" + ENTITY["image"] and "EncodedImage:blob" in comps:
@@ -369,7 +369,8 @@ def nearest_distances(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndar
     origin = b64.mean(axis=0)
     bf = np.ascontiguousarray(b64 - origin, dtype=np.float32)
     af = np.ascontiguousarray(a64 - origin, dtype=np.float32)
-    index = cv2.flann_Index(bf, dict(algorithm=4, leaf_max_size=10))  # 4 = FLANN_INDEX_KDTREE_SINGLE
+    # 4 = FLANN_INDEX_KDTREE_SINGLE. flann_Index is in cv2 but missing from its type stubs.
+    index = cv2.flann_Index(bf, dict(algorithm=4, leaf_max_size=10))  # type: ignore[attr-defined]
     nn, _ = index.knnSearch(af, 1, params=dict(checks=-1))  # -1 = unlimited: exact search
     nn = nn.reshape(-1).astype(np.int64)
     d = np.linalg.norm(a64 - b64[nn], axis=1)

@@ -17,7 +17,7 @@ import numpy as np
 
 from gnomon.aruco import plane_pose_from_aruco, plane_pose_from_charuco
 from gnomon.calibration import fit_camera_to_frames, read_grey
-from gnomon.camera import CameraModel, Pose
+from gnomon.camera import CalibratedCamera, CameraModel, Pose
 from gnomon.crop import Crop
 from gnomon.errors import FieldLogError, FrameError
 from gnomon.fieldlog import FieldLog, PlaneSpec, check_geometry
@@ -50,7 +50,7 @@ class ScanSetup:
     outliers; ``units``: the world units ("mm" or "m").
     """
 
-    camera: CameraModel
+    camera: CalibratedCamera
     pose: Pose
     planes: tuple[ReferencePlane, ...]
     tracker: TrackerSettings

@@ -207,7 +207,7 @@ class TiledTracker:
         done.sort(key=lambda t: (t.bounds[0], t.bounds[2]))
         tracked = stitch(done, shape)
         for t in done:  # keep where and how each tile ran, not a second copy of its maps
-            t.tracked = replace(t.tracked, times=None)  # type: ignore[arg-type]
+            t.tracked = replace(t.tracked, times=None)
         self.tiles = done
         self.info = {
             "tiles": str(self.grid),

@@ -44,7 +44,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -94,7 +94,7 @@ class ShadowTimes:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.enter.shape  # type: ignore[return-value]
+        return self.enter.shape
 
 
 def _check_dtype(dtype) -> np.dtype:
@@ -530,8 +530,7 @@ class _State:
     evaluated: int  # frames evaluated (a multiple of W)
 
     def copy(self) -> _State:
-        return _State(*(getattr(self, f.name).copy() if f.name != "evaluated" else self.evaluated
-                        for f in fields(self)))
+        return replace(self, **{f.name: getattr(self, f.name).copy() for f in fields(self) if f.name != "evaluated"})
 
 
 _CAPTURE_CHUNK = 1 << 16

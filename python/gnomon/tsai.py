@@ -744,7 +744,7 @@ def calibrate_views(
     shared_names = ["f_mm", "kappa1"] + (["cx", "cy", "sx"] if full else [])
     shared0 = [f0, k0] + ([cam0.cx, cam0.cy, sx0] if full else [])
     poses0 = [np.concatenate([Rotation.from_matrix(r.pose.R).as_rotvec(), r.pose.t]) for r in per_view]
-    p0 = np.concatenate([shared0] + poses0)
+    p0 = np.concatenate([np.asarray(shared0, dtype=np.float64), *poses0])
     ns = len(shared0)
 
     def unpack(p):

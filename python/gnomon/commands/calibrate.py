@@ -107,9 +107,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     lamp.set_defaults(func=run_lamp)
 
 
-def _pitch(text: str | None) -> tuple[float, float] | None:
-    if text is None:
-        return None
+def _pitch(text: str) -> tuple[float, float]:
     try:
         vals = [float(x) for x in text.split(",")]
     except ValueError:
@@ -178,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     publish.check_output_file(args.out, "--out")
     if args.rrd and not args.no_rrd:
         publish.check_output_file(args.rrd, "--rrd")
-    pitch = _pitch(args.pixel_pitch)
+    pitch = None if args.pixel_pitch is None else _pitch(args.pixel_pitch)
     if args.model == "zhang" and (pitch is not None or args.full or args.sx != 1.0):
         raise GnomonError("--pixel-pitch, --sx and --full apply to --model tsai only")
     paths = calibration.expand_image_args(args.images)

@@ -407,7 +407,9 @@ def load_pencil_log(path: str | Path) -> PencilLog:
     if len(photos) < 2:
         raise t.error("photos", f"the lamp needs at least 2 pencil photos, got {len(photos)}")
     t.done()
-    bases, tips, images = [], [], []
+    bases: list[np.ndarray] = []
+    tips: list[np.ndarray] = []
+    images: list[str | None] = []
     w, h = camera.width, camera.height
     for i, raw in enumerate(photos):
         pt = _Table(p, f"pencil.photos.{i}", raw)
@@ -459,6 +461,7 @@ def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
     bases, tips, lines = log.bases_px.copy(), log.tips_px.copy(), []
     for i in missing:
         name = log.images[i]
+        assert name is not None  # a tip to find needs its photo (checked when the log was read)
         photo_raw = read_grey(folder / name)
         if photo_raw.shape != empty_raw.shape:
             raise GnomonError(f"{log.path}: [pencil] photo {name} is {photo_raw.shape[1]}x{photo_raw.shape[0]}, "

@@ -17,6 +17,7 @@ reports for ``patternSize = (cols, rows)``.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -323,7 +324,7 @@ def render_view(
 
 
 def write_chessboard_views(
-    out_dir: str | Path,
+    out_dir: str | os.PathLike,
     *,
     camera: TruthCamera | None = None,
     cols: int = 9,
