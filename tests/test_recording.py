@@ -510,7 +510,9 @@ def test_command_line_options(tmp_path):
     with recording_from_args(parser.parse_args(["--no-rrd", "--view"]), tmp_path / "x", recording_name="s") as rec:
         assert not rec.enabled and not rec.viewer_spawned  # no display in tests
     assert not (tmp_path / "x").exists()
-    for argv in (["--no-rrd", "--rrd", "a.rrd"], ["--frame-stride", "0"], ["--rrd", str(tmp_path)]):
+    with pytest.raises(SystemExit):  # argparse: not allowed together
+        parser.parse_args(["--no-rrd", "--rrd", "a.rrd"])
+    for argv in (["--frame-stride", "0"], ["--rrd", str(tmp_path)]):
         with pytest.raises(GnomonError):
             recording_from_args(parser.parse_args(argv), tmp_path, recording_name="s")
 

@@ -966,22 +966,24 @@ def _flatten_numbers(metrics: Mapping[str, Any], prefix: str = "") -> list[tuple
 # --------------------------------------------------------------------------- command-line glue
 
 
-def add_recording_arguments(parser, *, default_filename: str = "scan.rrd") -> None:
-    """Add ``--rrd PATH``, ``--no-rrd``, ``--view`` and ``--frame-stride N`` to a sub-command."""
+def add_recording_arguments(parser, *, what: str = "a rerun recording", default: str = "OUT/scan.rrd",
+                            rrd_path: bool = True, view: bool = True, frame_stride: bool = True) -> None:
+    """Add a sub-command's rerun-recording options: ``--no-rrd`` (do not write ``what``), and unless
+    turned off ``--rrd PATH`` (where to write it instead of ``default``; exclusive with ``--no-rrd``),
+    ``--view`` and ``--frame-stride N``. Every command that records takes them from here.
+    """
     g = parser.add_argument_group("rerun recording")
-    g.add_argument(
-        "--rrd", type=Path, metavar="PATH", default=None,
-        help=f"where to write the rerun recording (default: OUT/{default_filename})",
-    )
-    g.add_argument("--no-rrd", action="store_true", help="do not write a rerun recording")
-    g.add_argument(
-        "--view", action="store_true",
-        help="also stream the run to a rerun viewer (started locally; needs a display)",
-    )
-    g.add_argument(
-        "--frame-stride", type=int, default=10, metavar="N",
-        help="keep every N-th frame image in the recording (default: 10)",
-    )
+    rrd = g.add_mutually_exclusive_group()
+    rrd.add_argument("--no-rrd", action="store_true", help=f"do not write {what}")
+    if rrd_path:
+        rrd.add_argument("--rrd", type=Path, metavar="PATH", default=None,
+                         help=f"where to write it (default: {default})")
+    if view:
+        g.add_argument("--view", action="store_true",
+                       help="also stream the run to a rerun viewer (started locally; needs a display)")
+    if frame_stride:
+        g.add_argument("--frame-stride", type=int, default=10, metavar="N",
+                       help="keep every N-th frame image in the recording (default: 10)")
 
 
 def recording_from_args(

@@ -7,6 +7,8 @@ import sys
 import time
 from pathlib import Path
 
+from gnomon.recording import add_recording_arguments
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -35,8 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="local cluster size (processes, one thread each; default: CPUs, at most 4)")
     p.add_argument("--retries", type=int, default=2, help="extra attempts of a task that crashed")
     p.add_argument("--force", action="store_true", help="rescan even when the outputs are up to date")
-    p.add_argument("--no-rrd", action="store_true", help="no recordings (scan.rrd, merge.rrd, batch.rrd)")
-    p.add_argument("--frame-stride", type=int, default=10, help="keep every N-th frame in each scan.rrd")
+    add_recording_arguments(p, what="the recordings (scan.rrd, merge.rrd, batch.rrd)", rrd_path=False, view=False)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 

@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from gnomon.errors import GnomonError
+from gnomon.recording import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -60,9 +61,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="tsai: also optimise the image centre (Cx, Cy) (and sx with several views), from the two-stage result",
     )
     c.add_argument("--fix-k3", action="store_true", help="zhang: hold k3 at 0 (advisable for narrow fields of view)")
-    c.add_argument("--rrd", default=None, metavar="PATH",
-                   help="rerun recording of the views with the reprojected board (default: beside --out, .rrd)")
-    c.add_argument("--no-rrd", action="store_true", help="do not write a recording")
+    add_recording_arguments(c, what="a recording of the views with the reprojected board",
+                            default="beside --out, .rrd", view=False, frame_stride=False)
     c.add_argument("--force", action="store_true",
                    help="write the camera file even when the calibration is degenerate (a lens model that "
                         "cannot be inverted over the image, or reprojection RMS over 5 px)")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gnomon.recording import add_recording_arguments
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -18,7 +20,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--weights", choices=("gaussian", "sigmoid"), default="gaussian")
     p.add_argument("--beta", type=float, default=10.0, help="sigmoid steepness (large: pick the better scan)")
-    p.add_argument("--no-rrd", action="store_true", help="do not write merge.rrd")
+    add_recording_arguments(p, what="OUT/merge.rrd", rrd_path=False, view=False, frame_stride=False)
     p.set_defaults(func=run)
 
 

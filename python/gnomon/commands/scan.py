@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from gnomon.recording import add_recording_arguments
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -18,11 +20,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("field_log", type=Path, help="the capture's field log (TOML)")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: scan/ beside the field log)")
-    rec = p.add_mutually_exclusive_group()
-    rec.add_argument("--no-rrd", action="store_true", help="do not write a rerun recording")
-    rec.add_argument("--rrd", type=Path, default=None, help="write the recording here instead of OUT/scan.rrd")
-    p.add_argument("--view", action="store_true", help="also stream the recording to a rerun viewer")
-    p.add_argument("--frame-stride", type=int, default=10, help="keep every N-th frame in the recording")
+    add_recording_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     tiles = p.add_argument_group("tiled scan on Dask (pip install \"gnomon[dask]\"; see docs/batch.md)")
     tiles.add_argument("--tiles", default=None, metavar="RxC",
