@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from gnomon.errors import GnomonError
+from gnomon.frames import grey_8bit_scale
 from gnomon.markers import PlanePose, fit_plane_pose
 
 __all__ = [
@@ -58,14 +59,11 @@ def dictionary(name: str, where: str = "aruco") -> cv2.aruco.Dictionary:
 
 
 def _grey_u8(image: np.ndarray) -> np.ndarray:
+    """The image as 8-bit grey for OpenCV's ArUco detector (:func:`gnomon.frames.grey_8bit_scale`, rounded)."""
     img = np.asarray(image)
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY if img.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
-    if img.dtype == np.uint8:
+    if img.ndim == 2 and img.dtype == np.uint8:
         return img
-    if img.dtype == np.uint16:
-        return (img.astype(np.float64) / 257.0).round().astype(np.uint8)
-    return np.clip(np.rint(img.astype(np.float64) * 255.0), 0, 255).astype(np.uint8)
+    return np.clip(np.rint(grey_8bit_scale(img)), 0, 255).astype(np.uint8)
 
 
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)

@@ -65,6 +65,7 @@ import numpy as np
 from gnomon import toml_io
 from gnomon.camera import OpenCVCamera, Pose, TsaiCamera
 from gnomon.errors import GnomonError
+from gnomon.frames import apply_exif_orientation, exif_orientation, to_grey
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".webp")
 OPENCV_STD_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
@@ -102,8 +103,6 @@ def read_grey(path: str | os.PathLike) -> np.ndarray:
 
     Unreadable → GnomonError naming it.
     """
-    from gnomon.frames import apply_exif_orientation, exif_orientation
-
     p = Path(path)
     if not p.is_file():
         raise GnomonError(f"{p}: image not found")
@@ -156,10 +155,9 @@ def fit_camera_to_frames(
 
 
 def to_grey_u8(image: np.ndarray) -> np.ndarray:
-    """Any grey or BGR image → 8-bit grey (16-bit and float data are rescaled to their range)."""
-    img = np.asarray(image)
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY if img.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
+    """Any grey or BGR image → 8-bit grey (16-bit and float data are stretched over their range, which
+    helps the chessboard detector on dim 16-bit photos)."""
+    img = to_grey(np.asarray(image))
     if img.dtype == np.uint8:
         return img
     f = img.astype(np.float64)

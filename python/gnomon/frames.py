@@ -55,6 +55,17 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     return image[:, :, 0]
 
 
+def grey_8bit_scale(image: np.ndarray) -> np.ndarray:
+    """An image (grey, BGR or BGRA) as float32 grey on an 8-bit scale: uint8 as is, uint16 / 257,
+    other types taken as 0..1 (× 255). For detectors that want 8-bit levels (markers, ArUco)."""
+    img = to_grey(np.asarray(image))
+    if img.dtype == np.uint8:
+        return img.astype(np.float32)
+    if img.dtype == np.uint16:
+        return (img.astype(np.float32) / 257.0).astype(np.float32)
+    return (img.astype(np.float32) * 255.0).astype(np.float32)
+
+
 _JPEG_SOI, _JPEG_SOS, _JPEG_EOI = b"\xff\xd8", b"\xff\xda", b"\xff\xd9"
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _PNG_IEND = b"IEND\xaeB`\x82"

@@ -33,6 +33,7 @@ from scipy.optimize import least_squares
 
 from gnomon.camera import Pose
 from gnomon.errors import GnomonError
+from gnomon.frames import grey_8bit_scale
 
 # --------------------------------------------------------------------------- marker detection
 
@@ -54,18 +55,6 @@ class MarkerDetection:
     contrast: float
     x_score: float
     asymmetry: float
-
-
-def _grey_float(image: np.ndarray) -> np.ndarray:
-    """Any image → float32 grey on an 8-bit scale (uint16 / 257, float assumed 0..1)."""
-    img = np.asarray(image)
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY if img.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
-    if img.dtype == np.uint8:
-        return img.astype(np.float32)
-    if img.dtype == np.uint16:
-        return (img.astype(np.float32) / 257.0).astype(np.float32)
-    return (img.astype(np.float32) * 255.0).astype(np.float32)
 
 
 def _circle_profile(img: np.ndarray, centre: tuple[float, float], radius: float, n: int = 64) -> np.ndarray:
@@ -148,7 +137,7 @@ def find_marker(
     ``source`` names the image in errors. Raises GnomonError when no marker
     is there.
     """
-    img = _grey_float(image)
+    img = grey_8bit_scale(image)
     h, w = img.shape
     u0, v0 = float(hint[0]), float(hint[1])
     where = f"{source}: marker '{name}'"
