@@ -1,8 +1,14 @@
-"""Shared fixtures: small captures written to a temporary folder."""
+"""Shared fixtures: captures written to a temporary folder.
+
+The simulated scenes are rendered once per session and shared by every test that
+uses them; they are read-only: a test that changes a capture works on a copy
+(:func:`copy_capture`).
+"""
 
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import cv2
@@ -78,3 +84,32 @@ def two_plane_small(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("two_plane_small")
     simulate_two_plane(root / "capture", TwoPlaneConfig(width=400, height=300, frames=120, seed=4))
     return root / "capture"
+
+
+def copy_capture(capture: Path, to: Path) -> Path:
+    """A copy of a shared capture folder that a test may change; returns the copy's folder."""
+    shutil.copytree(capture, to)
+    return to
+
+
+@pytest.fixture(scope="session")
+def desk_lamp_full(tmp_path_factory) -> Path:
+    """The full desk_lamp capture (800×600, 240 frames, seed 3, three pencil photos): its folder."""
+    from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
+
+    root = tmp_path_factory.mktemp("desk_lamp_full")
+    simulate_desk_lamp(root / "capture", DeskLampConfig(seed=3))
+    return root / "capture"
+
+
+@pytest.fixture(scope="session")
+def desk_lamp_full_scan(desk_lamp_full, tmp_path_factory):
+    """``desk_lamp_full`` scanned with the default options (no recording):
+    ``(root, ScanResult, ground truth arrays)``; the scan is in ROOT/scan."""
+    import numpy as np
+
+    from gnomon.pipeline import ScanOptions, run_scan
+
+    root = tmp_path_factory.mktemp("desk_lamp_full_scan")
+    result = run_scan(desk_lamp_full / "field_log.toml", root / "scan", ScanOptions(progress=False, rrd=False))
+    return root, result, dict(np.load(desk_lamp_full / "ground_truth.npz"))

@@ -66,8 +66,8 @@ def sigma_calibration(result, truth) -> list[tuple[float, float, int]]:
 
 
 @pytest.mark.slow
-def test_sigma_predicts_the_error_desk(tmp_path: Path) -> None:
-    result, truth = scan(tmp_path, DeskLampConfig(seed=13, pencil_photos=0))
+def test_sigma_predicts_the_error_desk(desk_lamp_full_scan) -> None:
+    _, result, truth = desk_lamp_full_scan
     rows = sigma_calibration(result, truth)
     print(rows)
     for predicted, observed, n in rows:

@@ -18,6 +18,7 @@ def in_memory(desk_scan):
     return gnomon.scan(desk_scan / "capture" / "field_log.toml")
 
 
+@pytest.mark.slow
 def test_scan_in_process_matches_the_files_the_cli_wrote(desk_scan, in_memory) -> None:
     s, files = in_memory, desk_scan / "scan"
     assert s.folder is None
@@ -36,6 +37,7 @@ def test_scan_in_process_matches_the_files_the_cli_wrote(desk_scan, in_memory) -
     assert s.warnings == report["warnings"]
 
 
+@pytest.mark.slow
 def test_depth_npz_carries_the_camera_that_reprojects_the_points(desk_scan, in_memory) -> None:
     with np.load(desk_scan / "scan" / "depth.npz") as z:
         np.testing.assert_array_equal(z["depth"], in_memory.depth)
@@ -53,6 +55,7 @@ def test_depth_npz_carries_the_camera_that_reprojects_the_points(desk_scan, in_m
         assert np.max(np.abs(px[:, 0] - in_memory.pixels)) < 0.01  # pixels (float32 points)
 
 
+@pytest.mark.slow
 def test_load_scan_reads_a_folder_back(desk_scan, in_memory) -> None:
     back = gnomon.load_scan(desk_scan / "scan")
     assert back.folder == desk_scan / "scan"

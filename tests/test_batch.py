@@ -318,6 +318,7 @@ print(json.dumps({"start": start, "peak": peak_rss_bytes()}))
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("normalize", [False, True], ids=["plain", "normalize_illumination"])
 def test_tiled_scan_equals_untiled_with_less_memory_per_worker(cluster, tmp_path, normalize):
     """2x2 tiles tracked on the two workers, stitched: the untiled scan's outputs, byte for byte,

@@ -67,6 +67,7 @@ def cropped_desk(tmp_path_factory):
     return root, gnomon.scan(log)
 
 
+@pytest.mark.slow
 def test_desk_scan_cropped_2mm_above_the_desk_keeps_the_objects(cropped_desk) -> None:
     """≥ 99 % of the objects' points stay, ≤ 0.5 % of the desk's (the simulator's object ids).
 

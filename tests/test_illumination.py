@@ -14,15 +14,15 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import copy_capture
 from gnomon import toml_io
 from gnomon.accuracy import depth_accuracy
 from gnomon.pipeline import ScanOptions, run_scan
-from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
 
 @pytest.mark.slow
-def test_normalisation_undoes_exposure_drift(tmp_path) -> None:
-    simulate_desk_lamp(tmp_path, DeskLampConfig(seed=21, pencil_photos=0))
+def test_normalisation_undoes_exposure_drift(desk_lamp_full, tmp_path) -> None:
+    tmp_path = copy_capture(desk_lamp_full, tmp_path / "capture")  # its frames are re-encoded
     frames = sorted((tmp_path / "frames").glob("*.jpg"))
     for i, f in enumerate(frames):
         gain = 1.0 + 0.25 * np.sin(2 * np.pi * 1.5 * i / len(frames))

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import copy_capture
 from gnomon import toml_io
 from gnomon.camera import OpenCVCamera, Pose
 from gnomon.errors import GnomonError
@@ -320,16 +321,14 @@ def test_field_log_missing_pencil_table(tmp_path):
 
 
 @pytest.mark.slow
-def test_tips_found_against_the_empty_desk(tmp_path) -> None:
+def test_tips_found_against_the_empty_desk(desk_lamp_full, tmp_path) -> None:
     """[pencil] empty = ...: photos give only a base hint; the shadow tips are found automatically."""
     import tomllib
 
     from gnomon import toml_io
     from gnomon.cli import main
-    from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
-    cap = tmp_path / "capture"
-    simulate_desk_lamp(cap, DeskLampConfig(seed=9, frames=24, pencil_photos=3))
+    cap = copy_capture(desk_lamp_full, tmp_path / "capture")  # the lamp file is written beside the log
     log = tomllib.loads((cap / "pencil_log.toml").read_text())
     rng = np.random.default_rng(9)
     for photo in log["pencil"]["photos"]:

@@ -17,18 +17,12 @@ import numpy as np
 import pytest
 
 from gnomon.accuracy import depth_accuracy
-from gnomon.pipeline import ScanOptions, run_scan
-from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
 
 @pytest.fixture(scope="module")
-def desk_scan(tmp_path_factory):
-    root = tmp_path_factory.mktemp("desk")
-    cfg = DeskLampConfig(seed=3)
-    simulate_desk_lamp(root / "capture", cfg)
-    result = run_scan(root / "capture" / "field_log.toml", root / "scan", ScanOptions(progress=False))
-    truth = dict(np.load(root / "capture" / "ground_truth.npz"))
-    return root, result, truth
+def desk_scan(desk_lamp_full_scan):
+    """The full desk_lamp capture (seed 3) and its scan, shared with the other tests (conftest)."""
+    return desk_lamp_full_scan
 
 
 @pytest.mark.slow

@@ -147,6 +147,7 @@ def test_sun_below_the_horizon(small_facade, capsys) -> None:
     assert "below the horizon" in out
 
 
+@pytest.mark.slow
 def test_sun_scan_is_georeferenced(small_facade) -> None:
     """report.json gives the site and world → ENU; points_enu.ply holds the cloud in ENU metres."""
     import gnomon
