@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gnomon.recording import add_recording_arguments
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
@@ -28,13 +30,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     view.add_argument("--connect", default=None, metavar="URL",
                       help="stream to a running rerun viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
     view.add_argument("--no-view", action="store_true", help="do not spawn a viewer (only OUT/scan.rrd)")
-    p.add_argument("--no-rrd", action="store_true", help="do not write OUT/scan.rrd")
     p.add_argument("--until-complete", action="store_true",
                    help="stop when the sweep is complete also for a file (always for a camera or a stream)")
     p.add_argument("--recover", type=int, default=3,
                    help="frames back above the mid-level after which a pixel's shadow has passed (default 3)")
     p.add_argument("--max-frames", type=int, default=100000, help="longest run from a camera or a stream")
-    p.add_argument("--frame-stride", type=int, default=10, help="keep every N-th frame in the recording")
+    add_recording_arguments(p, what="OUT/scan.rrd", rrd_path=False, view=False)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
