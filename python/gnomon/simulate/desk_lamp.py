@@ -168,6 +168,22 @@ def _objects() -> dict[int, tuple[geo.Surface, float]]:
     }
 
 
+def plane_texture(ab: np.ndarray, seed: list[int]) -> np.ndarray:
+    """Smooth albedo 0.45–0.75 at 2-D plane coordinates ab (..., 2), mm: four plane waves of 90–300 mm
+    with random directions, amplitudes and phases drawn from ``seed``."""
+    rng = np.random.default_rng(seed)
+    tex = np.zeros(ab.shape[:-1])
+    amp_sum = 0.0
+    for _ in range(4):
+        lam = rng.uniform(90.0, 300.0)
+        ang = rng.uniform(0.0, np.pi)
+        amp = rng.uniform(0.5, 1.0)
+        k = 2 * np.pi / lam * np.array([math.cos(ang), math.sin(ang)])
+        tex += amp * np.sin(ab[..., 0] * k[0] + ab[..., 1] * k[1] + rng.uniform(0, 2 * np.pi))
+        amp_sum += amp
+    return 0.6 + 0.15 * tex / amp_sum
+
+
 def mirror_across_view(X, camera_centre, scene_centre) -> np.ndarray:
     """Mirror image of X across the vertical plane through the camera and the scene centre."""
     h = np.asarray(camera_centre, dtype=np.float64) - np.asarray(scene_centre, dtype=np.float64)
@@ -208,12 +224,7 @@ class SweepConfig:
             raise bad(f"--width/--height {self.width}x{self.height}: the image size must be 128..8192 x 96..8192 px")
         if not 8 <= self.frames <= 100000:
             raise bad(f"--frames {self.frames}: need 8 to 100000 frames")
-        if not (math.isfinite(self.noise) and self.noise >= 0):
-            raise bad(f"--noise {self.noise}: must be >= 0")
-        if not 0 <= self.jpeg_quality <= 100:
-            raise bad(f"--jpeg-quality {self.jpeg_quality}: must be 0 (PNG) to 100")
-        if not (math.isfinite(self.blur) and 0 <= self.blur <= 20):
-            raise bad(f"--blur {self.blur}: must be 0 to 20 px")
+        sensor.check_sensor_options(self.noise, self.jpeg_quality, self.blur, bad)
         if not (math.isfinite(self.lamp_radius) and 0 < self.lamp_radius <= 50):
             raise bad(f"--lamp-radius {self.lamp_radius}: must be > 0 and <= 50 mm")
         if not (math.isfinite(self.stick_radius) and 0 < self.stick_radius <= 50):
@@ -429,18 +440,7 @@ class DeskLampScene:
 
     def _albedo(self, P: np.ndarray) -> np.ndarray:
         """Albedo at the (padded) grid's surface points: the desk texture, objects uniform."""
-        H, W = P.shape[:2]
-        rng = np.random.default_rng([self.config.seed, 1])
-        tex = np.zeros((H, W))
-        amp_sum = 0.0
-        for _ in range(4):
-            lam = rng.uniform(90.0, 300.0)
-            ang = rng.uniform(0.0, np.pi)
-            amp = rng.uniform(0.5, 1.0)
-            k = 2 * np.pi / lam * np.array([math.cos(ang), math.sin(ang)])
-            tex += amp * np.sin(P[..., 0] * k[0] + P[..., 1] * k[1] + rng.uniform(0, 2 * np.pi))
-            amp_sum += amp
-        albedo = 0.6 + 0.15 * tex / amp_sum
+        albedo = plane_texture(P[..., :2], [self.config.seed, 1])
         for oid, (_, a) in self.objects.items():
             albedo = np.where(self.object_id_f == oid, a, albedo)
         return albedo

@@ -314,12 +314,7 @@ class FacadeSunConfig:
             raise bad(f"duration_s {self.duration_s}: must be 600 s to {longest} h")
         if round(self.duration_s / (self.frames - 1)) < 1:
             raise bad(f"--frames {self.frames} over duration_s {self.duration_s:g} s: frames must be at least 1 s apart")
-        if not (math.isfinite(self.noise) and self.noise >= 0):
-            raise bad(f"--noise {self.noise}: must be >= 0")
-        if not 0 <= self.jpeg_quality <= 100:
-            raise bad(f"--jpeg-quality {self.jpeg_quality}: must be 0 (PNG) to 100")
-        if not (math.isfinite(self.blur) and 0 <= self.blur <= 20):
-            raise bad(f"--blur {self.blur}: must be 0 to 20 px")
+        sensor.check_sensor_options(self.noise, self.jpeg_quality, self.blur, bad)
         if not (math.isfinite(self.pole_radius) and 0.005 <= self.pole_radius <= 0.5):
             raise bad(f"--pole-radius {self.pole_radius}: must be 0.005 to 0.5 m")
         if not (math.isfinite(self.gamma) and 0.2 <= self.gamma <= 5):

@@ -9,6 +9,8 @@ Also the ground-truth files every scene writes beside its capture.
 from __future__ import annotations
 
 import json
+import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -43,3 +45,13 @@ def write_ground_truth(out: Path, arrays: dict[str, Any], summary: dict) -> tupl
     json_path = out / "ground_truth.json"
     atomic.write_text(json_path, json.dumps(summary, indent=2) + "\n")
     return gt_path, json_path
+
+
+def check_sensor_options(noise: float, jpeg_quality: int, blur: float, bad: Callable[[str], Exception]) -> None:
+    """The sensor options every scene has (noise DN, JPEG quality, blur px); ``bad`` makes the error to raise."""
+    if not (math.isfinite(noise) and noise >= 0):
+        raise bad(f"--noise {noise}: must be >= 0")
+    if not 0 <= jpeg_quality <= 100:
+        raise bad(f"--jpeg-quality {jpeg_quality}: must be 0 (PNG) to 100")
+    if not (math.isfinite(blur) and 0 <= blur <= 20):
+        raise bad(f"--blur {blur}: must be 0 to 20 px")

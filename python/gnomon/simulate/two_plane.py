@@ -98,7 +98,6 @@ projections of each marker's corners in OpenCV's order.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -121,6 +120,7 @@ from gnomon.simulate.desk_lamp import (
     SweepConfig,
     clear_previous,
     nuisance_text,
+    plane_texture,
     prepare_out_dir,
     write_frames,
 )
@@ -265,17 +265,7 @@ class TwoPlaneScene(DeskLampScene):
 
     def _texture(self, ab: np.ndarray, key: int) -> np.ndarray:
         """Smooth albedo 0.45–0.75 at plane coordinates ab (..., 2); phases from the seed."""
-        rng = np.random.default_rng([self.config.seed, key])
-        tex = np.zeros(ab.shape[:-1])
-        amp_sum = 0.0
-        for _ in range(4):
-            lam = rng.uniform(90.0, 300.0)
-            ang = rng.uniform(0.0, np.pi)
-            amp = rng.uniform(0.5, 1.0)
-            k = 2 * np.pi / lam * np.array([math.cos(ang), math.sin(ang)])
-            tex += amp * np.sin(ab[..., 0] * k[0] + ab[..., 1] * k[1] + rng.uniform(0, 2 * np.pi))
-            amp_sum += amp
-        return 0.6 + 0.15 * tex / amp_sum
+        return plane_texture(ab, [self.config.seed, key])
 
     def _plane_albedo(self, oid: int, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Albedo and marker class (0 none, 1 white, 2 black) of plane ``oid`` at world points X."""
