@@ -575,7 +575,10 @@ class LiveView:
         t0, c0 = time.perf_counter(), time.thread_time()
         if self.tracker is None:
             self.tracker = tracker
-            tracker.watch(self.setup.tracker.min_contrast, self.recover)
+            # The field log's contrast floor; without one, 20 DN (the scan's floor comes from the noise,
+            # which is not known yet at the first frame).
+            floor = self.setup.tracker.min_contrast
+            tracker.watch(floor if floor is not None else 20.0, self.recover)
         self.used.append(frame.index)
         k = len(self.used) - 1  # tracker frame
         self._estimate_noise(frame.grey)

@@ -572,7 +572,7 @@ class _Writers:
     def add(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
         self._jobs.append(self._pool.submit(fn, *args, **kwargs))
 
-    def __enter__(self) -> "_Writers":
+    def __enter__(self) -> _Writers:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -582,7 +582,7 @@ class _Writers:
                 job.result()
 
 
-def write_surface(folder: Path, surface: Surface, units: str, writers: "_Writers | None" = None) -> None:
+def write_surface(folder: Path, surface: Surface, units: str, writers: _Writers | None = None) -> None:
     """points.ply, mesh.ply, mesh.obj (+ .mtl, .png texture), mesh.stl, depth.npy, sigma.npy (each atomically).
 
     ``writers``: write on its threads (waited for by its owner), else here, concurrently."""

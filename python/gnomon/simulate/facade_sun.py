@@ -313,7 +313,8 @@ class FacadeSunConfig:
         if not (math.isfinite(self.duration_s) and 600 <= self.duration_s <= longest * 3600):
             raise bad(f"duration_s {self.duration_s}: must be 600 s to {longest} h")
         if round(self.duration_s / (self.frames - 1)) < 1:
-            raise bad(f"--frames {self.frames} over duration_s {self.duration_s:g} s: frames must be at least 1 s apart")
+            raise bad(f"--frames {self.frames} over duration_s {self.duration_s:g} s: "
+                      "frames must be at least 1 s apart")
         sensor.check_sensor_options(self.noise, self.jpeg_quality, self.blur, bad)
         if not (math.isfinite(self.pole_radius) and 0.005 <= self.pole_radius <= 0.5):
             raise bad(f"--pole-radius {self.pole_radius}: must be 0.005 to 0.5 m")
