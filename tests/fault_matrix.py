@@ -179,6 +179,17 @@ def prepare(root: Path) -> dict:
     subprocess.run(gnomon("simulate", "chessboard", "--out", str(root / "chess"), "--width", "640", "--height",
                           "480"), check=True, env=env, capture_output=True)
     fx["chess"] = root / "chess"
+    # a two-plane capture whose markers place the desk and the wall
+    subprocess.run(gnomon("simulate", "two_plane", "--out", str(root / "two"), "--width", "400", "--height", "300",
+                          "--frames", "120", "--seed", "4", "--quiet"), check=True, env=env, capture_output=True)
+    fx["two"] = root / "two" / "field_log.toml"
+    # a capture cropped to a few points: the recording is its biggest output (sizes a limit only it outgrows)
+    fx["cropped"] = write_tiny_capture(root / "cropped", n_frames=60, width=160, height=120,
+                                       extra={"output": {"crop_box": [[-10, -10, -5], [10, 10, 5]]}})
+    subprocess.run(gnomon("scan", str(fx["cropped"]), "--out", str(root / "cropped_scan"), "--quiet",
+                          "--frame-stride", "1"), check=True, env=env, capture_output=True)
+    sizes = {p.name: p.stat().st_size for p in (root / "cropped_scan").iterdir() if p.is_file()}
+    fx["cropped_limit"] = (sizes["scan.rrd"] + max(v for n, v in sizes.items() if n != "scan.rrd")) // 2
     return fx
 
 
@@ -336,6 +347,32 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
               lambda dd: dd["planes"].append({**dd["planes"][0]}), needle="desk")
     scan_case(geo, "camera in the plane", lambda dd: dd["camera"]["pose"].update(tvec=[0.0, 0.0, 0.0]),
               needle="camera")
+
+    def swap_hints(dd: dict) -> None:
+        m = dd["planes"][0]["markers"]
+        m[0]["pixel_hint"], m[1]["pixel_hint"] = m[1]["pixel_hint"], m[0]["pixel_hint"]
+    scan_case(geo, "two markers with each other's pixel_hint (26 px, 42° off)", swap_hints, needle="desk: marker",
+              source=fx["two"])
+    d_click = fresh("marker-clicked-off")
+    log_click = copy_capture(fx["two"].parent, d_click / "cap")
+
+    def click_off(dd: dict) -> None:  # a clicked pixel 12 px right of where marker 2 is found
+        from gnomon.fieldlog import load_field_log
+        from gnomon.scan_setup import frame_source, resolve_reference_planes
+        fl = load_field_log(fx["two"])
+        found = resolve_reference_planes(fl, frame_source(fl))[1][0]["pixels"][2]
+        m = dd["planes"][0]["markers"][2]
+        m.pop("pixel_hint")
+        m["pixel"] = [found[0] + 12.0, found[1]]
+    edit_toml(log_click, click_off)
+    o_click = d_click / "out"
+
+    def warned(o=o_click) -> str | None:
+        w = json.loads((o / "report.json").read_text())["warnings"]
+        return None if any("do not fit one plane" in x for x in w) else "no marker warning in report.json"
+    out.append(Case(geo, "a marker clicked 12 px off (warning)", gnomon("scan", str(log_click), "--out", str(o_click),
+                                                                      "--quiet", "--no-rrd"),
+                    expect="ok", check=warned))
 
     def sun_case(name: str, edit: Callable[[dict], None], needle: str) -> None:
         scan_case(geo, name, edit, needle=needle, source=fx["sun"])
@@ -544,6 +581,15 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
     out.append(Case(flt, "file-size limit (ulimit -f 4 MiB)", gnomon("scan", str(fx["desk"]), "--out", str(o),
                                                                      "--quiet"),
                     needle=str(o), preexec=fsize_limit, check=absent(o)))
+    d = fresh("view-ulimit")
+    o = d / "out"
+
+    def rrd_limit() -> None:
+        import resource
+        resource.setrlimit(resource.RLIMIT_FSIZE, (fx["cropped_limit"], fx["cropped_limit"]))
+    out.append(Case(flt, "--view without a display, a file-size limit only scan.rrd outgrows",
+                    gnomon("scan", str(fx["cropped"]), "--out", str(o), "--quiet", "--frame-stride", "1", "--view"),
+                    needle="scan.rrd", preexec=rrd_limit, check=absent(o)))
     d = fresh("rescan-no-rrd")
     o = d / "out"
     subprocess.run(gnomon("scan", str(fx["cap"]), "--out", str(o), "--quiet"), check=True, capture_output=True)

@@ -442,7 +442,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
-    warnings = list(setup.warnings)
+    warnings = list(setup.warnings) + (list(recorder.notes) if recorder is not None else [])
     _record_setup(recorder, setup, source)
     skip = setup.light.skipped_frames(source.count)
     colour = LitColour(sample_indices(np.flatnonzero(~skip), COLOUR_SAMPLES))
@@ -762,7 +762,8 @@ def open_recorder(staging: Path, opts: ScanOptions, name: str, filename: str = "
     if not (opts.rrd or opts.view):
         return None
     return ScanRecording(staging / filename if opts.rrd else None, recording_name=name,
-                         spawn_viewer=opts.view, frame_stride=opts.frame_stride, image_scale=image_scale)
+                         spawn_viewer=opts.view, frame_stride=opts.frame_stride, image_scale=image_scale,
+                         log_notes=False)  # the scan's warnings report them
 
 
 @contextmanager

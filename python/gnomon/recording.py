@@ -265,6 +265,8 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
     stream to a local viewer (only where a display exists); ``viewer_url``
     (``rerun+http://host:port/proxy``) to one already running. With neither,
     the recorder is disabled: every method is a no-op and rerun is never loaded.
+    Why a viewer asked for did not start is in ``notes`` (and logged as a
+    warning unless ``log_notes`` is False: the scan reports it with its warnings).
 
     ``frame_stride`` store every n-th frame image (index % stride == 0);
     ``image_scale`` (0, 1] downscale of stored images; ``jpeg_quality`` 1..100.
@@ -282,6 +284,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         jpeg_quality: int = 80,
         viewer_port: int = 9876,
         viewer_url: str | None = None,
+        log_notes: bool = True,
     ) -> None:
         if int(frame_stride) < 1:
             raise ValueError(f"frame_stride must be >= 1, got {frame_stride}")
@@ -295,6 +298,8 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         self.image_scale = float(image_scale)
         self.jpeg_quality = int(jpeg_quality)
         self.viewer_spawned = False
+        self.notes: list[str] = []  # why a viewer asked for did not start
+        self._log_notes = bool(log_notes)
         self.frames_seen = 0
         self.frames_stored = 0
 
@@ -312,7 +317,8 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
 
         want_viewer = bool(spawn_viewer) or viewer_url is not None
         if want_viewer and viewer_url is None and not display_available():
-            log.warning("no display: not starting the rerun viewer (recording to file only)")
+            self._note("no display here (DISPLAY and WAYLAND_DISPLAY unset): no rerun viewer started"
+                       + ("; the recording goes to its file only" if self.path is not None else ""))
             want_viewer = False
         if self.path is None and not want_viewer:
             return  # disabled
@@ -336,7 +342,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
                         url = f"rerun+http://127.0.0.1:{viewer_port}/proxy"
                     viewer = rr.GrpcSink(url)
                 except Exception as exc:  # no viewer binary, port in use, a malformed URL, ...
-                    log.warning("could not start the rerun viewer: %s", exc)
+                    self._note(f"could not start the rerun viewer: {exc}")
             if viewer is not None:
                 # The viewer's stream beside the in-memory file: both get every message.
                 rec.set_sinks(viewer, *([self._stream] if self._stream is not None else []))
@@ -351,6 +357,11 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
             self.abort()
             raise
         self._rec = rec
+
+    def _note(self, text: str) -> None:
+        self.notes.append(text)
+        if self._log_notes:
+            log.warning("%s", text)
 
     # ------------------------------------------------------------------ state
 
