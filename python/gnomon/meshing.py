@@ -456,7 +456,17 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
         parts.append(_kernel.obj_text(np.ascontiguousarray(v), _decimals_for(v) if len(v) else 1, t, n,
                                       np.ascontiguousarray(f)))
     _write_obj_material(target, texture)
-    atomic.write_bytes(target, b"".join(parts))
+    _write_parts(target, parts)
+
+
+def _write_parts(path: str | os.PathLike, parts: list) -> None:
+    """Write byte buffers one after the other into ``path``, atomically (no joined copy in memory)."""
+    from gnomon import atomic
+
+    with atomic.atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            for part in parts:
+                fh.write(part)
 
 
 def _obj_body_numpy(v: np.ndarray, f: np.ndarray, uv: np.ndarray | None, normals: np.ndarray | None) -> bytes:
@@ -525,4 +535,4 @@ def write_stl(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     table = np.zeros(len(f), dtype=np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")]))
     table["n"] = face_normals(v, f)
     table["v"] = v[f]
-    atomic.write_bytes(path, head.ljust(80, b" ") + np.uint32(len(f)).astype("<u4").tobytes() + table.tobytes())
+    _write_parts(path, [head.ljust(80, b" "), np.uint32(len(f)).astype("<u4").tobytes(), table.view(np.uint8)])

@@ -24,7 +24,7 @@ pub mod triangulate;
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
 pub use live::{FinishedPixel, WatchParams};
-pub use mesh::{clean_faces, grid_faces, obj_text, CleanMesh};
+pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
 pub use sample::Sample;
 pub use simd::SimdPath;
 pub use tracker::{find_crossing, Crossing, Edge, ShadowTimes, TemporalTracker, TrackerParams};

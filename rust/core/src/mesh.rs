@@ -473,8 +473,8 @@ fn write_uint(x: u64, out: &mut Vec<u8>) {
     out.extend_from_slice(&buf[k..]);
 }
 
-/// Lines `prefix col col …\n` for the rows of `columns`, in parallel.
-fn column_lines(prefix: &[u8], columns: &[Column], rows: usize) -> Vec<u8> {
+/// Lines `prefix col col …\n` for the rows of `columns`, in parallel: one buffer per block of rows.
+fn column_lines(prefix: &[u8], columns: &[Column], rows: usize) -> Vec<Vec<u8>> {
     let chunks: Vec<Vec<u8>> = (0..rows)
         .collect::<Vec<_>>()
         .par_chunks(ITEMS_PER_TASK)
@@ -491,7 +491,7 @@ fn column_lines(prefix: &[u8], columns: &[Column], rows: usize) -> Vec<u8> {
             out
         })
         .collect();
-    chunks.concat()
+    chunks
 }
 
 /// The body of a Wavefront OBJ file (see `gnomon.meshing.write_obj`, whose text this is, byte for byte).
@@ -508,6 +508,17 @@ pub fn obj_text(
     normals: Option<&[f64]>,
     faces: &[i64],
 ) -> Result<Vec<u8>, KernelError> {
+    Ok(obj_text_parts(vertices, vertex_decimals, uv, normals, faces)?.concat())
+}
+
+/// [`obj_text`] as consecutive buffers (blocks of lines), without joining them.
+pub fn obj_text_parts(
+    vertices: &[f64],
+    vertex_decimals: usize,
+    uv: Option<&[f64]>,
+    normals: Option<&[f64]>,
+    faces: &[i64],
+) -> Result<Vec<Vec<u8>>, KernelError> {
     if vertices.len() % 3 != 0 {
         return Err(KernelError::parameter(
             "vertices",
@@ -538,7 +549,7 @@ pub fn obj_text(
             "expected rows of 3 vertex indices in range",
         ));
     }
-    let mut out = Vec::new();
+    let mut out: Vec<Vec<u8>> = Vec::new();
     if nv > 0 {
         let cols = |a: &[f64], k: usize, dec: usize| {
             (0..k)
@@ -591,9 +602,7 @@ pub fn obj_text(
             o
         })
         .collect();
-    for c in chunks {
-        out.extend(c);
-    }
+    out.extend(chunks);
     Ok(out)
 }
 

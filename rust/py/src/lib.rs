@@ -699,10 +699,19 @@ fn obj_text<'py>(
         normals.as_ref().map(owned),
         faces.as_array().iter().copied().collect::<Vec<i64>>(),
     );
-    let text = py
-        .detach(|| gnomon_core::obj_text(&v, vertex_decimals, t.as_deref(), n.as_deref(), &f))
+    let parts = py
+        .detach(|| gnomon_core::obj_text_parts(&v, vertex_decimals, t.as_deref(), n.as_deref(), &f))
         .map_err(kernel_error)?;
-    Ok(pyo3::types::PyBytes::new(py, &text))
+    // one copy, straight into the bytes object
+    let len = parts.iter().map(Vec::len).sum();
+    pyo3::types::PyBytes::new_with(py, len, |buf| {
+        let mut at = 0;
+        for p in &parts {
+            buf[at..at + p.len()].copy_from_slice(p);
+            at += p.len();
+        }
+        Ok(())
+    })
 }
 
 /// The instruction set new trackers' hot loops run on: `"avx2"`, `"sse2"` or
