@@ -110,7 +110,8 @@ class LiveOptions:
 
     ``source``: None (the field log's frames), a camera index (``"0"``), a video
     file or a stream URL. ``realtime``: pace a file at ``fps`` (its own rate, or
-    the field log's, else 30) and drop frames not taken within ``buffer`` frames.
+    the field log's, else 30) and drop frames not taken within ``buffer`` frames
+    (a capture thread's queue, one second at 30 fps).
     ``recover``: frames back above the mid-level that end a pixel's dip.
     ``stop_when_complete``: end when the sweep is over (default: for cameras and
     streams only; a file is read to its end). ``max_frames``: a camera's or
@@ -121,7 +122,7 @@ class LiveOptions:
     source: str | None = None
     realtime: bool = False
     fps: float | None = None
-    buffer: int = 4
+    buffer: int = 30
     recover: int = 3
     stop_when_complete: bool | None = None
     max_frames: int = 100000
@@ -235,7 +236,7 @@ class LiveFrames:
     complete) ends the stream after the current frame.
     """
 
-    def __init__(self, inner: FrameSource, fps: float | None = None, buffer: int = 4):
+    def __init__(self, inner: FrameSource, fps: float | None = None, buffer: int = 30):
         self.inner = inner
         self.fps = fps
         self.buffer = max(int(buffer), 1)
@@ -244,6 +245,13 @@ class LiveFrames:
         self.stopped_early = False
         self._stop = threading.Event()
         self._queue: queue.Queue[object] | None = None
+        self.start: float | None = None  # when the first frame arrived (paced)
+
+    def arriving(self) -> int | None:
+        """The capture frame a camera would be delivering now (paced sources), else None."""
+        if self.fps is None or self.start is None:
+            return None
+        return int((time.perf_counter() - self.start) * self.fps)
 
     def backlog(self) -> int:
         """Frames taken from the source and waiting (0 unless paced)."""
@@ -309,7 +317,7 @@ class LiveFrames:
                         break
                     now = time.perf_counter()
                     if start is None:
-                        start = now
+                        start = self.start = now
                     due = start + k * period
                     if now < due:
                         time.sleep(due - now)
@@ -356,7 +364,9 @@ class LiveStats:
 
     ``logged_at`` (H, W) int32: capture frame at which each pixel's live point was
     logged (−1 = none); ``finished_at`` (H, W) int32: capture frame at which the
-    watch finished it (−1 = never); ``step_s``, ``step_cpu_s``: wall-clock and
+    watch finished it (−1 = never); ``logged_wall`` (H, W) int32: with a paced
+    source, the frame the camera was delivering when the point was logged (the
+    wall-clock view of the latency; −1 = none); ``step_s``, ``step_cpu_s``: wall-clock and
     CPU seconds (this thread) of live work per frame.
     """
 
@@ -366,6 +376,7 @@ class LiveStats:
     points_logged: int = 0
     logged_at: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.int32))
     finished_at: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.int32))
+    logged_wall: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.int32))
     step_s: list[float] = field(default_factory=list)
     step_cpu_s: list[float] = field(default_factory=list)
     fps: float | None = None
@@ -562,7 +573,8 @@ class LiveView:
         self.finished = 0
         self.idle = 0
         self.stats = LiveStats(logged_at=np.full(self.shape, -1, dtype=np.int32),
-                               finished_at=np.full(self.shape, -1, dtype=np.int32))
+                               finished_at=np.full(self.shape, -1, dtype=np.int32),
+                               logged_wall=np.full(self.shape, -1, dtype=np.int32))
         self._chunk: dict[int, list[np.ndarray]] = {}
         self._sigma_scale: float | None = None
         self._last_lines_frame = -1
@@ -747,6 +759,9 @@ class LiveView:
         cam_pts = rays * (z / rays[:, 2])[:, None]
         world = self.setup.pose.camera_to_world(cam_pts.astype(np.float64)).astype(np.float32)
         self.stats.logged_at.flat[px] = capture_frame
+        arriving = self.frames.arriving()
+        if arriving is not None:
+            self.stats.logged_wall.flat[px] = max(arriving, capture_frame)
         self.stats.points_logged += int(px.size)
         rec = self.recorder
         if rec is None or not rec.enabled:
