@@ -3,8 +3,8 @@
 For a simulated desk_lamp capture (``gnomon simulate desk_lamp --out CAPTURE``,
 any size), this script
 
-1. encodes its frames as an H.264 video (PyAV, CRF 12, 30 fps) beside the
-   capture and writes ``field_log_video.toml`` pointing at it;
+1. encodes its frames as a 30 fps video beside the capture (Motion JPEG with
+   OpenCV, or H.264 CRF 12 with PyAV) and writes a field log pointing at it;
 2. runs ``gnomon scan`` on that field log (``gnomon.api.scan``);
 3. runs ``gnomon live`` on it (``gnomon.live.run_live``), with ``--realtime``
    pacing at the video's 30 fps unless ``--no-realtime``;
@@ -18,7 +18,7 @@ any size), this script
 
 Not a test: figures depend on the machine and its load. Usage::
 
-    PYTHONPATH=python python benchmarks/live_desk.py CAPTURE [--out DIR] [--no-realtime]
+    PYTHONPATH=python python benchmarks/live_desk.py CAPTURE [--codec mjpg|h264] [--out DIR] [--no-realtime]
 """
 
 from __future__ import annotations
@@ -35,17 +35,27 @@ import numpy as np
 FPS = 30
 
 
-def encode_video(capture: Path) -> Path:
-    import av
+def encode_video(capture: Path, codec: str) -> Path:
+    """The capture's frames as a 30 fps video: Motion JPEG (the format USB webcams deliver at 1080p)
+    with OpenCV, or H.264 (CRF 12) with PyAV."""
     import cv2
 
     frames = sorted((capture / "frames").glob("*.*"), key=lambda p: [int(t) if t.isdigit() else t
                                                                       for t in re.split(r"(\d+)", p.name)])
-    path = capture / "capture.mp4"
+    path = capture / ("capture_mjpg.avi" if codec == "mjpg" else "capture.mp4")
     if path.exists():
         return path
     first = cv2.imread(str(frames[0]), cv2.IMREAD_COLOR)
     h, w = first.shape[:2]
+    if codec == "mjpg":
+        vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), FPS, (w, h))
+        vw.set(cv2.VIDEOWRITER_PROP_QUALITY, 95)
+        for f in frames:
+            vw.write(cv2.imread(str(f), cv2.IMREAD_COLOR))
+        vw.release()
+        return path
+    import av
+
     out = av.open(str(path), "w")
     stream = out.add_stream("libx264", rate=FPS)
     stream.width, stream.height, stream.pix_fmt = w, h, "yuv420p"
@@ -63,7 +73,7 @@ def encode_video(capture: Path) -> Path:
 def video_field_log(capture: Path, video: Path) -> Path:
     text = (capture / "field_log.toml").read_text()
     text = re.sub(r'^frames = ".*"$', f'frames = "{video.name}"', text, count=1, flags=re.MULTILINE)
-    path = capture / "field_log_video.toml"
+    path = capture / f"field_log_{video.stem}.toml"
     path.write_text(text)
     return path
 
@@ -73,6 +83,7 @@ def main() -> None:
     ap.add_argument("capture", type=Path)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--no-realtime", action="store_true")
+    ap.add_argument("--codec", choices=("mjpg", "h264"), default="mjpg")
     args = ap.parse_args()
 
     import gnomon
@@ -81,7 +92,7 @@ def main() -> None:
 
     out = args.out or args.capture / "bench_live"
     shutil.rmtree(out, ignore_errors=True)
-    video = encode_video(args.capture)
+    video = encode_video(args.capture, args.codec)
     log = video_field_log(args.capture, video)
     truth = np.load(args.capture / "ground_truth.npz")
     distance = float(truth["camera_distance_mm"])
@@ -117,7 +128,7 @@ def main() -> None:
     report = json.loads((out / "live" / "report.json").read_text())
 
     summary = {
-        "image": list(depth_scan.shape[::-1]),
+        "image": list(depth_scan.shape[::-1]), "video": video.name,
         "frames": stats.frames, "dropped_frames": len(stats.dropped), "realtime_fps": stats.fps,
         "live_run_s": round(live_s, 1), "scan_run_s": round(scan_s, 1),
         "live_step_ms_median": report["tracking"]["live"]["live_step_ms_median"],

@@ -97,9 +97,9 @@ BAND_FRAMES = 2.0
 # A finished pixel whose planes have not come this many frames after its time gets no live point.
 GIVE_UP_FRAMES = 12
 # Frames the lines and points may wait while frames are queued behind a paced source.
-MAX_DEFER = 3
+MAX_DEFER = 8
 # Frames per entity of live points in the recording.
-POINT_CHUNK = 16
+POINT_CHUNK = 4
 # Longest side of the live shadow-time map in the recording (pixels).
 LIVE_MAP_SIZE = 480
 
@@ -518,6 +518,8 @@ class _EdgeState:
         self.lines = [_PlaneLines(r, capacity) for r in refs]
         self.planes = np.full((0, 4), np.nan)
         self.dirty: set[int] = set()
+        # finished reference-region pixels by the integer part of this edge's time
+        self.by_frame: dict[int, list[np.ndarray]] = {}
 
     def grow(self, n: int) -> None:
         for ln in self.lines:
@@ -561,7 +563,6 @@ class LiveView:
             region |= ref.mask.ravel()
         self.region = region
         self.plane_masks = [ref.mask.ravel() for ref in setup.planes]
-        self.recent: list[tuple[int, np.ndarray]] = []  # (tracker frame, finished region pixels)
         self.pending = np.zeros(0, dtype=np.int64)
         self.threshold = np.zeros(n_pixels, dtype=np.float32)
         self.contrast_lin = np.zeros(n_pixels, dtype=np.float32)
@@ -648,23 +649,25 @@ class LiveView:
         self.finished += len(idx)
         in_region = idx[self.region[idx]]
         if in_region.size:
-            self.recent.append((k, in_region))
             for e in self.edges:
                 te = e.times.flat[in_region]
-                te = te[np.isfinite(te)]
-                if te.size:
-                    first, last = int(np.floor(te.min())), int(np.ceil(te.max()))
-                    e.dirty.update(range(max(first, 0), last + 1))
-        keep_after = k - 2 * self.setup.tracker.max_width - self.recover - 8
-        self.recent = [(f, px) for f, px in self.recent if f >= keep_after]
+                finite = np.isfinite(te)
+                if not finite.any():
+                    continue
+                px, frame = in_region[finite], np.floor(te[finite]).astype(np.int64)
+                order = np.argsort(frame, kind="stable")
+                px, frame = px[order], frame[order]
+                cuts = np.flatnonzero(np.diff(frame)) + 1
+                for part, f in zip(np.split(px, cuts), frame[np.r_[0, cuts]], strict=True):
+                    e.by_frame.setdefault(int(f), []).append(part)
+                first, last = int(frame[0]), int(np.ceil(te[finite].max()))
+                e.dirty.update(range(max(first, 0), last + 1))
         self.pending = np.concatenate([self.pending, idx])
 
     def _measure_lines(self, k: int) -> None:
         """Lines of the dirty frames no later pixel can change any more, then every edge's planes."""
         n = k + 1
         ready_until = k - self.recover - LINE_MARGIN
-        candidates_all = (np.concatenate([px for _, px in self.recent]) if self.recent
-                          else np.zeros(0, dtype=np.int64))
         changed = False
         measured: dict[_EdgeState, np.ndarray] = {}
         for e in self.edges:
@@ -673,8 +676,12 @@ class LiveView:
             if not ready.size:
                 continue
             e.dirty.difference_update(ready.tolist())
+            # the region pixels whose time lies near the frames measured, from the edge's buckets
+            lo, hi = int(ready.min() - BAND_FRAMES) - 1, int(ready.max() + BAND_FRAMES) + 1
+            parts = [p for f in range(lo, hi + 1) for p in e.by_frame.get(f, ())]
+            near = np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
             for ln, members in zip(e.lines, self.plane_masks, strict=True):
-                ln.measure(e.times, ready, n, self.setup.camera, candidates_all[members[candidates_all]])
+                ln.measure(e.times, ready, n, self.setup.camera, near[members[near]])
             self._last_lines_frame = max(self._last_lines_frame, int(ready.max()))
             measured[e] = ready
             changed = True
@@ -710,7 +717,24 @@ class LiveView:
     def _triangulate(self, k: int, capture_frame: int) -> None:
         if not self.pending.size or not self.edges:
             return
-        px = self.pending
+        # only pixels whose every edge has its planes (or has given up waiting for them)
+        ready = np.ones(self.pending.size, dtype=bool)
+        for e in self.edges:
+            t = e.times.flat[self.pending]
+            n = len(e.planes)
+            if n == 0:
+                ready &= ~np.isfinite(t) | (np.ceil(t) + GIVE_UP_FRAMES <= k)
+                continue
+            with np.errstate(invalid="ignore"):
+                r0 = np.clip(np.nan_to_num(np.floor(t), nan=0).astype(np.int64), 0, n - 1)
+                r1 = np.clip(np.nan_to_num(np.ceil(t), nan=0).astype(np.int64), 0, n - 1)
+                inside = (t >= 0) & (np.ceil(t) < n)
+                have = inside & np.isfinite(e.planes[r0, 0]) & np.isfinite(e.planes[r1, 0])
+            ready &= ~np.isfinite(t) | have | (np.ceil(t) + GIVE_UP_FRAMES <= k)
+        if not ready.any():
+            return
+        px = self.pending[ready]
+        later = self.pending[~ready]
         rays = self.ray_map.reshape(-1, 3)[px][None, :, :]
         depths, sigmas, decided = [], [], np.ones(px.size, dtype=bool)
         for e in self.edges:
@@ -737,7 +761,7 @@ class LiveView:
         z, s = fused[0], fused_sigma[0]
         done = decided
         good = done & np.isfinite(z)
-        self.pending = px[~done]
+        self.pending = np.concatenate([later, px[~done]])
         if good.any():
             self._log_points(px[good], z[good], s[good], capture_frame)
 
@@ -817,13 +841,27 @@ def _live_track(view: LiveView) -> Callable[..., TrackedSequence]:
     """A drop-in for :func:`gnomon.tracking.track_source` that runs ``view`` on every frame."""
 
     def track(source: Any, settings: TrackerSettings, shape: tuple[int, int], **kwargs: Any) -> TrackedSequence:
-        tracked = track_source(source, settings, shape, on_update=view.on_update, **kwargs)
+        frames = view.frames
+        try:
+            tracked = track_source(source, settings, shape, on_update=view.on_update, **kwargs)
+        except FrameError as exc:
+            if frames.dropped:
+                raise FrameError(f"{exc} ({_dropped_note(frames)})") from None
+            raise
+        if len(frames.dropped) > frames.delivered:
+            raise FrameError(_dropped_note(frames))
         view.stats.frames = len(view.used)
-        view.stats.dropped = list(view.frames.dropped)
+        view.stats.dropped = list(frames.dropped)
         tracked.info = {**tracked.info, "live": view.stats.summary()}
         return tracked
 
     return track
+
+
+def _dropped_note(frames: LiveFrames) -> str:
+    total = frames.delivered + len(frames.dropped)
+    return (f"{frames.name}: {len(frames.dropped)} of {total} frames dropped: this machine did not keep up "
+            f"with {frames.fps:g} fps (decoding and tracking); run without --realtime, or at a lower --fps")
 
 
 class _StopOnInterrupt:
