@@ -732,6 +732,7 @@ def test_recording_streamed_to_a_viewer_is_written_by_gnomon(tmp_path: Path, vie
         if server is not None:
             server.kill()
             server.wait(timeout=30)
+            server.stdout.close()  # (a pipe left open is a ResourceWarning, an error in this test run)
 
 
 def _marker_log(capture: Path, name: str, edit_markers) -> Path:
