@@ -629,15 +629,17 @@ def load_field_log(path: str | Path) -> FieldLog:
     root = _Table(p, "field log", toml_io.load(p))
     base = p.resolve().parent
 
-    def section(name: str, required: bool = True) -> _Table | None:
-        if name not in root.data:
-            if required:
-                raise FieldLogError(f"{p}: missing required table [{name}]")
-            return None
-        return _Table(p, name, root.data.pop(name))
+    def optional_section(name: str) -> _Table | None:
+        return _Table(p, name, root.data.pop(name)) if name in root.data else None
 
-    capture = _parse_capture(section("capture"), base)  # type: ignore[arg-type]
-    camera, pose, camera_file, calibration = _parse_camera(section("camera"), base)  # type: ignore[arg-type]
+    def section(name: str) -> _Table:
+        table = optional_section(name)
+        if table is None:
+            raise FieldLogError(f"{p}: missing required table [{name}]")
+        return table
+
+    capture = _parse_capture(section("capture"), base)
+    camera, pose, camera_file, calibration = _parse_camera(section("camera"), base)
     camera, calibration = _fit_camera(camera, calibration, capture, f"{p}: [camera]")
     raw_planes = root.data.pop("planes", None)
     if not isinstance(raw_planes, list) or not raw_planes:
@@ -645,12 +647,12 @@ def load_field_log(path: str | Path) -> FieldLog:
     planes = tuple(
         _parse_plane(_Table(p, f"planes.{i}", d), i, camera.width, camera.height) for i, d in enumerate(raw_planes)
     )
-    light = _parse_light(section("light"), base)  # type: ignore[arg-type]
-    scan = _parse_scan(section("scan", required=False))
-    site = _parse_site(section("site", required=False))
-    pole = _parse_pole(section("pole", required=False))
-    gnomon = _parse_gnomon(section("gnomon", required=False))
-    output = _parse_output(section("output", required=False), planes)
+    light = _parse_light(section("light"), base)
+    scan = _parse_scan(optional_section("scan"))
+    site = _parse_site(optional_section("site"))
+    pole = _parse_pole(optional_section("pole"))
+    gnomon = _parse_gnomon(optional_section("gnomon"))
+    output = _parse_output(optional_section("output"), planes)
     if light.kind == "sun":
         if site is None:
             raise FieldLogError(f"{p}: [light] kind 'sun' needs a [site] table (latitude, longitude, ...)")

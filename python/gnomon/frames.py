@@ -26,6 +26,7 @@ import threading
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
@@ -349,7 +350,7 @@ class FrameSource:
                     return
                 if isinstance(item, BaseException):
                     raise item
-                yield item  # type: ignore[misc]
+                yield cast(Frame, item)  # the queue holds frames, an exception or _DONE
         finally:
             stop.set()
             worker.join(timeout=5)

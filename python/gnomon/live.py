@@ -917,6 +917,7 @@ def run_live(field_log: str | Path, out_dir: str | Path, options: LiveOptions | 
                             map_stride=opts.map_stride, update_every=opts.update_every)
             view.stats.fps = fps
             with _StopOnInterrupt(frames, view.stats):
+                # LiveFrames stands in for a FrameSource by duck typing (no Protocol of the two yet).
                 result = scan(setup, frames, recorder, progress=opts.progress,  # type: ignore[arg-type]
                               frame_stride=opts.frame_stride, track=_live_track(view))
             write_scan(staging, result, started)

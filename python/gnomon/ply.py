@@ -273,7 +273,7 @@ def _parse_header(raw: bytes, where: str) -> tuple[str, list[str], list[_Element
 def _read_binary_element(buf: memoryview, pos: int, el: _Element, endian: str, where: str):
     """Return ({prop: array}, new_pos) for one element of a binary PLY body."""
     if not any(isinstance(t, tuple) for _, t in el.props):
-        dt = np.dtype([(n, endian + t) for n, t in el.props])  # type: ignore[operator]
+        dt = np.dtype([(n, endian + t) for n, t in el.props if isinstance(t, str)])  # (all are, checked above)
         nbytes = dt.itemsize * el.count
         if pos + nbytes > len(buf):
             raise GnomonError(f"{where}: truncated PLY body in element {el.name!r}")
