@@ -436,7 +436,6 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     to the same index for position, texture and normal (``f a/a/a``).
     Only official OBJ statements are used (no per-vertex colours).
     """
-    from gnomon import atomic
 
     target = Path(path)
     v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
@@ -525,7 +524,6 @@ def write_stl(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     STL has no units: the coordinates are the world units (say which in
     ``header``, at most 80 ASCII characters; it must not start with ``solid``).
     """
-    from gnomon import atomic
 
     v = np.asarray(vertices, dtype=np.float32).reshape(-1, 3)
     f = np.asarray(faces, dtype=np.intp).reshape(-1, 3)
