@@ -276,3 +276,29 @@ def test_share_of_the_sun_a_pole_hides() -> None:
     # in between it falls monotonically
     f = occluded_fraction(r, np.linspace(umbra, 10 * umbra, 50))
     assert np.all(np.diff(f) < 0) and 0 < f[-1] < 1
+
+
+@pytest.mark.slow
+def test_contrast_floor_from_the_noise_unless_given(tmp_path: Path) -> None:
+    import tomllib
+
+    from gnomon import toml_io
+    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.validity import MIN_CONTRAST_SIGMAS
+
+    log = write_tiny_capture(tmp_path / "capture")
+    rng = np.random.default_rng(4)
+    # σ = 2 DN of noise on every frame; the band's dip is 160 DN
+    _refill_frames(tmp_path / "capture",
+                   lambda i, im: np.clip(im + rng.normal(0, 2.0, im.shape), 0, 255).astype(np.uint8))
+    given = run_scan(log, tmp_path / "s20", ScanOptions(progress=False, rrd=False)).report["settings"]
+    assert given["min_contrast_dn"] == 20 and given["min_contrast_from"] == "field log"
+    data = tomllib.loads(log.read_text())
+    del data["scan"]["min_contrast"]
+    toml_io.dump(data, log)
+    result = run_scan(log, tmp_path / "snoise", ScanOptions(progress=False, rrd=False))
+    s, noise = result.report["settings"], result.report["noise"]["image_noise_dn"]
+    assert s["min_contrast_from"] == "image noise"
+    assert noise == pytest.approx(np.sqrt(4 + 1 / 12), rel=0.15)
+    assert s["min_contrast_dn"] == pytest.approx(MIN_CONTRAST_SIGMAS * noise)
+    assert result.report["coverage"]["points"] > 0.5 * 48 * 36

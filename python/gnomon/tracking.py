@@ -436,10 +436,12 @@ def track_source(
             if first is None:
                 _check_first(frame, shape, where)
                 first, tracker = frame, ShadowTracker(settings, shape, frame.grey.dtype, crop)
-            if previous is not None and len(noise) < NOISE_PAIRS:
-                # before any illumination drift has accumulated
-                noise.append(pool.submit(image_noise_dn, previous, frame.grey))
-            previous = frame.grey
+            if skip is None or not skip[frame.index]:
+                if previous is not None and len(noise) < NOISE_PAIRS:
+                    # the first frames the tracker sees (not the night's, clipped at black), before any
+                    # illumination drift has accumulated
+                    noise.append(pool.submit(image_noise_dn, previous, frame.grey))
+                previous = frame.grey
             if on_frame is not None:
                 on_frame(frame)
             bar.update(frame.index + 1)

@@ -62,7 +62,8 @@ markers = [
 kind = "two-plane"  # the shadow planes from the lines on the two planes; or "lamp" with position = [x, y, z]
 
 [scan]
-min_contrast = 20  # DN: pixels whose lit and shadowed values differ less are left out
+# min_contrast = 20  # DN: pixels whose lit and shadowed values differ less are left out
+                    # (without it: 8 σ of the image noise measured between the first frames)
 edge = "both"  # triangulate the entering and the leaving shadow edge and fuse them
 '''
 
