@@ -44,6 +44,7 @@ from gnomon.shadow_planes import sun_shadow_planes
 from gnomon.sun import Site, enu_to_world, sun_direction_enu, sun_position
 from gnomon.timestamps import interpolate_times
 from gnomon.tracking import ShadowTimes
+from gnomon.uncertainty import MIN_FRAMES_PER_TRANSITION
 from gnomon.validity import (
     contrast_like_neighbours,
     event_order,
@@ -313,10 +314,13 @@ class SunWithPole(SunLight):
                 too_deep = relative_depth - DEPTH_SIGMAS * sigma > check.occlusion
             rejected["dip_deeper_than_the_pole_makes_there"] = int((had & sound & too_deep).sum())
             sound &= ~too_deep
+        deep = contrast_like_neighbours(times.contrast, sound)
         if relative_depth is not None:
-            deep = fully_lit_like_neighbours(relative_depth, check.occlusion, sound)
-        else:
-            deep = contrast_like_neighbours(times.contrast, sound)
+            # Where the shadow lasts MIN_FRAMES_PER_TRANSITION frames or more, the darkest sample sees
+            # its full depth and the half-disc test applies; a shorter dip is sampled at a random
+            # phase (its darkest sample may sit on a flank), and only the loose contrast test does.
+            resolved = sound & (check.predicted_frames >= MIN_FRAMES_PER_TRANSITION)
+            deep = np.where(resolved, fully_lit_like_neighbours(relative_depth, check.occlusion, resolved), deep)
         rejected["dip_shallower_than_its_neighbours"] = int((had & sound & ~deep).sum())
         sound &= deep
         notes = []
