@@ -710,7 +710,9 @@ def run_case(case: Case, env: dict) -> Outcome:
             return Outcome(case, "silent", "accepted (exit 0)", secs)
         return Outcome(case, "other", f"exit {rc}: {' | '.join(lines[-3:])}", secs)
     if case.expect == "signal":
-        if rc is not None and rc > 128 and len(lines) <= 1:
+        # exit 128+n from gnomon, or killed by the signal itself before Python could handle it (start-up)
+        by_signal = rc is not None and case.send is not None and rc == -case.send[1]
+        if rc is not None and (rc > 128 or by_signal) and len(lines) <= 1:
             return Outcome(case, "one line", f"exit {rc}: {lines[0] if lines else '(quiet)'}", secs)
         if rc == 0:
             return Outcome(case, "other", "finished before the signal", secs)

@@ -17,18 +17,31 @@ Errors in the input raise :class:`GnomonError`.
 """
 
 import importlib as _importlib
+from typing import TYPE_CHECKING
 
 # The version's one home is Cargo.toml ([workspace.package] version): the
 # compiled kernel carries it, and maturin writes it into the package metadata.
 from gnomon._kernel import __version__
-from gnomon.api import Scan, ScanMesh, load_scan, scan
 from gnomon.errors import GnomonError
+
+if TYPE_CHECKING:
+    from gnomon.api import Scan, ScanMesh, load_scan, scan
 
 __all__ = ["__version__", "GnomonError", "Scan", "ScanMesh", "load_scan", "scan", "simulate"]
 
+# The API is imported on first use: `python -m gnomon` imports this package before its
+# __main__ can catch a Ctrl-C, so the package itself loads nothing heavy (numpy, OpenCV).
+_API = ("Scan", "ScanMesh", "load_scan", "scan")
+
 
 def __getattr__(name: str):
-    # gnomon.simulate: the simulator package, also callable as gnomon.api.simulate (imported on first use)
+    if name in _API:
+        return getattr(_importlib.import_module("gnomon.api"), name)
+    # gnomon.simulate: the simulator package, also callable as gnomon.api.simulate
     if name == "simulate":
         return _importlib.import_module("gnomon.simulate")
     raise AttributeError(f"module 'gnomon' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

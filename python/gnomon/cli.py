@@ -47,6 +47,15 @@ def _raise_terminated(signum: int, frame) -> None:
     raise Terminated(signum)
 
 
+_interrupted = False  # a SIGINT arrived during this run (numpy may turn it into an ImportError)
+
+
+def _raise_interrupted(signum: int, frame) -> None:
+    global _interrupted
+    _interrupted = True
+    raise KeyboardInterrupt
+
+
 def version_text() -> str:
     """``gnomon X.Y.Z (kernel X.Y.Z, SIMD avx2)``: the version and the instruction set
     the kernel's hot loops run on here (chosen at run time; see ``gnomon bench``)."""
@@ -72,6 +81,8 @@ def _install_signal_handlers() -> dict:
     try:
         for sig in (signal.SIGTERM, signal.SIGHUP):
             previous[sig] = signal.signal(sig, _raise_terminated)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, _raise_interrupted)
         if hasattr(signal, "SIGXFSZ"):
             previous[signal.SIGXFSZ] = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     except ValueError:  # not the main thread (an embedding application): leave signals alone
@@ -135,7 +146,8 @@ def main(argv: list[str] | None = None) -> int:
         _stdout_closed()
         return 128 + getattr(signal, "SIGPIPE", 13)
     except ImportError as exc:
-        if not _caused_by_interrupt(exc):  # numpy turns a Ctrl-C during its import into an ImportError
+        # numpy turns a Ctrl-C during its import into an ImportError (not always chained to it)
+        if not (_interrupted or _caused_by_interrupt(exc)):
             raise
         print("gnomon: interrupted", file=sys.stderr)
         return 130
