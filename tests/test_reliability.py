@@ -405,13 +405,13 @@ def run_cli(*args: str, **kw) -> subprocess.CompletedProcess:
 
 def test_broken_pipe_is_quiet() -> None:
     """`gnomon sun ... | head -1`: no traceback when the reader goes away."""
-    p = subprocess.Popen([sys.executable, "-m", "gnomon", "sun", "--lat", "47", "--lon", "8",
-                          *sum((["--time", f"2026-06-01T{h:02d}:00Z"] for h in range(6, 18)), [])],
-                         env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    p.stdout.readline()
-    p.stdout.close()
-    err = p.stderr.read().decode()
-    p.wait(timeout=60)
+    with subprocess.Popen([sys.executable, "-m", "gnomon", "sun", "--lat", "47", "--lon", "8",
+                           *sum((["--time", f"2026-06-01T{h:02d}:00Z"] for h in range(6, 18)), [])],
+                          env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE) as p:
+        p.stdout.readline()
+        p.stdout.close()
+        err = p.stderr.read().decode()
+        p.wait(timeout=60)
     assert "Traceback" not in err and err.strip() == "", err
 
 
