@@ -42,6 +42,7 @@ from gnomon.preview import coverage_map, write_preview
 from gnomon.publish import OUTPUT_FILES, staged_outputs
 from gnomon.recording import ScanRecording, playable_video
 from gnomon.reference_lines import ReferenceLines
+from gnomon.retiming import retime_between_isochrones
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
 from gnomon.texture import LitColour, sample_indices
 from gnomon.tracking import ShadowTimes, TrackedSequence, track_source
@@ -65,6 +66,10 @@ from gnomon.validity import (
 MIN_PLANE_SHARE_ERROR = 0.2
 MIN_PLANE_SHARE_WARN = 0.5
 MAX_PLANE_GAP = 3.0
+# An edge is re-timed between its isochrones when more than this share of its timed pixels is
+# under-sampled (a fast sweep: the tracker's temporal interpolation gives a staircase). On the
+# simulated captures, whose sweeps are slower, re-timing the few fast pixels is not better.
+RETIME_UNDERSAMPLED_SHARE = 0.5
 
 __all__ = ["OUTPUT_FILES", "EdgeResult", "ScanOptions", "ScanResult", "Surface", "build_surface", "reconstruct",
            "run_scan", "scan", "staged_outputs", "write_scan", "write_surface"]
@@ -175,10 +180,23 @@ def _pixel_time_sigma(slope: np.ndarray, tracked: TrackedSequence) -> np.ndarray
     return np.hypot(sigma_t_noise, interpolation_time_sigma(contrast_lin, slope))
 
 
+def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: TrackedSequence) -> EdgeTimes:
+    """One edge's times and σ; a fast sweep's (most pixels crossed within two frames) re-timed between
+    the isochrones (:mod:`gnomon.retiming`), each re-timed σ from the σ of the pixels its crossings
+    were interpolated between."""
+    sigma = _pixel_time_sigma(slope, tracked)
+    lut, t = tracked.lut, tracked.times
+    fast = undersampled(slope, lut[_dn_index(t.imax, lut)], lut[_dn_index(t.imin, lut)])
+    timed = np.isfinite(times)
+    if timed.any() and fast[timed].mean() > RETIME_UNDERSAMPLED_SHARE:
+        retimed = retime_between_isochrones(times, tracked.n_frames)
+        return EdgeTimes(name, retimed.times, slope, retimed.sigma(sigma))
+    return EdgeTimes(name, times, slope, sigma)
+
+
 def _edge_times(tracked: TrackedSequence) -> tuple[EdgeTimes, EdgeTimes]:
     t = tracked.times
-    return (EdgeTimes("enter", t.enter, t.enter_slope, _pixel_time_sigma(t.enter_slope, tracked)),
-            EdgeTimes("leave", t.leave, t.leave_slope, _pixel_time_sigma(t.leave_slope, tracked)))
+    return (_edge_time("enter", t.enter, t.enter_slope, tracked), _edge_time("leave", t.leave, t.leave_slope, tracked))
 
 
 def _with_typical_sigma(depth: np.ndarray, sigma: np.ndarray) -> np.ndarray:

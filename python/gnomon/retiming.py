@@ -1,0 +1,210 @@
+"""Shadow times between the isochrones: a fast sweep's times from where the edge was, not from how dark it got.
+
+A pixel's shadow time is interpolated linearly between the two frames whose
+samples bracket the threshold (:mod:`gnomon.tracking`). That is exact while
+the edge's penumbra spans a frame's motion or more. When the shadow moves
+several pixels per frame (a hand-swept stick filmed at a few frames per
+second: most pixels of the CMU frog capture are crossed within one frame), a
+pixel is fully lit in frame ``k`` and fully dark in ``k + 1``, so every pixel
+between the edge's positions at frames ``k`` and ``k + 1`` gets the same time
+``≈ k + 0.5``: the time map is a staircase, and the points triangulated from
+it a saw-tooth around the surface (on the frog's desk, ±3 mm).
+
+The edge's *positions* are still measured well: where the time map crosses
+the integer frame ``k`` is where the pixel's penumbra straddles the
+threshold in frame ``k``, to a fraction of a pixel (the reference lines are
+measured there, :mod:`gnomon.reference_lines`). Between the crossings of
+``k`` and ``k + 1`` the edge moved at a steady pace over a smooth surface,
+so the pixel's time is the fraction of that distance it lies along:
+
+    t = k + (u − u_k) / (u_{k+1} − u_k)
+
+along the sweep's axis (rows or columns, whichever the times change fastest
+along). The crossings are taken within *runs*: consecutive pixels of one row
+(or column) whose times never go back against the sweep by more than
+``BACKSTEP`` frames (a depth edge, a missing time or a wrong one ends a run),
+where each integer frame is crossed once. A pixel keeps its own time when a bracketing crossing is
+missing in its run, or when they are more than ``max_gap`` pixels apart, or
+less than ``MIN_GAP_PX`` (a slow sweep, which the tracker times well).
+The map's integer isochrones are unchanged (it passes through the same
+crossings), so the reference lines, and the shadow planes, are the same.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["MAX_GAP_PX", "RetimedTimes", "retime_between_isochrones"]
+
+# Crossings of consecutive frames farther apart than this (pixels) are not interpolated between.
+MAX_GAP_PX = 40.0
+# Nor closer than this: an edge that moved less than three pixels in a frame is sampled finely enough
+# in time (its penumbra spans the step) for the tracker's own interpolation.
+MIN_GAP_PX = 3.0
+# A run tolerates times going back by this much (frames): the noise of a staircase's plateau.
+BACKSTEP = 0.25
+
+
+def _sweep_axis(times: np.ndarray) -> tuple[bool, float]:
+    """(along rows?, sense) of the sweep: the axis where neighbouring times differ most, and its sign."""
+    steps = []
+    for axis in (1, 0):
+        d = np.diff(times, axis=axis) if times.shape[axis] > 1 else np.zeros(0)
+        d = d[np.isfinite(d) & (d != 0)]
+        steps.append(float(np.median(d)) if d.size else 0.0)
+    along_rows = not abs(steps[1]) > abs(steps[0])
+    return along_rows, float(np.sign(steps[0] if along_rows else steps[1]))
+
+
+@dataclass(frozen=True)
+class RetimedTimes:
+    """A re-timed shadow-time map and what its times were made of.
+
+    ``times`` (H, W) float32 frames (NaN = none); ``retimed`` (H, W) bool the
+    pixels whose time comes from the crossings around them (the others kept
+    the tracker's). For each re-timed pixel (``pixel``, flat indices), the two
+    crossings it lies between: the pixels each crossing was interpolated
+    between (``left``, ``right``: (P, 2) flat indices, crossing of ``⌊t⌋``
+    then of ``⌊t⌋ + 1``), where between them (``phase`` (P, 2), 0 at the
+    left pixel) and how fast the time rises there (``rise`` (P, 2), frames
+    per pixel); the crossings' distance ``gap`` (P,) pixels and the pixel's
+    fraction ``f`` (P,) of it.
+    """
+
+    times: np.ndarray
+    retimed: np.ndarray
+    pixel: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    phase: np.ndarray
+    rise: np.ndarray
+    gap: np.ndarray
+    f: np.ndarray
+
+    def sigma(self, sigma_t: np.ndarray) -> np.ndarray:
+        """Each pixel's time σ (frames) given the tracker's σ of every pixel's own time (H, W).
+
+        A crossing at phase φ between pixels a and b whose times rise by g per
+        pixel is off by ``((1 − φ) σa + φ σb) / g`` pixels (neighbours' errors
+        taken as fully correlated: the sampling phase, which dominates, is
+        nearly the same for adjacent pixels); the
+        re-timed ``t = ⌊t⌋ + (u − u₀)/(u₁ − u₀)`` is off by ``(1 − f)/D`` and
+        ``f/D`` of the two crossings' errors (D the gap), added linearly too:
+        where the sweep is steady the crossings of consecutive frames fall at
+        the same sampling phase, so their errors are alike (on the simulated
+        two-plane capture, adding them in quadrature under-predicts the error
+        by 1.7×); and, in quadrature, a crossing whose penumbra is narrower
+        than a pixel (the time rises by g > 1 frame per pixel there) is known
+        only to ``(1 − 1/g)/√12`` px. Pixels not re-timed keep
+        their own σ.
+        """
+        out = np.asarray(sigma_t, dtype=np.float64).copy()
+        if self.pixel.size == 0:
+            return out.astype(np.float32)
+        flat = out.ravel()
+        sa, sb = flat[self.left], flat[self.right]
+        su = ((1.0 - self.phase) * sa + self.phase * sb) / self.rise  # (P, 2) px
+        weights = np.stack([1.0 - self.f, self.f], axis=1) / self.gap[:, None]
+        # A penumbra narrower than a pixel (the time rises by g > 1 frame per pixel across it) is
+        # located only within its pixel: uniform over the part 1 − 1/g it does not span, independent
+        # between the two crossings.
+        blind = np.clip(1.0 - 1.0 / self.rise, 0.0, 1.0) / np.sqrt(12.0)  # (P, 2) px
+        quantised = np.sqrt(np.sum((weights * blind) ** 2, axis=1))
+        new = np.hypot(np.sum(weights * su, axis=1), quantised)
+        flat = flat.copy()
+        flat[self.pixel] = new
+        return flat.reshape(out.shape).astype(np.float32)
+
+
+def retime_between_isochrones(times: np.ndarray, n_frames: int, max_gap: float = MAX_GAP_PX,
+                              where: np.ndarray | None = None) -> RetimedTimes:
+    """The shadow-time map (H, W, frames, NaN = none) re-timed between its integer isochrones (see the module).
+
+    ``where`` (H, W) bool: re-time only these pixels (e.g. the under-sampled
+    ones, :func:`gnomon.uncertainty.undersampled`: where the edge is sampled
+    by two frames or more, the tracker's own time is already right); the
+    crossings are still taken from every pixel.
+    """
+    t = np.asarray(times, dtype=np.float64)
+    empty = np.zeros(0, dtype=np.int64)
+
+    def unchanged() -> RetimedTimes:
+        z2 = np.zeros((0, 2))
+        return RetimedTimes(t.astype(np.float32), np.zeros(t.shape, dtype=bool), empty, z2.astype(np.int64),
+                            z2.astype(np.int64), z2, z2, np.zeros(0), np.zeros(0))
+
+    if t.ndim != 2 or t.size == 0:
+        return unchanged()
+    along_rows, sense = _sweep_axis(t)
+    if sense == 0:
+        return unchanged()
+    # Work along rows, with times increasing to the right; ``index`` keeps each pixel's flat index in the image.
+    index = np.arange(t.size).reshape(t.shape)
+    m, index = (t, index) if along_rows else (t.T, index.T)
+    if sense < 0:
+        m, index = m[:, ::-1], index[:, ::-1]
+    h, w = m.shape
+    if w < 2:
+        return unchanged()
+    a, b = m[:, :-1], m[:, 1:]
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(a) & np.isfinite(b) & (b >= a - BACKSTEP)
+    # Run ids: a new run at each row start and after each pair that is not ok.
+    start = np.ones((h, w), dtype=np.int64)
+    start[:, 1:] = ~ok
+    run = np.cumsum(start.ravel()).reshape(h, w)
+    # Crossings: pair (j, j+1) of a run owns the integer frames k with a < k ≤ b, at u = j + (k − a)/(b − a).
+    rise = ok & (b > a)
+    lo = np.where(rise, np.floor(a) + 1, 0).astype(np.int64)
+    hi = np.where(rise, np.floor(b), -1).astype(np.int64)
+    count = np.where(rise, np.maximum(hi - lo + 1, 0), 0)
+    rows, cols = np.nonzero(count)
+    if rows.size == 0:
+        return unchanged()
+    reps = count[rows, cols]
+    rows, cols = np.repeat(rows, reps), np.repeat(cols, reps)
+    k = lo[rows, cols] + (np.arange(reps.sum()) - np.repeat(np.cumsum(reps) - reps, reps))
+    ta, tb = a[rows, cols], b[rows, cols]
+    phase = (k - ta) / (tb - ta)
+    u = cols + phase
+    stride = n_frames + 2
+    key = run[rows, cols] * stride + np.clip(k, -1, n_frames) + 1
+    order = np.argsort(key, kind="stable")
+    key, u, phase = key[order], u[order], phase[order]
+    c_left, c_right, c_rise = index[rows, cols][order], index[rows, cols + 1][order], (tb - ta)[order]
+    # Every finite pixel that is not on an integer frame: look up its run's crossings of ⌊t⌋ and ⌊t⌋ + 1.
+    wanted = np.isfinite(m)
+    if where is not None:
+        wm = np.asarray(where, dtype=bool)
+        wm = wm if along_rows else wm.T
+        wanted &= wm[:, ::-1] if sense < 0 else wm
+    pr, pc = np.nonzero(wanted)
+    tp = m[pr, pc]
+    kf = np.floor(tp)
+    inner = tp > kf
+    pr, pc, kf = pr[inner], pc[inner], kf[inner].astype(np.int64)
+    rid = run[pr, pc]
+    k0 = rid * stride + np.clip(kf, -1, n_frames) + 1
+    k1 = rid * stride + np.clip(kf + 1, -1, n_frames) + 1
+    i0 = np.clip(np.searchsorted(key, k0), 0, len(key) - 1)
+    i1 = np.clip(np.searchsorted(key, k1), 0, len(key) - 1)
+    have = (key[i0] == k0) & (key[i1] == k1)
+    u0, u1 = u[i0], u[i1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        frac = (pc - u0) / (u1 - u0)
+        good = have & (u1 - u0 >= MIN_GAP_PX) & (u1 - u0 <= max_gap) & (frac >= 0) & (frac <= 1)
+    new = m.astype(np.float32, copy=True)
+    new[pr[good], pc[good]] = (kf[good] + frac[good]).astype(np.float32)
+    done = np.zeros(m.shape, dtype=bool)
+    done[pr[good], pc[good]] = True
+    if sense < 0:
+        new, done = new[:, ::-1], done[:, ::-1]
+    if not along_rows:
+        new, done = new.T, done.T
+    j0, j1 = i0[good], i1[good]
+    return RetimedTimes(np.ascontiguousarray(new), np.ascontiguousarray(done), index[pr[good], pc[good]],
+                        np.stack([c_left[j0], c_left[j1]], axis=1), np.stack([c_right[j0], c_right[j1]], axis=1),
+                        np.stack([phase[j0], phase[j1]], axis=1), np.stack([c_rise[j0], c_rise[j1]], axis=1),
+                        (u1 - u0)[good], frac[good])
