@@ -48,6 +48,8 @@ class CaptureScore:
     object_swept_points: int = 0
     false_points: int = 0
     all_points: int = 0
+    # of false_points, those on other real objects the benchmark outlines (not the scanned object)
+    false_on_others: int = 0
     notes: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
@@ -64,6 +66,11 @@ class CaptureScore:
         what = "outside the object" if self.object_pixels else "object included: no outline"
         out.append(f"  points off both planes by > 5 mm ({what}) "
                    f"{100 * self.false_points / max(self.all_points, 1):.2f} % of {self.all_points}")
+        if self.false_on_others:
+            rest = self.false_points - self.false_on_others
+            out.append(f"    of which on the other real objects outlined (boxes): "
+                       f"{100 * self.false_on_others / max(self.all_points, 1):.2f} %; elsewhere "
+                       f"{100 * rest / max(self.all_points, 1):.2f} %")
         out.extend(f"  note: {n}" for n in self.notes)
         return out
 
@@ -83,13 +90,16 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
                extents: dict[str, tuple[float, float, float, float]] | None,
                object_outline: list | None = None, shadow_outlines: list | None = None,
                keep_out_px: int = 12, marker_keep_out_px: int = 40, false_mm: float = 5.0,
-               region_masks: dict[str, np.ndarray] | None = None) -> CaptureScore:
+               region_masks: dict[str, np.ndarray] | None = None,
+               other_outlines: list | None = None) -> CaptureScore:
     """Score one scan.
 
     ``extents``: per plane, (x0, x1, y0, y1) in the plane's own 2-D frame
     (world units) where it is bare paper; ``object_outline``: the object's
     outline (pixels) in the first frame; ``shadow_outlines``: its cast
-    shadows' outlines (pixels).
+    shadows' outlines (pixels); ``other_outlines``: other real surfaces in
+    view (boxes beside the planes): not bare, and their points are counted
+    apart among the points off both planes.
     """
     report = json.loads((scan_dir / "report.json").read_text())
     depth = np.load(scan_dir / "depth.npy")
@@ -120,6 +130,7 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
                     max(int(u) - marker_keep_out_px, 0):int(u) + marker_keep_out_px] = True
     obj = _polygon_mask((h, w), [object_outline], keep_out_px) if object_outline else np.zeros((h, w), bool)
     shadow = _polygon_mask((h, w), shadow_outlines or [], keep_out_px)
+    others = _polygon_mask((h, w), other_outlines or [], keep_out_px)
     swept = np.isfinite(shadow_time)
     has = np.isfinite(depth)
     result = CaptureScore(name, [])
@@ -135,7 +146,7 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
             x0, x1, y0, y1 = extents[pname]
             inside = (nearest == k) & np.isfinite(hits[pname]) & (local[..., 0] >= x0) & (local[..., 0] <= x1) \
                 & (local[..., 1] >= y0) & (local[..., 1] <= y1)
-        bare = inside & ~obj & ~shadow & ~markers
+        bare = inside & ~obj & ~shadow & ~markers & ~others
         d = (pts_cam - t) @ R[:, 2]  # signed distance to the markers' plane
         dist_any = np.minimum(dist_any, np.where(np.isfinite(d), np.abs(d), np.inf))
         sel = bare & swept & has
@@ -155,4 +166,5 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
         result.object_swept_points = int((tight & swept & has).sum())
     result.all_points = int(has.sum())
     result.false_points = int((has & ~obj & (dist_any > false_mm)).sum())
+    result.false_on_others = int((has & ~obj & others & (dist_any > false_mm)).sum())
     return result
