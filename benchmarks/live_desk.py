@@ -134,6 +134,9 @@ def main() -> None:
         "live_step_ms_median": report["tracking"]["live"]["live_step_ms_median"],
         "live_step_ms_p95": report["tracking"]["live"]["live_step_ms_p95"],
         "live_step_cpu_ms_median": report["tracking"]["live"]["live_step_cpu_ms_median"],
+        # the whole pass (decode, tracking, live work, recording), CPU of all threads, per frame
+        "pass_cpu_ms_per_frame": 1e3 * report["tracking"]["live"]["pass_cpu_s"] / max(stats.frames, 1),
+        "pass_wall_ms_per_frame": 1e3 * report["tracking"]["live"]["pass_wall_s"] / max(stats.frames, 1),
         "points_logged_live": stats.points_logged,
         "latency_frames_median": float(np.median(latency)) if latency.size else None,
         "latency_frames_p90": float(np.percentile(latency, 90)) if latency.size else None,

@@ -367,7 +367,9 @@ class LiveStats:
     watch finished it (−1 = never); ``logged_wall`` (H, W) int32: with a paced
     source, the frame the camera was delivering when the point was logged (the
     wall-clock view of the latency; −1 = none); ``step_s``, ``step_cpu_s``: wall-clock and
-    CPU seconds (this thread) of live work per frame.
+    CPU seconds (this thread) of live work per frame; ``pass_wall_s``,
+    ``pass_cpu_s``: the whole live pass (decoding, tracking, live work,
+    recording; CPU time of all threads).
     """
 
     frames: int = 0
@@ -379,6 +381,8 @@ class LiveStats:
     logged_wall: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.int32))
     step_s: list[float] = field(default_factory=list)
     step_cpu_s: list[float] = field(default_factory=list)
+    pass_wall_s: float = 0.0
+    pass_cpu_s: float = 0.0
     fps: float | None = None
 
     def summary(self) -> dict[str, Any]:
@@ -388,7 +392,8 @@ class LiveStats:
                 "stopped": self.stopped, "points_logged": self.points_logged, "realtime_fps": self.fps,
                 "live_step_ms_median": float(np.median(steps) * 1e3),
                 "live_step_ms_p95": float(np.percentile(steps, 95) * 1e3),
-                "live_step_cpu_ms_median": float(np.median(cpu) * 1e3)}
+                "live_step_cpu_ms_median": float(np.median(cpu) * 1e3),
+                "pass_wall_s": self.pass_wall_s, "pass_cpu_s": self.pass_cpu_s}
 
 
 class _PlaneLines:
@@ -842,6 +847,7 @@ def _live_track(view: LiveView) -> Callable[..., TrackedSequence]:
 
     def track(source: Any, settings: TrackerSettings, shape: tuple[int, int], **kwargs: Any) -> TrackedSequence:
         frames = view.frames
+        wall, cpu = time.perf_counter(), time.process_time()
         try:
             tracked = track_source(source, settings, shape, on_update=view.on_update, **kwargs)
         except FrameError as exc:
@@ -850,6 +856,8 @@ def _live_track(view: LiveView) -> Callable[..., TrackedSequence]:
             raise
         if len(frames.dropped) > frames.delivered:
             raise FrameError(_dropped_note(frames))
+        view.stats.pass_wall_s = time.perf_counter() - wall
+        view.stats.pass_cpu_s = time.process_time() - cpu
         view.stats.frames = len(view.used)
         view.stats.dropped = list(frames.dropped)
         tracked.info = {**tracked.info, "live": view.stats.summary()}
