@@ -135,3 +135,50 @@ def two_plane_shadow_planes(lines: list[ReferenceLines], min_angle_deg: float = 
         planes[t, :3] = normal
         planes[t, 3] = normal @ centre
     return _orient(planes), degenerate
+
+
+def complete_from_light(planes: np.ndarray, lines: list[ReferenceLines], point: np.ndarray,
+                        direction: np.ndarray | None,
+                        min_angle_deg: float = MIN_LAMP_LINE_ANGLE_DEG) -> tuple[np.ndarray, int]:
+    """Planes for the frames whose shadow crossed only one reference plane, from the light the others located.
+
+    Two-plane scans locate the light from the frames whose shadow crossed
+    both planes (:func:`gnomon.validity.light_point_or_line`): a point ``S``,
+    or, when every plane contained one direction (a stick moved parallel to
+    itself), the line through ``point`` along ``direction``. All shadow planes
+    of that light contain it, so a frame with a line on one plane only (the
+    shadow's start and end, where it is on the wall but not yet on the desk)
+    still has a plane: the one containing that line and the light — the
+    least-squares plane normal to the line's direction, to the direction
+    from the light to the line and (a line light) to the light's direction.
+    A frame is skipped when these do not fix a plane (the light within
+    ``min_angle_deg`` of the line's own axis). Returns the completed (N, 4)
+    planes (oriented) and the number of frames added.
+    """
+    out = planes.copy()
+    added = 0
+    sin_min = np.sin(np.radians(min_angle_deg))
+    for t in range(len(out)):
+        if np.isfinite(out[t, 0]):
+            continue
+        found = [ln for ln in lines if np.isfinite(ln.point[t, 0])]
+        if not found:
+            continue
+        best = max(found, key=lambda ln: ln.count[t])
+        p, d = best.point[t], best.direction[t]
+        to_line = p - point
+        if direction is not None:  # the light is a line: measure from its point nearest the shadow line
+            to_line = to_line - (to_line @ direction) * direction
+        if np.linalg.norm(to_line) == 0:
+            continue
+        rows = [d / np.linalg.norm(d), to_line / np.linalg.norm(to_line)]
+        if direction is not None:
+            rows.append(direction / np.linalg.norm(direction))
+        _, sv, vt = np.linalg.svd(np.array(rows))
+        if sv[1] < sin_min * sv[0]:
+            continue
+        normal = vt[-1]
+        out[t, :3] = normal
+        out[t, 3] = normal @ p
+        added += 1
+    return _orient(out), added

@@ -16,10 +16,13 @@ import numpy as np
 from gnomon.camera import Pose
 from gnomon.light.base import LightModel
 from gnomon.reference_lines import ReferenceLines
-from gnomon.shadow_planes import two_plane_shadow_planes
+from gnomon.shadow_planes import complete_from_light, two_plane_shadow_planes
 from gnomon.validity import MIN_LAMP_CONDITIONING, light_point_or_line
 
 __all__ = ["TwoPlaneLight"]
+
+# Two-plane frames needed before the light they locate completes the frames with one line.
+MIN_PLANES_FOR_LIGHT = 10
 
 
 class TwoPlaneLight(LightModel):
@@ -31,7 +34,12 @@ class TwoPlaneLight(LightModel):
         self.pose = pose
 
     def planes_from_lines(self, lines: list[ReferenceLines]) -> tuple[np.ndarray, int]:
-        return two_plane_shadow_planes(lines)
+        planes, degenerate = two_plane_shadow_planes(lines)
+        if np.isfinite(planes[:, 0]).sum() >= MIN_PLANES_FOR_LIGHT:
+            # Frames whose shadow crossed one plane only: their plane from the light the others located.
+            est = light_point_or_line(planes)
+            planes, _ = complete_from_light(planes, lines, est.point, est.direction)
+        return planes, degenerate
 
     def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:
         light: dict[str, Any] = {"kind": self.kind, "position": None}
