@@ -332,7 +332,8 @@ def gnomon_losses(cap: Path, ref_times: np.ndarray, groups: dict[str, np.ndarray
 
     result = scan(setup, source, track=track)
     tr, raw = captured["tracked"], captured["times"]
-    mc = setup.tracker.min_contrast
+    # the field log's min_contrast, or (none given) 8 σ of the image noise, as the scan resolves it
+    mc = setup.tracker.min_contrast if setup.tracker.min_contrast is not None else 8.0 * tr.noise_dn
     edges = {e.name: e for e in result.edges}
     stages = [
         ("no dip ≥ min_contrast", raw["contrast"] < mc),
