@@ -125,6 +125,19 @@ class ReferenceLines:
     def found(self) -> np.ndarray:
         return np.isfinite(self.point[:, 0])
 
+    def speed(self, t: int) -> float:
+        """How far the line at frame ``t`` moves across itself per frame (world units per frame):
+        the mean distance, perpendicular to its direction, to the lines of the neighbouring frames
+        that have one; 0.0 when neither has."""
+        found = self.found
+        d = self.direction[t]
+        moves = []
+        for s in (t - 1, t + 1):
+            if 0 <= s < len(self.point) and found[s]:
+                delta = self.point[s] - self.point[t]
+                moves.append(float(np.linalg.norm(delta - (delta @ d) * d)))
+        return float(np.mean(moves)) if moves else 0.0
+
 
 def _typical_step(times: np.ndarray, axis: int) -> float:
     """Median non-zero change of the shadow time between neighbours along ``axis``.

@@ -142,23 +142,12 @@ def line_time_sigma(lines: ReferenceLines) -> np.ndarray:
     tilt error seen at the RMS distance along the line, divided by the line's
     speed across the plane (from its neighbours in time).
     """
-    n = len(lines.point)
-    sigma = np.full(n, np.nan)
-    found = lines.found
-    for t in np.flatnonzero(found):
+    sigma = np.full(len(lines.point), np.nan)
+    for t in np.flatnonzero(lines.found):
         pix = lines.count[t]
         if pix < 3:
             continue
-        speed = []
-        for s in (t - 1, t + 1):
-            if 0 <= s < n and found[s]:
-                d = lines.direction[t]
-                delta = lines.point[s] - lines.point[t]
-                across = np.linalg.norm(delta - (delta @ d) * d)
-                speed.append(across)
-        if not speed:
-            continue
-        v = float(np.mean(speed))
+        v = lines.speed(int(t))
         if v <= 0:
             continue
         # A line fit to n points spread uniformly has var(tilt)·Σs² = var(offset)·n,

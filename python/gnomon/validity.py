@@ -290,20 +290,12 @@ def reference_line_residuals(lines, sigma_t: np.ndarray) -> LineResiduals | None
     """Residuals of one plane's lines (:class:`gnomon.reference_lines.ReferenceLines`) against the time
     σ map ``sigma_t`` (H, W, frames) of the pixels they were fitted to; None when fewer than three
     lines have a neighbour to measure their motion against."""
-    n = len(lines.point)
-    found = lines.found
     residual, expected = [], []
     h, w = sigma_t.shape
-    for t in np.flatnonzero(found):
+    for t in np.flatnonzero(lines.found):
         if lines.count[t] < 3 or lines.extrapolated[t] or not np.isfinite(lines.rms[t]):
             continue
-        moves = []
-        for s in (t - 1, t + 1):
-            if 0 <= s < n and found[s]:
-                d = lines.direction[t]
-                delta = lines.point[s] - lines.point[t]
-                moves.append(float(np.linalg.norm(delta - (delta @ d) * d)))
-        speed = float(np.mean(moves)) if moves else 0.0
+        speed = lines.speed(int(t))
         if speed <= 0:
             continue
         px = np.rint(lines.pixels[t]).astype(np.int64)
