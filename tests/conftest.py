@@ -86,6 +86,26 @@ def two_plane_small(tmp_path_factory) -> Path:
     return root / "capture"
 
 
+def encode_h264(frames, path: Path, *, fps: int, crf: int) -> None:
+    """Write ``frames`` (uint8 arrays, RGB (H, W, 3) or grey (H, W)) as an H.264 video with PyAV
+    (the ``test`` extra); ``crf`` 0 keeps the luma lossless."""
+    import av
+
+    out = av.open(str(path), "w")
+    stream = out.add_stream("libx264", rate=fps)
+    stream.pix_fmt = "yuv420p"
+    stream.options = {"crf": str(crf)}
+    for i, f in enumerate(frames):
+        rgb = np.repeat(f[:, :, None], 3, axis=2) if f.ndim == 2 else f
+        if i == 0:
+            stream.height, stream.width = rgb.shape[:2]
+        for packet in stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")):
+            out.mux(packet)
+    for packet in stream.encode():
+        out.mux(packet)
+    out.close()
+
+
 def copy_capture(capture: Path, to: Path) -> Path:
     """A copy of a shared capture folder that a test may change; returns the copy's folder."""
     shutil.copytree(capture, to)

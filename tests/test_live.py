@@ -14,28 +14,13 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import encode_h264
 from gnomon import ply
 from gnomon.cli import main
 from gnomon.frames import FrameSource
 from gnomon.live import LiveFrames, LiveStats, _StopOnInterrupt
 
 av = pytest.importorskip("av")  # PyAV: an H.264 encoder to make the test video (the `test` extra)
-
-
-def _h264(frame_files: list[Path], path: Path, fps: int = 30) -> None:
-    out = av.open(str(path), "w")
-    stream = out.add_stream("libx264", rate=fps)
-    first = cv2.imread(str(frame_files[0]), cv2.IMREAD_COLOR)
-    stream.height, stream.width = first.shape[:2]
-    stream.pix_fmt = "yuv420p"
-    stream.options = {"crf": "10"}
-    for f in frame_files:
-        rgb = cv2.cvtColor(cv2.imread(str(f), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-        for packet in stream.encode(av.VideoFrame.from_ndarray(rgb, format="rgb24")):
-            out.mux(packet)
-    for packet in stream.encode():
-        out.mux(packet)
-    out.close()
 
 
 def _natural(p: Path) -> list[int | str]:
@@ -53,7 +38,8 @@ def live_run(desk_scan, tmp_path_factory):
     root = tmp_path_factory.mktemp("live")
     capture = desk_scan / "capture"
     video = root / "desk.mp4"
-    _h264(_frame_files(capture), video)
+    encode_h264((cv2.cvtColor(cv2.imread(str(f), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB) for f in _frame_files(capture)),
+                video, fps=30, crf=10)
     text = (capture / "field_log.toml").read_text()
     text = re.sub(r'^frames = ".*"$', f'frames = "{video.as_posix()}"', text, count=1, flags=re.MULTILINE)
     log_video = root / "field_log_video.toml"

@@ -8,26 +8,12 @@ import tomllib
 from pathlib import Path
 
 import cv2
-import numpy as np
 import pytest
 
+from conftest import encode_h264
 from gnomon import toml_io
 
 av = pytest.importorskip("av")  # PyAV: an H.264 encoder to make the test video (the `test` extra)
-
-
-def _h264(frames: list[np.ndarray], path: Path, fps: int = 10) -> None:
-    out = av.open(str(path), "w")
-    stream = out.add_stream("libx264", rate=fps)
-    stream.height, stream.width = frames[0].shape[:2]
-    stream.pix_fmt = "yuv420p"
-    stream.options = {"crf": "0"}  # lossless luma
-    for f in frames:
-        for packet in stream.encode(av.VideoFrame.from_ndarray(np.repeat(f[:, :, None], 3, axis=2), format="rgb24")):
-            out.mux(packet)
-    for packet in stream.encode():
-        out.mux(packet)
-    out.close()
 
 
 def test_video_capture_is_recorded_as_a_video(tiny_capture: Path) -> None:
@@ -37,7 +23,7 @@ def test_video_capture_is_recorded_as_a_video(tiny_capture: Path) -> None:
 
     folder = tiny_capture.parent
     frames = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in sorted((folder / "frames").glob("*.png"))]
-    _h264(frames, folder / "capture.mp4")
+    encode_h264(frames, folder / "capture.mp4", fps=10, crf=0)  # crf 0: lossless luma
     data = tomllib.loads(tiny_capture.read_text())
     data["capture"]["frames"] = "capture.mp4"
     toml_io.dump(data, folder / "video.toml")
