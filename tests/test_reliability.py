@@ -64,11 +64,6 @@ def scan(log: Path, out: Path, *extra: str) -> int:
     return main(["scan", str(log), "--out", str(out), "--quiet", *extra])
 
 
-@pytest.fixture
-def cap(tmp_path: Path) -> Path:
-    return write_tiny_capture(tmp_path / "cap")
-
-
 @pytest.fixture(scope="module")
 def scanned(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("scanned")
@@ -81,10 +76,10 @@ def scanned(tmp_path_factory) -> Path:
 
 
 @pytest.mark.slow
-def test_zero_byte_frame(cap: Path, capsys) -> None:
-    (cap.parent / "frames" / "frame_0005.png").write_bytes(b"")
-    one_line(scan(cap, cap.parent / "out"), capsys, "frame_0005.png", "empty")
-    assert not (cap.parent / "out").exists()
+def test_zero_byte_frame(tiny_capture: Path, capsys) -> None:
+    (tiny_capture.parent / "frames" / "frame_0005.png").write_bytes(b"")
+    one_line(scan(tiny_capture, tiny_capture.parent / "out"), capsys, "frame_0005.png", "empty")
+    assert not (tiny_capture.parent / "out").exists()
 
 
 def _png_header(width: int, height: int) -> bytes:
@@ -96,9 +91,9 @@ def _png_header(width: int, height: int) -> bytes:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["frame_0000.png", "frame_0003.png"])
-def test_png_header_claiming_60000_squared(cap: Path, capsys, name: str) -> None:
-    (cap.parent / "frames" / name).write_bytes(_png_header(60000, 60000))
-    one_line(scan(cap, cap.parent / "out"), capsys, name)
+def test_png_header_claiming_60000_squared(tiny_capture: Path, capsys, name: str) -> None:
+    (tiny_capture.parent / "frames" / name).write_bytes(_png_header(60000, 60000))
+    one_line(scan(tiny_capture, tiny_capture.parent / "out"), capsys, name)
 
 
 @pytest.mark.slow
@@ -138,8 +133,8 @@ def test_field_log_is_a_folder(tmp_path: Path, capsys) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["binary", "latin-1", "folder"])
 @pytest.mark.parametrize("which", ["camera", "light"])
-def test_camera_and_light_files_not_text(cap: Path, capsys, kind: str, which: str) -> None:
-    target = cap.parent / f"{which}.toml"
+def test_camera_and_light_files_not_text(tiny_capture: Path, capsys, kind: str, which: str) -> None:
+    target = tiny_capture.parent / f"{which}.toml"
     if kind == "folder":
         target.mkdir()
     else:
@@ -150,21 +145,21 @@ def test_camera_and_light_files_not_text(cap: Path, capsys, kind: str, which: st
             d["camera"] = {"file": "camera.toml", "pose": d["camera"]["pose"]}
         else:
             d["light"] = {"kind": "lamp", "file": "light.toml"}
-    edit(cap, point_at)
-    one_line(scan(cap, cap.parent / "out"), capsys, f"{which}.toml")
+    edit(tiny_capture, point_at)
+    one_line(scan(tiny_capture, tiny_capture.parent / "out"), capsys, f"{which}.toml")
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("frames, needle", [("", "empty"), ("/", "root"), ("/nonexistent-gnomon/*.png", "not found")])
-def test_frames_glob_empty_or_absolute(cap: Path, capsys, frames: str, needle: str) -> None:
-    edit(cap, lambda d: d["capture"].update(frames=frames))
-    one_line(scan(cap, cap.parent / "out"), capsys, "frames", needle)
+def test_frames_glob_empty_or_absolute(tiny_capture: Path, capsys, frames: str, needle: str) -> None:
+    edit(tiny_capture, lambda d: d["capture"].update(frames=frames))
+    one_line(scan(tiny_capture, tiny_capture.parent / "out"), capsys, "frames", needle)
 
 
 @pytest.mark.slow
-def test_absolute_frames_glob_that_exists_scans(cap: Path, capsys) -> None:
-    edit(cap, lambda d: d["capture"].update(frames=str(cap.parent / "frames" / "*.png")))
-    assert scan(cap, cap.parent / "out", "--no-rrd") == 0, capsys.readouterr().err
+def test_absolute_frames_glob_that_exists_scans(tiny_capture: Path, capsys) -> None:
+    edit(tiny_capture, lambda d: d["capture"].update(frames=str(tiny_capture.parent / "frames" / "*.png")))
+    assert scan(tiny_capture, tiny_capture.parent / "out", "--no-rrd") == 0, capsys.readouterr().err
 
 
 # ------------------------------------------------------------------ numbers and geometry
@@ -181,29 +176,29 @@ def test_absolute_frames_glob_that_exists_scans(cap: Path, capsys) -> None:
     ("light", "position", [0.0, 0.0, 500.0], "camera's centre"),  # the camera sits at (0, 0, 500)
     ("light", "position", [1e300, 0.0, 400.0], "position"),
 ])
-def test_implausible_numbers(cap: Path, capsys, section: str, key: str, value, needle: str) -> None:
-    edit(cap, lambda d: d[section].update({key: value}))
-    one_line(scan(cap, cap.parent / "out"), capsys, "field_log.toml", needle)
-    assert not (cap.parent / "out").exists()
+def test_implausible_numbers(tiny_capture: Path, capsys, section: str, key: str, value, needle: str) -> None:
+    edit(tiny_capture, lambda d: d[section].update({key: value}))
+    one_line(scan(tiny_capture, tiny_capture.parent / "out"), capsys, "field_log.toml", needle)
+    assert not (tiny_capture.parent / "out").exists()
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("board", ["0x0", "2x5", "-3x4"])
-def test_plane_chessboard_too_small(cap: Path, capsys, board: str) -> None:
-    edit(cap, lambda d: d["planes"][0].update(chessboard=board, square=25.0))
-    one_line(scan(cap, cap.parent / "out"), capsys, "chessboard")
+def test_plane_chessboard_too_small(tiny_capture: Path, capsys, board: str) -> None:
+    edit(tiny_capture, lambda d: d["planes"][0].update(chessboard=board, square=25.0))
+    one_line(scan(tiny_capture, tiny_capture.parent / "out"), capsys, "chessboard")
 
 
 @pytest.mark.slow
-def test_two_planes_with_one_name(cap: Path, capsys) -> None:
-    edit(cap, lambda d: d["planes"].append(dict(d["planes"][0])))
-    one_line(scan(cap, cap.parent / "out"), capsys, "'desk'", "own name")
+def test_two_planes_with_one_name(tiny_capture: Path, capsys) -> None:
+    edit(tiny_capture, lambda d: d["planes"].append(dict(d["planes"][0])))
+    one_line(scan(tiny_capture, tiny_capture.parent / "out"), capsys, "'desk'", "own name")
 
 
 @pytest.mark.slow
-def test_timezone_that_does_not_exist(cap: Path, capsys) -> None:
-    edit(cap, lambda d: d.update(site={"latitude": 47.0, "longitude": 8.0, "timezone": "Mars/Olympus"}))
-    one_line(scan(cap, cap.parent / "out"), capsys, "Mars/Olympus")
+def test_timezone_that_does_not_exist(tiny_capture: Path, capsys) -> None:
+    edit(tiny_capture, lambda d: d.update(site={"latitude": 47.0, "longitude": 8.0, "timezone": "Mars/Olympus"}))
+    one_line(scan(tiny_capture, tiny_capture.parent / "out"), capsys, "Mars/Olympus")
 
 
 def _sun_log(tmp_path: Path) -> Path:
@@ -235,16 +230,16 @@ def test_implausible_frame_rate(tmp_path: Path, capsys, fps: float) -> None:
 
 
 @pytest.mark.slow
-def test_out_is_a_file_or_under_one(cap: Path, capsys) -> None:
-    f = cap.parent / "taken"
+def test_out_is_a_file_or_under_one(tiny_capture: Path, capsys) -> None:
+    f = tiny_capture.parent / "taken"
     f.write_text("keep")
-    one_line(scan(cap, f), capsys, str(f), "is a file")
-    one_line(scan(cap, f / "sub"), capsys, "is a file")
+    one_line(scan(tiny_capture, f), capsys, str(f), "is a file")
+    one_line(scan(tiny_capture, f / "sub"), capsys, "is a file")
     assert f.read_text() == "keep"
 
 
 @pytest.mark.slow
-def test_read_only_output(cap: Path, capsys, tmp_path: Path) -> None:
+def test_read_only_output(tiny_capture: Path, capsys, tmp_path: Path) -> None:
     ro = tmp_path / "ro"
     ro.mkdir()
     if os.geteuid() == 0:
@@ -254,7 +249,7 @@ def test_read_only_output(cap: Path, capsys, tmp_path: Path) -> None:
     else:
         ro.chmod(0o555)
     try:
-        one_line(scan(cap, ro / "scan"), capsys, str(ro / "scan"))
+        one_line(scan(tiny_capture, ro / "scan"), capsys, str(ro / "scan"))
     finally:
         if os.geteuid() == 0:
             subprocess.run(["umount", str(ro)], capture_output=True)

@@ -129,6 +129,14 @@ def _refill_frames(folder: Path, make) -> None:
         cv2.imwrite(str(png), make(i, image))
 
 
+def _reference_rows_lit(image: np.ndarray) -> np.ndarray:
+    """A copy of a tiny capture's frame with its reference regions (8 rows at top and bottom) lit."""
+    image = image.copy()
+    image[:8] = 200
+    image[-8:] = 200
+    return image
+
+
 @pytest.mark.slow
 def test_random_noise_frames_are_an_error(tmp_path: Path, capsys) -> None:
     log = write_tiny_capture(tmp_path / "capture", width=96, height=72)
@@ -155,13 +163,7 @@ def test_reference_regions_never_crossed_is_an_error(tmp_path: Path, capsys) -> 
     # top and bottom) stay lit in every frame.
     log = write_tiny_capture(tmp_path / "capture")
 
-    def keep_regions_lit(i, im):
-        im = im.copy()
-        im[:8] = 200
-        im[-8:] = 200
-        return im
-
-    _refill_frames(tmp_path / "capture", keep_regions_lit)
+    _refill_frames(tmp_path / "capture", lambda i, im: _reference_rows_lit(im))
     code, err = _scan(log, tmp_path / "scan", capsys)
     assert code == 2 and "shadow line was found on the reference regions in 0" in err, err
 
@@ -173,12 +175,7 @@ def test_reference_regions_rarely_crossed_is_an_error(tmp_path: Path, capsys) ->
     log = write_tiny_capture(tmp_path / "capture")
 
     def regions_lit_mostly(i, im):
-        if i in (10, 11, 12):
-            return im
-        im = im.copy()
-        im[:8] = 200
-        im[-8:] = 200
-        return im
+        return im if i in (10, 11, 12) else _reference_rows_lit(im)
 
     _refill_frames(tmp_path / "capture", regions_lit_mostly)
     code, err = _scan(log, tmp_path / "scan", capsys)
