@@ -68,10 +68,17 @@ FROG_OUTLINE = [(318, 400), (322, 385), (345, 372), (362, 338), (380, 328), (470
                 (330, 450), (320, 425)]
 FROG_SHADOW = [(300, 460), (240, 525), (232, 560), (255, 640), (330, 648), (420, 650), (465, 632), (470, 600),
                (640, 622), (690, 610), (690, 650), (790, 650), (810, 630), (770, 600), (780, 500), (740, 490)]
-# Other real surfaces in view (frame 1): the two white boxes left and right of the wall. Their points are real
-# (the left box's front face scans as a plane at 87.6° to the desk, median 2.2 mm off it) and are counted apart.
-FROG_BOXES = [[(0, 180), (150, 180), (195, 300), (195, 505), (0, 505)],
-              [(875, 170), (1024, 170), (1024, 500), (875, 500)]]
+# Other real surfaces in view (frame 1): the faces of the two white boxes left and right of the wall that the
+# shadow sweeps, and the wall board's right edge, folded towards the camera (a strip 20 px wide, up to 25 mm in
+# front of the wall). score.py fits a plane to each face's points (printed with its residual and its angle to
+# the desk): a point within 5 mm of its face's plane is on a real surface, not a false point.
+FROG_OTHER_FACES = {"left box front": [(0, 228), (120, 228), (165, 497), (0, 497)],
+                    "left box side": [(120, 228), (150, 192), (197, 495), (165, 497)],
+                    "left box top": [(0, 185), (150, 180), (120, 228), (0, 228)],
+                    "right box side": [(910, 175), (937, 212), (905, 485), (882, 445)],
+                    "right box front": [(937, 212), (1024, 212), (1024, 485), (905, 485)],
+                    "right box top": [(910, 172), (1024, 165), (1024, 212), (937, 212)],
+                    "wall's folded right edge": [(935, 0), (956, 0), (952, 168), (933, 168)]}
 PHONE = ["stand", "banana", "mug", "fruits", "candle-mug"]
 # The mug's npz clicks land on none of its crosses (they belong to another framing): rough pixels read off
 # its first frame by eye instead (bottom-left, bottom-right, top-right, top-left; full size).
@@ -125,7 +132,7 @@ def frog(mirror: Path, out: Path) -> None:
     toml_io.dump(log, log_path)
     scan = regions_preview_scan(log_path)
     extents = {"desk": (-20.0, 580.0, -60.0, 420.0), "wall": (-20.0, 580.0, -60.0, 360.0)}
-    score = score_scan("frog", scan, camera, extents, FROG_OUTLINE, [FROG_SHADOW], other_outlines=FROG_BOXES)
+    score = score_scan("frog", scan, camera, extents, FROG_OUTLINE, [FROG_SHADOW], other_faces=FROG_OTHER_FACES)
     print("\n".join(score.lines()), flush=True)
 
 
