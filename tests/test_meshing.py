@@ -104,3 +104,82 @@ def test_kernel_obj_text_equals_the_numpy_text() -> None:
         for n in (None, nrm):
             fast = _kernel.obj_text(v, _decimals_for(v), t, n, f)
             assert fast == _obj_body_numpy(v, f, t, n)
+
+
+def _normals_by_loops(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, centre: np.ndarray,
+                      jump: float) -> np.ndarray:
+    """grid_normals written out pixel by pixel: the tangent along each axis from the neighbours
+    within the depth jump (central, else one-sided), their cross product towards the camera."""
+    h, w = valid.shape
+    out = np.full((h, w, 3), np.nan)
+    p = points.astype(np.float64)
+    z = depth.astype(np.float64)
+
+    def near(v: int, u: int, v0: int, u0: int) -> bool:
+        return 0 <= v < h and 0 <= u < w and bool(valid[v, u]) and abs(z[v, u] - z[v0, u0]) <= jump * abs(z[v0, u0])
+
+    for v in range(h):
+        for u in range(w):
+            if not valid[v, u]:
+                continue
+            tangents = []
+            for dv, du in ((0, 1), (1, 0)):
+                lo, hi = near(v - dv, u - du, v, u), near(v + dv, u + du, v, u)
+                if lo and hi:
+                    tangents.append(p[v + dv, u + du] - p[v - dv, u - du])
+                elif hi:
+                    tangents.append(p[v + dv, u + du] - p[v, u])
+                elif lo:
+                    tangents.append(p[v, u] - p[v - dv, u - du])
+                else:
+                    tangents.append(np.full(3, np.nan))
+            to_cam = centre - p[v, u]
+            to_cam = to_cam / np.sqrt(to_cam @ to_cam)
+            n = np.cross(tangents[0], tangents[1])
+            length = np.sqrt(n @ n)
+            n = n / length if np.isfinite(n).all() and length > 0 else to_cam
+            out[v, u] = -n if n @ to_cam < 0 else n
+    return out
+
+
+def test_kernel_grid_normals_equal_a_per_pixel_computation() -> None:
+    from gnomon.meshing import _grid_normals_numpy, grid_normals
+
+    centre = np.array([20.0, -15.0, -400.0])
+    for seed in range(3):
+        depth, _, valid = _bumpy_surface(seed, h=23, w=31)
+        points = grid_points(depth).astype(np.float32)
+        points[~valid] = np.nan
+        fast = grid_normals(points, depth, valid, centre, 0.02)
+        assert fast.dtype == np.float32 and fast.shape == (23, 31, 3)
+        slow = _normals_by_loops(points, depth, valid, centre, 0.02)
+        # f64 arithmetic in both, rounded to float32 once: a few float32 ulps
+        np.testing.assert_allclose(fast, slow, rtol=0, atol=2e-7)
+        np.testing.assert_array_equal(np.isnan(fast), ~valid[..., None].repeat(3, axis=2))
+        np.testing.assert_allclose(fast, _grid_normals_numpy(points, depth, valid, centre, 0.02), rtol=0, atol=2e-7)
+        # every case occurs: central, one-sided and no tangent (isolated pixels face the camera)
+        lengths = np.linalg.norm(fast[valid], axis=1)
+        np.testing.assert_allclose(lengths, 1.0, atol=1e-6)
+
+
+def test_kernel_stl_records_equal_a_per_face_computation(tmp_path) -> None:
+    from gnomon.meshing import _stl_table_numpy, write_stl
+
+    rng = np.random.default_rng(7)
+    v = (rng.normal(0, 1, (60, 3)) * np.array([10.0, 1.0, 100.0])).astype(np.float32)
+    f = rng.integers(0, len(v), (200, 3)).astype(np.int32)
+    f[3] = [4, 4, 9]  # degenerate: zero normal
+    write_stl(tmp_path / "m.stl", v, f, header="test")
+    data = (tmp_path / "m.stl").read_bytes()
+    assert data[:4] == b"test" and len(data) == 84 + 50 * len(f)
+    assert int(np.frombuffer(data[80:84], "<u4")[0]) == len(f)
+    rec = np.frombuffer(data[84:], dtype=np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")]))
+    np.testing.assert_array_equal(rec["v"], v[f])
+    assert not rec["attr"].any()
+    for k, (a, b, c) in enumerate(v[f].astype(np.float64)):
+        n = np.cross(b - a, c - a)
+        length = np.sqrt(n @ n)
+        expect = n / length if length > 0 else np.zeros(3)
+        np.testing.assert_allclose(rec["n"][k], expect, rtol=0, atol=1e-5)
+    assert np.array_equal(rec["n"][3], np.zeros(3, np.float32))
+    assert data[84:] == _stl_table_numpy(v, f).tobytes()

@@ -197,3 +197,17 @@ def obj_text(
     faces: npt.NDArray[np.int64],
 ) -> bytes:
     """The ``v``/``vt``/``vn``/``f`` lines of :func:`gnomon.meshing.write_obj`, byte for byte."""
+
+def grid_normals(
+    points: npt.NDArray[np.float32],
+    depth: npt.NDArray[np.float32],
+    valid: npt.NDArray[np.uint8],
+    camera_centre: tuple[float, float, float],
+    max_relative_jump: float,
+) -> npt.NDArray[np.float32]:
+    """Unit normals (H, W, 3) of the surface on the pixel grid, towards the camera, NaN off it:
+    :func:`gnomon.meshing.grid_normals` (its numpy definition), rows in parallel, f64 arithmetic."""
+
+def stl_records(vertices: npt.NDArray[np.float32], faces: npt.NDArray[np.int32]) -> npt.NDArray[np.uint8]:
+    """The (F·50,) bytes of a binary STL file's records (normal, corners, attribute 0; little-endian),
+    as :func:`gnomon.meshing.write_stl` writes them."""

@@ -145,7 +145,23 @@ def grid_normals(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, camer
     neighbours qualify, one-sided where only one does; a pixel with no
     qualifying neighbour in a direction gets the unit vector towards the
     camera. NaN where ``valid`` is False.
+
+    On float32 maps the kernel computes it (``_kernel.grid_normals``, rows in
+    parallel, the same f64 arithmetic); :func:`_grid_normals_numpy` is the
+    definition in numpy.
     """
+    if points.dtype == np.float32 and depth.dtype == np.float32:
+        centre = np.asarray(camera_centre, dtype=np.float64).reshape(3)
+        return _kernel.grid_normals(np.ascontiguousarray(points), np.ascontiguousarray(depth),
+                                    np.ascontiguousarray(valid, dtype=np.uint8),
+                                    (float(centre[0]), float(centre[1]), float(centre[2])),
+                                    float(max_relative_jump))
+    return _grid_normals_numpy(points, depth, valid, camera_centre, max_relative_jump)
+
+
+def _grid_normals_numpy(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, camera_centre: np.ndarray,
+                        max_relative_jump: float) -> np.ndarray:
+    """:func:`grid_normals` in numpy (the kernel's ``grid_normals`` gives the same on float32 maps)."""
     p = np.where(valid[..., None], points, np.nan).astype(np.float64)
     z = np.where(valid, depth, np.nan).astype(np.float64)
     h, w = valid.shape
@@ -530,7 +546,14 @@ def write_stl(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     head = header.encode("ascii")[:80]
     if head.lower().startswith(b"solid"):
         raise ValueError("a binary STL header must not start with 'solid'")
+    # the records (normal, corners, attribute) packed by the kernel, rows in parallel (_stl_table_numpy: the same)
+    records = _kernel.stl_records(np.ascontiguousarray(v), np.ascontiguousarray(f, dtype=np.int32))
+    _write_parts(path, [head.ljust(80, b" "), np.uint32(len(f)).astype("<u4").tobytes(), records])
+
+
+def _stl_table_numpy(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """write_stl's records in numpy (the kernel's ``stl_records`` gives the same bytes)."""
     table = np.zeros(len(f), dtype=np.dtype([("n", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")]))
     table["n"] = face_normals(v, f)
     table["v"] = v[f]
-    _write_parts(path, [head.ljust(80, b" "), np.uint32(len(f)).astype("<u4").tobytes(), table.view(np.uint8)])
+    return table.view(np.uint8)

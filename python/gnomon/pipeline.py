@@ -17,12 +17,14 @@ previous scan's files mixed with the new ones.
 from __future__ import annotations
 
 import json
+import queue
 import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +39,7 @@ from gnomon.fieldlog import load_field_log
 from gnomon.frames import Frame, FrameSource, sha256_file
 from gnomon.fusion import fuse_depths
 from gnomon.light import EdgePlanes, EdgeTimes, ReferenceGeometry
+from gnomon.light.base import LightModel, Screening
 from gnomon.meshing import GridMesh, grid_mesh, grid_normals, remove_small_components, write_obj, write_stl
 from gnomon.preview import coverage_map, write_preview
 from gnomon.publish import OUTPUT_FILES, staged_outputs
@@ -71,8 +74,8 @@ MAX_PLANE_GAP = 3.0
 # simulated captures, whose sweeps are slower, re-timing the few fast pixels is not better.
 RETIME_UNDERSAMPLED_SHARE = 0.5
 
-__all__ = ["OUTPUT_FILES", "EdgeResult", "ScanOptions", "ScanResult", "Surface", "build_surface", "reconstruct",
-           "run_scan", "scan", "staged_outputs", "write_scan", "write_surface"]
+__all__ = ["OUTPUT_FILES", "EdgeResult", "RecordingWorker", "ScanOptions", "ScanResult", "Surface", "build_surface",
+           "reconstruct", "run_scan", "scan", "staged_outputs", "write_scan", "write_surface"]
 
 @dataclass
 class ScanOptions:
@@ -169,24 +172,53 @@ def _dn_index(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
     return np.clip(np.nan_to_num(values_dn), 0, len(lut) - 1).astype(np.int64)
 
 
-def _pixel_time_sigma(slope: np.ndarray, tracked: TrackedSequence) -> np.ndarray:
+class _Levels:
+    """Per-pixel levels of the tracked dips in linear irradiance, each computed once per scan (both
+    edges, the screening and the fusion use them)."""
+
+    def __init__(self, tracked: TrackedSequence):
+        self.tracked = tracked
+
+    @cached_property
+    def imax(self) -> np.ndarray:
+        lut = self.tracked.lut
+        return lut[_dn_index(self.tracked.times.imax, lut)]
+
+    @cached_property
+    def imin(self) -> np.ndarray:
+        lut = self.tracked.lut
+        return lut[_dn_index(self.tracked.times.imin, lut)]
+
+    @cached_property
+    def sigma_at_threshold(self) -> np.ndarray:
+        """The image noise carried to irradiance at each pixel's threshold."""
+        t = self.tracked
+        # The noise is measured in the input's DN: carry it to irradiance through the input's decoding.
+        return linear_noise_at_threshold(t.noise_dn, t.times.threshold, t.input_lut)
+
+    @cached_property
+    def relative_depth(self) -> tuple[np.ndarray, np.ndarray]:
+        return _relative_depth(self.tracked, self.imax, self.imin)
+
+
+def _pixel_time_sigma(slope: np.ndarray, tracked: TrackedSequence, levels: _Levels | None = None) -> np.ndarray:
     """σ of each pixel's shadow time (frames): image noise over the slope, and edge sampling."""
-    times = tracked.times
-    # The noise is measured in the input's DN: carry it to irradiance through the input's decoding.
-    sigma_lin = linear_noise_at_threshold(tracked.noise_dn, times.threshold, tracked.input_lut)
-    contrast_lin = 2.0 * (tracked.lut[_dn_index(times.imax, tracked.lut)] - times.threshold)
+    levels = levels or _Levels(tracked)
+    sigma_lin = levels.sigma_at_threshold
+    contrast_lin = 2.0 * (levels.imax - tracked.times.threshold)
     with np.errstate(invalid="ignore", divide="ignore"):
         sigma_t_noise = np.where(slope > 0, sigma_lin / slope, np.nan)
     return np.hypot(sigma_t_noise, interpolation_time_sigma(contrast_lin, slope))
 
 
-def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: TrackedSequence) -> EdgeTimes:
+def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: TrackedSequence,
+               levels: _Levels | None = None) -> EdgeTimes:
     """One edge's times and σ; a fast sweep's (most pixels crossed within two frames) re-timed between
     the isochrones (:mod:`gnomon.retiming`), each re-timed σ from the σ of the pixels its crossings
     were interpolated between."""
-    sigma = _pixel_time_sigma(slope, tracked)
-    lut, t = tracked.lut, tracked.times
-    fast = undersampled(slope, lut[_dn_index(t.imax, lut)], lut[_dn_index(t.imin, lut)])
+    levels = levels or _Levels(tracked)
+    sigma = _pixel_time_sigma(slope, tracked, levels)
+    fast = undersampled(slope, levels.imax, levels.imin)
     timed = np.isfinite(times)
     if timed.any() and fast[timed].mean() > RETIME_UNDERSAMPLED_SHARE:
         retimed = retime_between_isochrones(times, tracked.n_frames)
@@ -194,9 +226,10 @@ def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: Tracked
     return EdgeTimes(name, times, slope, sigma)
 
 
-def _edge_times(tracked: TrackedSequence) -> tuple[EdgeTimes, EdgeTimes]:
-    t = tracked.times
-    return (_edge_time("enter", t.enter, t.enter_slope, tracked), _edge_time("leave", t.leave, t.leave_slope, tracked))
+def _edge_times(tracked: TrackedSequence, levels: _Levels | None = None) -> tuple[EdgeTimes, EdgeTimes]:
+    t, levels = tracked.times, levels or _Levels(tracked)
+    return (_edge_time("enter", t.enter, t.enter_slope, tracked, levels),
+            _edge_time("leave", t.leave, t.leave_slope, tracked, levels))
 
 
 def _with_typical_sigma(depth: np.ndarray, sigma: np.ndarray) -> np.ndarray:
@@ -211,12 +244,15 @@ def _with_typical_sigma(depth: np.ndarray, sigma: np.ndarray) -> np.ndarray:
 
 
 def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, setup: ScanSetup,
-                      tracked: TrackedSequence) -> EdgeResult:
+                      tracked: TrackedSequence, levels: _Levels | None = None) -> EdgeResult:
     """Triangulate one edge against its shadow planes (keeping the points the light accepts), with σZ."""
     scaled = (edge.times * planes.time_scale).astype(np.float32)
     tri = triangulate(ray_map, scaled, planes.planes)
-    screening = setup.light.screen(edge, points_from_depth(ray_map, tri.depth), tracked.times, tracked.n_frames,
-                                   *_relative_depth(tracked))
+    if type(setup.light).screen is LightModel.screen:
+        screening = Screening()  # the default keeps every point: its inputs are not computed
+    else:
+        screening = setup.light.screen(edge, points_from_depth(ray_map, tri.depth), tracked.times,
+                                       tracked.n_frames, *(levels or _Levels(tracked)).relative_depth)
     if screening.keep is not None:
         tri.depth[~screening.keep] = np.nan
     unc = depth_sigma(ray_map, scaled, planes.planes, tri.depth, edge.sigma_t * planes.time_scale,
@@ -226,11 +262,9 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
                       screening.rejected, screening.notes)
 
 
-def _relative_depth(tracked: TrackedSequence) -> tuple[np.ndarray, np.ndarray]:
-    """(H, W) each dip's depth over its lit level, ``r = (Imax − Imin)/Imax`` in linear irradiance,
-    and its 1σ from the image noise at both levels."""
-    lut, times = tracked.lut, tracked.times
-    hi, lo = lut[_dn_index(times.imax, lut)], lut[_dn_index(times.imin, lut)]
+def _relative_depth(tracked: TrackedSequence, hi: np.ndarray, lo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) each dip's depth over its lit level, ``r = (Imax − Imin)/Imax`` in linear irradiance
+    (``hi``, ``lo``: the levels Imax, Imin), and its 1σ from the image noise at both levels."""
     s_hi = linear_noise_at_threshold(tracked.noise_dn, hi, tracked.input_lut)
     s_lo = linear_noise_at_threshold(tracked.noise_dn, lo, tracked.input_lut)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -332,10 +366,12 @@ def _check_line_residuals(edge: EdgeResult, sigma_t: np.ndarray, path: Path, war
 
 
 def _reconstruct_edges(setup: ScanSetup, tracked: TrackedSequence, ray_map: np.ndarray,
-                       warnings: list[str]) -> list[EdgeResult]:
+                       warnings: list[str], levels: _Levels | None = None) -> list[EdgeResult]:
     geometry = ReferenceGeometry(setup.camera, setup.planes, tracked.n_frames)
-    times = setup.light.edges(*_edge_times(tracked), setup.edge)
-    edges = [_reconstruct_edge(e, setup.light.shadow_planes(e, geometry), ray_map, setup, tracked) for e in times]
+    levels = levels or _Levels(tracked)
+    times = setup.light.edges(*_edge_times(tracked, levels), setup.edge)
+    edges = [_reconstruct_edge(e, setup.light.shadow_planes(e, geometry), ray_map, setup, tracked, levels)
+             for e in times]
     for e, t in zip(edges, times, strict=True):
         _check_line_residuals(e, t.sigma_t, setup.inputs.field_log, warnings)
     for e in edges:
@@ -363,7 +399,8 @@ class _Fused:
     undersampled: np.ndarray
 
 
-def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: float) -> _Fused:
+def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: float,
+          levels: _Levels | None = None) -> _Fused:
     """Fuse the edges, drop unsupported points, shadow time in capture frames, under-sampled points."""
     depth, sigma, conflict = fuse_depths([e.depth for e in edges], [e.sigma for e in edges], max_depth_jump)
     keep = supported_by_neighbours(depth, max_depth_jump)
@@ -375,8 +412,8 @@ def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: flo
         # frames were skipped (clouds, night): report times as the capture's frame indices
         finite = np.isfinite(shadow_time)
         shadow_time[finite] = np.interp(shadow_time[finite], np.arange(len(used)), used)
-    lut, times = tracked.lut, tracked.times
-    imax, imin = lut[_dn_index(times.imax, lut)], lut[_dn_index(times.imin, lut)]
+    levels = levels or _Levels(tracked)
+    imax, imin = levels.imax, levels.imin
     under = np.zeros(keep.shape, dtype=bool)
     for e in edges:
         under |= undersampled(e.slope, imax, imin) & keep
@@ -432,7 +469,7 @@ def _crop(fused: _Fused, setup: ScanSetup, ray_map: np.ndarray) -> np.ndarray:
     return cropped
 
 
-def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None = None, *,
+def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | RecordingWorker | None = None, *,
          progress: bool = False, frame_stride: int = 10,
          track: Callable[..., TrackedSequence] = track_source) -> ScanResult:
     """Reconstruct a surface from a capture, in memory (nothing is written but the recording).
@@ -443,29 +480,32 @@ def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None =
                                  track=track)
     if record is not None:
         t0 = time.perf_counter() - result.report["timings_s"]["total_s"]
-        record()
+        _on_recorder(recorder, record)
+        if isinstance(recorder, RecordingWorker):
+            recorder.finish()
         result.report["timings_s"]["total_s"] = time.perf_counter() - t0
     return result
 
 
-def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | None = None, *,
+def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | RecordingWorker | None = None, *,
                 progress: bool = False, frame_stride: int = 10,
                 track: Callable[..., TrackedSequence] = track_source
-                ) -> tuple[ScanResult, Callable[[], None] | None]:
-    """:func:`scan` without its last step: the result, and the call that logs it to ``recorder``
-    (None without one), so that a caller can record while it writes the outputs.
+                ) -> tuple[ScanResult, Callable[[ScanRecording], None] | None]:
+    """:func:`scan` without its last step: the result, and the call that logs it to a recorder
+    (None without ``recorder``), so that a caller can record while it writes the outputs.
 
-    The frames are recorded as they stream by; the ray map is computed on a
-    worker thread while the frames are tracked (OpenCV releases the GIL).
+    The frames are recorded as they stream by (on the :class:`RecordingWorker`'s thread when
+    ``recorder`` is one); the ray map is computed on a worker thread while the frames are tracked
+    (OpenCV releases the GIL).
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     warnings = list(setup.warnings) + (list(recorder.notes) if recorder is not None else [])
-    _record_setup(recorder, setup, source)
+    _on_recorder(recorder, lambda rec: _record_setup(rec, setup, source))
     skip = setup.light.skipped_frames(source.count)
     colour = LitColour(sample_indices(np.flatnonzero(~skip), COLOUR_SAMPLES))
     source.color_frames = source.color_frames | frozenset(int(i) for i in colour.indices)
-    on_frame = _frame_hook(colour, None if recorder is None else _frame_logger(recorder, setup))
+    on_frame = _frame_hook(colour, None if recorder is None else _frame_logger(recorder, setup, frame_stride))
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-ray-map") as pool:
         rays = pool.submit(setup.camera.ray_map)
         with _timed(timings, "tracking_s"):
@@ -477,9 +517,10 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     _check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
     with _timed(timings, "planes_and_triangulation_s"):
-        edges = _reconstruct_edges(setup, tracked, ray_map, warnings)
+        levels = _Levels(tracked)
+        edges = _reconstruct_edges(setup, tracked, ray_map, warnings, levels)
     with _timed(timings, "fusion_and_mesh_s"):
-        fused = _fuse(edges, tracked, setup.max_depth_jump)
+        fused = _fuse(edges, tracked, setup.max_depth_jump, levels)
         cropped = _crop(fused, setup, ray_map)
         rgb = _lit_colours(colour, tracked)
         surface = build_surface(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, rgb,
@@ -495,7 +536,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     if recorder is None:
         return result, None
 
-    def record() -> None:
+    def record(recorder: ScanRecording) -> None:
         with _timed(timings, "recording_s"):
             _record(recorder, setup, edges, surface, fused.shadow_time, warnings, report, frame_stride,
                     tracked.used, coverage)
@@ -694,7 +735,9 @@ def points_from_depth(ray_map: np.ndarray, depth: np.ndarray) -> np.ndarray:
 def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | None = None) -> ScanResult:
     """Run a scan end to end and write its outputs into ``out_dir`` (nothing there unless it succeeds).
 
-    The recording is logged and encoded on a worker thread while the outputs are written.
+    The recording lives on its own thread (:class:`RecordingWorker`): it is opened there (importing
+    rerun) while the frames are decoded and tracked, logs and encodes the frames as they go by, and
+    logs and encodes the result while the outputs are written.
     """
     opts = options or ScanOptions()
     t0 = time.perf_counter()
@@ -708,51 +751,81 @@ def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | 
         with _recording(staging, opts, f"scan {log.path.name}", image_scale=1.0 if full else 0.5) as recorder:
             result, record = reconstruct(setup, source, recorder, progress=opts.progress,
                                          frame_stride=opts.frame_stride, track=opts.track or track_source)
-            with _Background(_record_and_close(record, recorder)) as recording:
-                write_scan(staging, result, t0, before_report=recording.join)
+            if recorder is not None and record is not None:
+                recorder.submit(record)
+            write_scan(staging, result, t0, before_report=None if recorder is None else recorder.finish)
     result.out_dir = Path(out_dir)
     return result
 
 
-def _record_and_close(record: Callable[[], None] | None, recorder: ScanRecording | None) -> Callable[[], None]:
-    def run() -> None:
-        if record is not None:
-            record()
-        if recorder is not None:
-            recorder.close()  # encodes and writes the file (idempotent: the context's close is then a no-op)
-    return run
+class RecordingWorker:
+    """A scan's recording on its own thread: opened there, then fed calls in order.
 
+    ``open_recorder`` builds the :class:`~gnomon.recording.ScanRecording` (importing rerun, ≈ 1 s)
+    on the worker thread, so the frames are decoded and tracked meanwhile; :meth:`submit` queues a
+    call ``fn(recorder)`` (frames to log, the result to log), run in order on that thread (rerun's
+    time is per thread: every log of the recording comes from this one). :meth:`finish` closes the
+    recorder there (encodes and writes the file), waits, and re-raises the first failure in the
+    caller's thread; :meth:`abort` waits and removes the unfinished file. After a failure the
+    remaining calls are skipped. ``notes`` are the recorder's (a viewer that did not start): an
+    already opened recorder can be given instead (its notes are then known at once).
+    """
 
-class _Background:
-    """A call on a worker thread; :meth:`join` waits for it and re-raises its exception.
-
-    Leaving the ``with`` block always waits for the thread (nothing keeps writing
-    into a staging folder that is being removed)."""
-
-    def __init__(self, fn: Callable[[], None]):
+    def __init__(self, open_recorder: Callable[[], ScanRecording | None] | ScanRecording) -> None:
+        self._queue: queue.SimpleQueue[Callable[[ScanRecording], object] | None] = queue.SimpleQueue()
         self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, args=(fn,), name="gnomon-recording", daemon=True)
-
-    def _run(self, fn: Callable[[], None]) -> None:
-        try:
-            fn()
-        except BaseException as exc:  # re-raised by join, in the caller's thread
-            self._error = exc
-
-    def __enter__(self) -> _Background:
+        self._recorder: ScanRecording | None = None
+        self.notes: list[str] = []
+        if isinstance(open_recorder, ScanRecording):
+            self._recorder = open_recorder
+            self.notes = list(open_recorder.notes)
+            opener = None
+        else:
+            opener = open_recorder
+        self._done = False
+        self._thread = threading.Thread(target=self._run, args=(opener,), name="gnomon-recording", daemon=True)
         self._thread.start()
-        return self
 
-    def join(self) -> None:
+    def _run(self, opener: Callable[[], ScanRecording | None] | None) -> None:
+        try:
+            if opener is not None:
+                self._recorder = opener()
+        except BaseException as exc:  # re-raised by finish, in the caller's thread
+            self._error = exc
+        while (task := self._queue.get()) is not None:
+            if self._error is None and self._recorder is not None:
+                try:
+                    task(self._recorder)
+                except BaseException as exc:
+                    self._error = exc
+
+    def submit(self, fn: Callable[[ScanRecording], object]) -> None:
+        """Queue ``fn(recorder)`` (skipped once a call has failed)."""
+        if not self._done:
+            self._queue.put(fn)
+
+    def _stop(self) -> None:
+        if not self._done:
+            self._done = True
+            self._queue.put(None)
         self._thread.join()
+
+    def finish(self) -> None:
+        """Close the recording (encode and write its file), wait, re-raise the first failure."""
+        if not self._done:
+            self.submit(lambda rec: rec.close())
+        self._stop()
         if self._error is not None:
             error, self._error = self._error, None
+            if self._recorder is not None:
+                self._recorder.abort()
             raise error
 
-    def __exit__(self, *exc: object) -> None:
-        self._thread.join()
-        if exc[0] is None:
-            self.join()
+    def abort(self) -> None:
+        """Wait for the thread and drop the unfinished recording (its file is removed)."""
+        self._stop()
+        if self._recorder is not None:
+            self._recorder.abort()
 
 
 _rerun_warm: threading.Thread | None = None
@@ -786,17 +859,33 @@ def open_recorder(staging: Path, opts: ScanOptions, name: str, filename: str = "
 
 @contextmanager
 def _recording(staging: Path, opts: ScanOptions, name: str, *,
-               image_scale: float = 0.5) -> Iterator[ScanRecording | None]:
-    """open_recorder, closed on success and aborted on failure."""
-    recorder = open_recorder(staging, opts, name, image_scale=image_scale)
+               image_scale: float = 0.5) -> Iterator[RecordingWorker | None]:
+    """open_recorder on a :class:`RecordingWorker` (a viewer's recorder is opened here, for its notes),
+    finished on success and aborted on failure."""
+    if not (opts.rrd or opts.view):
+        yield None
+        return
+    if opts.view:
+        recorder = open_recorder(staging, opts, name, image_scale=image_scale)
+        worker = RecordingWorker(recorder) if recorder is not None else None
+    else:
+        worker = RecordingWorker(lambda: open_recorder(staging, opts, name, image_scale=image_scale))
     try:
-        yield recorder
+        yield worker
     except BaseException:
-        if recorder is not None:
-            recorder.abort()
+        if worker is not None:
+            worker.abort()
         raise
-    if recorder is not None:
-        recorder.close()
+    if worker is not None:
+        worker.finish()
+
+
+def _on_recorder(recorder: ScanRecording | RecordingWorker | None, fn: Callable[[ScanRecording], object]) -> None:
+    """``fn(recorder)`` now, or queued on the recording's worker thread."""
+    if isinstance(recorder, RecordingWorker):
+        recorder.submit(fn)
+    elif recorder is not None:
+        fn(recorder)
 
 
 def _record_setup(recorder: ScanRecording | None, setup: ScanSetup, source: FrameSource) -> None:
@@ -809,9 +898,13 @@ def _record_setup(recorder: ScanRecording | None, setup: ScanSetup, source: Fram
     setup.light.record_setup(recorder)
 
 
-def _frame_logger(recorder: ScanRecording, setup: ScanSetup) -> Any:
+def _frame_logger(recorder: ScanRecording | RecordingWorker, setup: ScanSetup, stride: int) -> Any:
+    """on_frame's recording part: the frame's time, and its image every ``stride`` frames (only those
+    are kept until the worker has logged them)."""
     def log(frame: Frame) -> None:
-        recorder.log_frame(frame.index, frame.grey, setup.light.frame_time(frame.index))
+        index, when = frame.index, setup.light.frame_time(frame.index)
+        image = frame.grey if index % stride == 0 else None
+        _on_recorder(recorder, lambda rec: rec.log_frame(index, image, when))
     return log
 
 

@@ -496,14 +496,15 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
     def log_frame(
         self,
         index: int,
-        image: np.ndarray,
+        image: np.ndarray | None,
         capture_time: datetime | np.datetime64 | None = None,
     ) -> bool:
         """Set the time to frame ``index``; store the image if ``index % frame_stride == 0``.
 
-        ``image`` (H, W) uint8/uint16 grey or (H, W, 3) RGB uint8. uint16 is
-        shifted to 8 bits (one shift for the whole recording, from the first
-        uint16 frame). Returns whether the image was stored.
+        ``image`` (H, W) uint8/uint16 grey or (H, W, 3) RGB uint8; None for a
+        frame that is not stored (its time only). uint16 is shifted to 8 bits
+        (one shift for the whole recording, from the first uint16 frame).
+        Returns whether the image was stored.
         """
         if not self.enabled:
             return False
@@ -517,6 +518,8 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
             return False
         if int(index) % self.frame_stride != 0:
             return False
+        if image is None:
+            raise ValueError(f"frame {index} is stored (frame_stride {self.frame_stride}) but has no image")
         rr = _rr()
         img = self._to_u8(image)
         if img.ndim == 3 and img.shape[2] == 4:

@@ -7,6 +7,7 @@
 //!   shadow has passed, with provisional times, as soon as it has passed;
 //! * [`triangulate`]: camera rays ∩ interpolated shadow planes;
 //! * [`grid_faces`], [`clean_faces`], [`obj_text`]: the mesh on the pixel grid, its clean-up, its OBJ text;
+//! * [`grid_normals`], [`stl_records`]: the surface's normals on the pixel grid, a mesh's binary STL records;
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
 //! Pure Rust, no Python types; every function on user data returns
@@ -18,6 +19,7 @@ pub mod live;
 pub mod mesh;
 pub mod sample;
 pub mod simd;
+pub mod surface;
 pub mod tracker;
 pub mod triangulate;
 
@@ -27,5 +29,6 @@ pub use live::{FinishedPixel, WatchParams};
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
 pub use sample::Sample;
 pub use simd::SimdPath;
+pub use surface::{grid_normals, stl_records, STL_RECORD_BYTES};
 pub use tracker::{find_crossing, Crossing, Edge, ShadowTimes, TemporalTracker, TrackerParams};
 pub use triangulate::{plane_at, triangulate};

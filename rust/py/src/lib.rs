@@ -714,6 +714,92 @@ fn obj_text<'py>(
     })
 }
 
+/// Unit normals (H, W, 3) float32 of the surface on the pixel grid (see `gnomon_core::grid_normals`).
+#[pyfunction]
+#[pyo3(signature = (points, depth, valid, camera_centre, max_relative_jump))]
+fn grid_normals<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
+    valid: &Bound<'py, PyAny>,
+    camera_centre: [f64; 3],
+    max_relative_jump: f64,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let valid = borrow_array::<u8, Ix2>(
+        valid,
+        "valid",
+        "uint8",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (valid.shape()[0], valid.shape()[1]);
+    let depth = borrow_array::<f32, Ix2>(
+        depth,
+        "depth",
+        "float32",
+        &[Extent::Exactly(h), Extent::Exactly(w)],
+    )?;
+    let points = borrow_array::<f32, Ix3>(
+        points,
+        "points",
+        "float32",
+        &[Extent::Exactly(h), Extent::Exactly(w), Extent::Exactly(3)],
+    )?;
+    let (valid, depth, points) = (valid.as_array(), depth.as_array(), points.as_array());
+    let normals = py
+        .detach(|| {
+            with_slice(&points, |points| {
+                with_slice(&depth, |depth| {
+                    with_slice(&valid, |valid| {
+                        gnomon_core::grid_normals(
+                            points,
+                            depth,
+                            valid,
+                            w.max(1),
+                            camera_centre,
+                            max_relative_jump,
+                        )
+                    })
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    let normals = Array3::from_shape_vec((h, w, 3), normals).map_err(|err| {
+        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
+    })?;
+    Ok(normals.into_pyarray(py))
+}
+
+/// The records of a binary STL file (F·50,) uint8 (see `gnomon_core::stl_records`).
+#[pyfunction]
+#[pyo3(signature = (vertices, faces))]
+fn stl_records<'py>(
+    py: Python<'py>,
+    vertices: &Bound<'py, PyAny>,
+    faces: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArray1<u8>>> {
+    let vertices = borrow_array::<f32, Ix2>(
+        vertices,
+        "vertices",
+        "float32",
+        &[Extent::Any("V"), Extent::Exactly(3)],
+    )?;
+    let faces = borrow_array::<i32, Ix2>(
+        faces,
+        "faces",
+        "int32",
+        &[Extent::Any("F"), Extent::Exactly(3)],
+    )?;
+    let (vertices, faces) = (vertices.as_array(), faces.as_array());
+    let records = py
+        .detach(|| {
+            with_slice(&vertices, |v| {
+                with_slice(&faces, |f| gnomon_core::stl_records(v, f))
+            })
+        })
+        .map_err(kernel_error)?;
+    Ok(records.into_pyarray(py))
+}
+
 /// The instruction set new trackers' hot loops run on: `"avx2"`, `"sse2"` or
 /// `"portable"` (detected at run time; `GNOMON_SIMD` may force a lower one).
 #[pyfunction]
@@ -739,6 +825,8 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(grid_faces, m)?)?;
     m.add_function(wrap_pyfunction!(clean_faces, m)?)?;
     m.add_function(wrap_pyfunction!(obj_text, m)?)?;
+    m.add_function(wrap_pyfunction!(grid_normals, m)?)?;
+    m.add_function(wrap_pyfunction!(stl_records, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

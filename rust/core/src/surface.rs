@@ -1,0 +1,286 @@
+//! Per-pixel work on a scan's surface after fusion, as the numpy definitions
+//! in `gnomon.meshing` state them (the tests compare both): the grid's unit
+//! normals ([`grid_normals`]) and the binary STL records of a mesh
+//! ([`stl_records`]).
+//!
+//! Invariants: maps are row-major `H·W` (points `H·W·3`); a pixel is on the
+//! surface where `valid` is non-zero; rows are processed in parallel (rayon),
+//! each output element depending only on its own inputs and its 4-neighbours.
+
+use rayon::prelude::*;
+
+use crate::error::KernelError;
+
+/// Rows of pixels (or faces) per parallel work item.
+const ROWS_PER_TASK: usize = 4;
+const FACES_PER_TASK: usize = 16384;
+
+type V3 = [f64; 3];
+
+fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn finite(a: V3) -> bool {
+    a.iter().all(|x| x.is_finite())
+}
+
+/// Unit surface normals `H·W·3` (f32) from the pixel grid, oriented towards the camera.
+///
+/// * `points`: `H·W·3` coordinates in any frame (world units);
+/// * `depth`: `H·W` camera Z for the discontinuity test;
+/// * `valid`: `H·W`, non-zero = a surface pixel; `width` = W;
+/// * `camera_centre`: the camera's centre in the frame of `points`.
+///
+/// A neighbour (left/right along the row, up/down along the column) qualifies
+/// when it is valid and `|Z_n − Z| ≤ max_relative_jump·|Z|`. The tangent
+/// along each axis is the central difference where both neighbours qualify,
+/// one-sided where one does, none otherwise; the normal is the unit
+/// `t_row × t_column` flipped to face the camera, or the unit vector towards
+/// the camera where it is undefined (no tangent, zero or non-finite). NaN
+/// where `valid` is zero. All in f64, as `gnomon.meshing.grid_normals`.
+pub fn grid_normals(
+    points: &[f32],
+    depth: &[f32],
+    valid: &[u8],
+    width: usize,
+    camera_centre: [f64; 3],
+    max_relative_jump: f64,
+) -> Result<Vec<f32>, KernelError> {
+    let n = valid.len();
+    if depth.len() != n {
+        return Err(KernelError::LengthMismatch {
+            what: "depth (one per pixel)",
+            expected: n,
+            got: depth.len(),
+        });
+    }
+    if points.len() != 3 * n {
+        return Err(KernelError::LengthMismatch {
+            what: "points (3 per pixel)",
+            expected: 3 * n,
+            got: points.len(),
+        });
+    }
+    if width == 0 || n % width != 0 {
+        return Err(KernelError::parameter(
+            "width",
+            format!("{width} does not divide {n} pixels"),
+        ));
+    }
+    let height = n / width;
+    let p = |i: usize| -> V3 {
+        if valid[i] != 0 {
+            [
+                f64::from(points[3 * i]),
+                f64::from(points[3 * i + 1]),
+                f64::from(points[3 * i + 2]),
+            ]
+        } else {
+            [f64::NAN; 3]
+        }
+    };
+    let z = |i: usize| -> f64 {
+        if valid[i] != 0 {
+            f64::from(depth[i])
+        } else {
+            f64::NAN
+        }
+    };
+    // Tangent at pixel i from its neighbours lo/hi (None outside the image).
+    let tangent = |i: usize, lo: Option<usize>, hi: Option<usize>| -> V3 {
+        let zi = z(i);
+        let limit = max_relative_jump * zi.abs();
+        let ok = |j: Option<usize>| j.is_some_and(|j| (z(j) - zi).abs() <= limit);
+        match (ok(lo), ok(hi), lo, hi) {
+            (true, true, Some(l), Some(h)) => sub(p(h), p(l)),
+            (false, true, _, Some(h)) => sub(p(h), p(i)),
+            (true, false, Some(l), _) => sub(p(i), p(l)),
+            _ => [f64::NAN; 3],
+        }
+    };
+    let mut out = vec![f32::NAN; 3 * n];
+    out.par_chunks_mut(3 * width * ROWS_PER_TASK)
+        .enumerate()
+        .for_each(|(task, block)| {
+            let row0 = task * ROWS_PER_TASK;
+            for (r, row) in block.chunks_exact_mut(3 * width).enumerate() {
+                let v = row0 + r;
+                for u in 0..width {
+                    let i = v * width + u;
+                    if valid[i] == 0 {
+                        continue;
+                    }
+                    let along_u = tangent(
+                        i,
+                        u.checked_sub(1).map(|_| i - 1),
+                        (u + 1 < width).then_some(i + 1),
+                    );
+                    let along_v = tangent(
+                        i,
+                        v.checked_sub(1).map(|_| i - width),
+                        (v + 1 < height).then_some(i + width),
+                    );
+                    let pi = p(i);
+                    let to_cam = sub(camera_centre, pi);
+                    let len = dot(to_cam, to_cam).sqrt();
+                    let to_cam = [to_cam[0] / len, to_cam[1] / len, to_cam[2] / len];
+                    let c = cross(along_u, along_v);
+                    let norm = dot(c, c).sqrt();
+                    let mut nrm = [c[0] / norm, c[1] / norm, c[2] / norm];
+                    if !finite(nrm) || norm == 0.0 {
+                        nrm = to_cam;
+                    }
+                    if dot(nrm, to_cam) < 0.0 {
+                        nrm = [-nrm[0], -nrm[1], -nrm[2]];
+                    }
+                    let o = &mut row[3 * u..3 * u + 3];
+                    o[0] = nrm[0] as f32;
+                    o[1] = nrm[1] as f32;
+                    o[2] = nrm[2] as f32;
+                }
+            }
+        });
+    Ok(out)
+}
+
+/// Size of one binary STL record: normal, three corners (12 f32), attribute (u16).
+pub const STL_RECORD_BYTES: usize = 50;
+
+/// The records of a binary STL file (after its 80-byte header and count), little-endian.
+///
+/// `vertices` `V·3` f32, `faces` `F·3` indices into them (checked). Each record is
+/// the face's unit normal (right-hand rule over its corners, computed in f32 as
+/// `gnomon.meshing.face_normals`: zero for a degenerate face), its three corners and a
+/// zero attribute.
+pub fn stl_records(vertices: &[f32], faces: &[i32]) -> Result<Vec<u8>, KernelError> {
+    if vertices.len() % 3 != 0 {
+        return Err(KernelError::parameter(
+            "vertices",
+            "expected rows of 3 coordinates",
+        ));
+    }
+    let nv = vertices.len() / 3;
+    if faces.len() % 3 != 0 || faces.iter().any(|&f| f < 0 || f as usize >= nv) {
+        return Err(KernelError::parameter(
+            "faces",
+            "expected rows of 3 vertex indices in range",
+        ));
+    }
+    let nf = faces.len() / 3;
+    let mut out = vec![0u8; nf * STL_RECORD_BYTES];
+    let corner = |k: i32| -> [f32; 3] {
+        let k = k as usize;
+        [vertices[3 * k], vertices[3 * k + 1], vertices[3 * k + 2]]
+    };
+    out.par_chunks_mut(STL_RECORD_BYTES * FACES_PER_TASK)
+        .zip(faces.par_chunks(3 * FACES_PER_TASK))
+        .for_each(|(records, faces)| {
+            for (rec, f) in records
+                .chunks_exact_mut(STL_RECORD_BYTES)
+                .zip(faces.chunks_exact(3))
+            {
+                let (a, b, c) = (corner(f[0]), corner(f[1]), corner(f[2]));
+                let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+                let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+                let mut n = [
+                    e1[1] * e2[2] - e1[2] * e2[1],
+                    e1[2] * e2[0] - e1[0] * e2[2],
+                    e1[0] * e2[1] - e1[1] * e2[0],
+                ];
+                let norm = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                if norm == 0.0 {
+                    n = [0.0; 3];
+                } else {
+                    n = [n[0] / norm, n[1] / norm, n[2] / norm];
+                }
+                for (k, x) in n.iter().chain(&a).chain(&b).chain(&c).enumerate() {
+                    rec[4 * k..4 * k + 4].copy_from_slice(&x.to_le_bytes());
+                }
+                // bytes 48..50: the attribute, 0
+            }
+        });
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plane_grid(h: usize, w: usize) -> (Vec<f32>, Vec<f32>) {
+        // The plane z = 10 + 0.1 x seen from the origin: points (u, v, z).
+        let mut pts = Vec::new();
+        let mut depth = Vec::new();
+        for v in 0..h {
+            for u in 0..w {
+                let z = 10.0 + 0.1 * u as f32;
+                pts.extend([u as f32, v as f32, z]);
+                depth.push(z);
+            }
+        }
+        (pts, depth)
+    }
+
+    #[test]
+    fn plane_normal_faces_the_camera() {
+        let (pts, depth) = plane_grid(4, 5);
+        let valid = vec![1u8; 20];
+        let n = grid_normals(&pts, &depth, &valid, 5, [0.0, 0.0, 0.0], 0.5).unwrap();
+        // tangents (1, 0, 0.1) and (0, 1, 0): normal ∝ (−0.1, 0, 1), flipped towards the camera (−z).
+        let len = (0.01f64 + 1.0).sqrt();
+        for px in n.chunks_exact(3) {
+            assert!((f64::from(px[0]) - 0.1 / len).abs() < 1e-6, "{px:?}");
+            assert!(px[1].abs() < 1e-6);
+            assert!((f64::from(px[2]) + 1.0 / len).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn invalid_and_isolated_pixels() {
+        let (pts, mut depth) = plane_grid(3, 3);
+        let mut valid = vec![1u8; 9];
+        valid[0] = 0;
+        // the centre jumps far away: no neighbour qualifies, it faces the camera
+        depth[4] = 100.0;
+        let n = grid_normals(&pts, &depth, &valid, 3, [0.0, 0.0, 0.0], 0.05).unwrap();
+        assert!(n[..3].iter().all(|x| x.is_nan()));
+        let p = [1.0f64, 1.0, 10.1];
+        let len = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        for k in 0..3 {
+            assert!(
+                (f64::from(n[12 + k]) + p[k] / len).abs() < 1e-6,
+                "{:?}",
+                &n[12..15]
+            );
+        }
+        assert!(grid_normals(&pts, &depth[..8], &valid, 3, [0.0; 3], 0.05).is_err());
+        assert!(grid_normals(&pts, &depth, &valid, 2, [0.0; 3], 0.05).is_err());
+    }
+
+    #[test]
+    fn stl_record_layout() {
+        let v = [0.0f32, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 3.0, 0.0];
+        let rec = stl_records(&v, &[0, 1, 2, 0, 0, 1]).unwrap();
+        assert_eq!(rec.len(), 2 * STL_RECORD_BYTES);
+        let f = |o: usize| f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]]);
+        assert_eq!([f(0), f(4), f(8)], [0.0, 0.0, 1.0]);
+        assert_eq!([f(12), f(24), f(28), f(40)], [0.0, 2.0, 0.0, 3.0]);
+        assert_eq!(&rec[48..50], &[0, 0]);
+        // a degenerate face has a zero normal
+        assert_eq!([f(50), f(54), f(58)], [0.0, 0.0, 0.0]);
+        assert!(stl_records(&v, &[0, 1, 3]).is_err());
+        assert!(stl_records(&v, &[0, 1]).is_err());
+    }
+}
