@@ -79,6 +79,8 @@ class CaptureScore:
     # points off both planes and outside the object but within false_mm of an outlined face's plane (real surfaces)
     on_faces: int = 0
     faces: list[FaceScore] = field(default_factory=list)
+    # where the false points are: (place, count), places in the order tested (a point counts in the first)
+    false_where: list[tuple[str, int]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
@@ -102,6 +104,9 @@ class CaptureScore:
             out.extend(f.line() for f in self.faces)
             out.append(f"  false points (off both planes, outside the object and off every outlined face) "
                        f"{100 * self.false_points / max(self.all_points, 1):.2f} % of {self.all_points}")
+        if self.false_where:
+            out.append("    where: " + "; ".join(f"{place} {100 * n / max(self.all_points, 1):.2f} %"
+                                                for place, n in self.false_where))
         out.extend(f"  note: {n}" for n in self.notes)
         return out
 
@@ -122,7 +127,7 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
                object_outline: list | None = None, shadow_outlines: list | None = None,
                keep_out_px: int = 12, marker_keep_out_px: int = 40, false_mm: float = 5.0,
                region_masks: dict[str, np.ndarray] | None = None,
-               other_faces: dict[str, list] | None = None) -> CaptureScore:
+               other_faces: dict[str, list] | None = None, border_px: int = 60) -> CaptureScore:
     """Score one scan.
 
     ``extents``: per plane, (x0, x1, y0, y1) in the plane's own 2-D frame
@@ -131,6 +136,9 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
     shadows' outlines (pixels); ``other_faces``: flat faces of other real
     surfaces in view (boxes beside the planes), name → outline (pixels): not
     bare, and a point within ``false_mm`` of its face's fitted plane is not false.
+    The false points are also counted by place (``false_where``): in the faces'
+    outlines, near the markers, in the cast shadows, within ``border_px`` of
+    the image's left and right sides (where the frog's desk board curls), elsewhere.
     """
     report = json.loads((scan_dir / "report.json").read_text())
     depth = np.load(scan_dir / "depth.npy")
@@ -208,7 +216,17 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
         near = np.abs(pts_cam @ face.normal - face.offset) <= false_mm
         on_face |= _polygon_mask((h, w), [outline], keep_out_px) & near
     result.on_faces = int((off & on_face).sum())
-    result.false_points = int((off & ~on_face).sum())
+    false = off & ~on_face
+    result.false_points = int(false.sum())
+    border = np.zeros((h, w), dtype=bool)
+    border[:, :border_px] = border[:, w - border_px:] = True
+    places = [("in the outlined faces, off their planes", others), ("near the markers", markers),
+              ("in the object's cast shadow", shadow), (f"within {border_px} px of the image's sides", border),
+              ("elsewhere", np.ones((h, w), dtype=bool))]
+    for place, mask in places:
+        if shadow_outlines or place != "in the object's cast shadow":
+            result.false_where.append((place, int((false & mask).sum())))
+        false &= ~mask
     return result
 
 
