@@ -140,3 +140,22 @@ def test_every_plane_from_its_own_markers(two_plane) -> None:
     print(acc.table("two_plane, planes from their markers"))
     assert acc.rms_pct <= 0.15
     assert acc.coverage >= 0.90
+
+
+@pytest.mark.slow
+def test_coverage_map_gives_the_reasons_the_report_counts(two_plane) -> None:
+    """The coverage map's classes add up to the report's counts, and the pixels refused because no
+    neighbour shares their depth were measured worse than the points kept (against the truth)."""
+    from gnomon.preview import EDGES_DISAGREE, NO_NEIGHBOUR, POINT, UNDERSAMPLED
+
+    _, result, truth = two_plane
+    cov, counts = result.coverage, result.report["coverage"]
+    assert cov is not None
+    assert int(np.isin(cov, (POINT, UNDERSAMPLED)).sum()) == counts["points"]
+    assert int((cov == EDGES_DISAGREE).sum()) == counts["edge_conflicts"]
+    lonely = cov == NO_NEIGHBOUR
+    assert lonely.sum() > 0
+    kept = np.isin(cov, (POINT, UNDERSAMPLED))
+    for edge in result.edges:
+        err = np.abs(edge.depth - truth["depth"])
+        assert np.nanmedian(err[lonely]) > 2 * np.nanmedian(err[kept])

@@ -97,3 +97,28 @@ def test_scan_colours_of_a_colour_capture_come_from_its_lit_frames(tmp_path) -> 
     assert np.allclose(dark_in_frame_0[..., 0], 200, atol=3)
     assert np.allclose(dark_in_frame_0[..., 1], 150, atol=3)
     assert np.allclose(dark_in_frame_0[..., 2], 100, atol=3)
+
+
+def test_coverage_map_says_why_a_pixel_has_no_point() -> None:
+    """Each refused pixel gets its reason; a kept point is a point whatever else is set, and the
+    reasons that need a shadow time (edges disagree, no neighbour) only where the shadow was seen."""
+    from gnomon.preview import AMBIGUOUS, EDGES_DISAGREE, NO_DEPTH, NO_NEIGHBOUR, NO_SHADOW, POINT
+
+    h, w = 4, 6
+    seen = np.zeros((h, w), bool)
+    seen[:, :4] = True
+    valid = np.zeros((h, w), bool)
+    valid[0, :4] = True
+    ambiguous = np.zeros((h, w), bool)
+    ambiguous[:, 4] = True  # never seen as one dip
+    ambiguous[0, 0] = True  # a point: the flag from another pass does not override it
+    conflict = np.zeros((h, w), bool)
+    conflict[1, :] = True
+    unsupported = np.zeros((h, w), bool)
+    unsupported[1:3, :] = True  # row 1 also disagrees: the edges' disagreement is the first reason
+    cov = coverage_map(seen, valid, ambiguous=ambiguous, conflict=conflict, unsupported=unsupported)
+    assert (cov[0, :4] == POINT).all()
+    assert (cov[1, :4] == EDGES_DISAGREE).all() and (cov[2, :4] == NO_NEIGHBOUR).all()
+    assert (cov[3, :4] == NO_DEPTH).all()
+    assert (cov[:, 4] == AMBIGUOUS).all() and (cov[:, 5] == NO_SHADOW).all()
+    assert set(COVERAGE_CLASSES) >= {AMBIGUOUS, EDGES_DISAGREE, NO_NEIGHBOUR}

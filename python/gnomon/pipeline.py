@@ -397,6 +397,7 @@ class _Fused:
     conflict: np.ndarray
     shadow_time: np.ndarray
     undersampled: np.ndarray
+    unsupported: np.ndarray  # (H, W) a fused depth no neighbour shares (dropped)
 
 
 def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: float,
@@ -404,6 +405,7 @@ def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: flo
     """Fuse the edges, drop unsupported points, shadow time in capture frames, under-sampled points."""
     depth, sigma, conflict = fuse_depths([e.depth for e in edges], [e.sigma for e in edges], max_depth_jump)
     keep = supported_by_neighbours(depth, max_depth_jump)
+    unsupported = np.isfinite(depth) & ~keep
     depth = np.where(keep, depth, np.nan).astype(np.float32)
     sigma = np.where(keep, sigma, np.nan).astype(np.float32)
     shadow_time = _mean_ignoring_nan([e.times for e in edges])
@@ -417,7 +419,7 @@ def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: flo
     under = np.zeros(keep.shape, dtype=bool)
     for e in edges:
         under |= undersampled(e.slope, imax, imin) & keep
-    return _Fused(depth, sigma, keep, conflict, shadow_time, under)
+    return _Fused(depth, sigma, keep, conflict, shadow_time, under, unsupported)
 
 
 def _fusion_warnings(fused: _Fused) -> list[str]:
@@ -525,7 +527,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
         rgb = _lit_colours(colour, tracked)
         surface = build_surface(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, rgb,
                                 setup.max_depth_jump)
-    coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped)
+    coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
+                            ambiguous=tracked.times.ambiguous, conflict=fused.conflict, unsupported=fused.unsupported)
     warnings += _fusion_warnings(fused)
     report = _report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
     _report_outputs(report, setup, cropped)

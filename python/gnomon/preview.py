@@ -26,19 +26,34 @@ COVERAGE_CLASSES: dict[int, tuple[str, tuple[int, int, int]]] = {
     2: ("shadow seen, no depth", (230, 25, 75)),
     3: ("under-sampled point", (255, 200, 20)),
     4: ("cropped", (0, 130, 200)),
+    5: ("ambiguous: two comparable dips", (145, 30, 180)),
+    6: ("edges disagree", (245, 130, 48)),
+    7: ("no neighbour at its depth", (70, 240, 240)),
 }
-NO_SHADOW, POINT, NO_DEPTH, UNDERSAMPLED, CROPPED = range(5)
+NO_SHADOW, POINT, NO_DEPTH, UNDERSAMPLED, CROPPED, AMBIGUOUS, EDGES_DISAGREE, NO_NEIGHBOUR = range(8)
 
 
 def coverage_map(contrast_ok: np.ndarray, valid: np.ndarray, undersampled: np.ndarray | None = None,
-                 cropped: np.ndarray | None = None) -> np.ndarray:
+                 cropped: np.ndarray | None = None, *, ambiguous: np.ndarray | None = None,
+                 conflict: np.ndarray | None = None, unsupported: np.ndarray | None = None) -> np.ndarray:
     """Class per pixel (H, W) uint8: see :data:`COVERAGE_CLASSES`.
 
     ``contrast_ok`` the shadow was seen (enough contrast), ``valid`` a point
     was kept, ``undersampled`` kept points the edge crossed in fewer than 2
-    frames, ``cropped`` points removed by ``[output] crop``. All (H, W) bool.
+    frames, ``cropped`` points removed by ``[output] crop``. Why a pixel has
+    no point, where known: ``ambiguous`` two comparable dips (no time),
+    ``conflict`` the entering and leaving edges gave incompatible depths,
+    ``unsupported`` a depth no neighbour shares. All (H, W) bool; a pixel
+    with a shadow time and none of these reasons is "shadow seen, no depth"
+    (no shadow plane near its time, or the light refused it).
     """
     c = np.where(contrast_ok, NO_DEPTH, NO_SHADOW).astype(np.uint8)
+    if ambiguous is not None:
+        c[ambiguous & ~contrast_ok] = AMBIGUOUS
+    if unsupported is not None:
+        c[unsupported & contrast_ok] = NO_NEIGHBOUR
+    if conflict is not None:
+        c[conflict & contrast_ok] = EDGES_DISAGREE
     c[valid] = POINT
     if undersampled is not None:
         c[valid & undersampled] = UNDERSAMPLED
@@ -96,7 +111,8 @@ def preview_image(rgb: np.ndarray, depth: np.ndarray, sigma: np.ndarray, coverag
     cov = lut[fit(np.asarray(coverage, np.uint8), nearest=True)]
     u = f" {units}" if units else ""
     share = {k: float(np.mean(coverage == k)) for k in COVERAGE_CLASSES}
-    short = {POINT: "points", NO_DEPTH: "no depth", UNDERSAMPLED: "under-sampled", CROPPED: "cropped"}
+    short = {POINT: "points", NO_DEPTH: "no depth", UNDERSAMPLED: "under-sampled", CROPPED: "cropped",
+             AMBIGUOUS: "ambiguous", EDGES_DISAGREE: "edges disagree", NO_NEIGHBOUR: "no neighbour"}
     legend = ", ".join(f"{short[k]} {100 * share[k]:.0f}%" for k in short if share[k] > 0)
     bar = max(18, size[1] // 12)
     panels = [
