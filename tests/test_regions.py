@@ -171,3 +171,39 @@ def test_shadow_plane_ransac_ignores_an_object_inside_a_region() -> None:
     inl = ransac_shadow_plane(points, label, np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]), np.array([1.0, 1.0]))
     assert inl[:220].mean() > 0.99
     assert not inl[220:].any()
+
+
+def test_predicted_times_ignore_lines_off_the_sweep() -> None:
+    """A plane swept by lines x = 10·t mm (frames 5–45), plus the wrong lines a real first pass finds: in
+    frame 1 a line beyond the sweep's end (an off-plane surface's isochrone back-projected onto the
+    plane: on the stand capture's wall it reversed the sweep's sense and left every pixel unpredicted), in
+    frame 2 one far behind its start and in frame 30 one behind its neighbours. Every pixel the true lines pass gets its time (to 1e-9 frame), and the wrong lines are the
+    ones left out."""
+    from gnomon.reference_lines import PlaneInCamera, ReferenceLines
+    from gnomon.regions import monotone_sweep, predicted_times
+
+    n_frames = 50
+    # Plane z = 1000 mm in the camera frame; plane coordinates (x, y) = camera (x, y) via e1, e2.
+    plane = PlaneInCamera(np.array([0.0, 0.0, 1.0]), 1000.0, np.array([0.0, 0.0, 1000.0]),
+                          np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    point = np.full((n_frames, 3), np.nan)
+    direction = np.full((n_frames, 3), np.nan)
+    for t in range(5, 46):
+        point[t], direction[t] = [10.0 * t - 250.0, 0.0, 1000.0], [0.0, 1.0, 0.0]
+    point[1], direction[1] = [900.0, 0.0, 1000.0], [0.0, 1.0, 0.0]  # beyond the sweep's end
+    point[2], direction[2] = [-900.0, 0.0, 1000.0], [0.0, 1.0, 0.0]  # far behind its start
+    point[30], direction[30] = [10.0 * 20 - 250.0, 0.0, 1000.0], [0.0, 1.0, 0.0]  # back at frame 20's place
+    lines = ReferenceLines("p", plane, point, direction, np.zeros(n_frames), np.zeros(n_frames, dtype=int),
+                           [np.zeros((0, 2))] * n_frames, np.zeros(n_frames, dtype=bool),
+                           [np.zeros((0, 3))] * n_frames)
+    x = np.linspace(-195.0, 195.0, 40)
+    rays = np.stack([x / 1000.0, np.zeros_like(x), np.ones_like(x)], axis=1)
+    pred = predicted_times(lines, rays.reshape(1, -1, 3))[0]
+    truth = (x + 250.0) / 10.0
+    assert np.all(np.isfinite(pred))
+    np.testing.assert_allclose(pred, truth, atol=1e-9)  # across 29–31 too: the sweep is linear
+    found = np.flatnonzero(np.isfinite(point[:, 0]))
+    centres = point[found][:, :2]
+    normals = np.stack([-direction[found][:, 1], direction[found][:, 0]], axis=1)
+    kept = found[monotone_sweep(found, centres, normals)]
+    assert 1 not in kept and 2 not in kept and 30 not in kept and len(kept) == 40

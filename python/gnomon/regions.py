@@ -48,13 +48,15 @@ from gnomon.reference_lines import (
     mask_crossings,
 )
 
-__all__ = ["PlaneRegion", "hull_mask", "nearest_plane", "pixel_footprint", "predicted_times", "propose_regions",
-           "ransac_shadow_plane", "shadow_lines", "smooth_times"]
+__all__ = ["PlaneRegion", "hull_mask", "monotone_sweep", "nearest_plane", "pixel_footprint", "predicted_times",
+           "propose_regions", "ransac_shadow_plane", "shadow_lines", "smooth_times"]
 
 # The first lines (over the seed, which may hold objects) are RANSAC lines of this tolerance, in pixels on the plane.
 RANSAC_PIXELS = 2.0
 # Neighbouring shadow times of a smooth swept surface differ by less than this (frames).
 SMOOTH_STEP = 2.0
+# A plane's lines are one sweep where consecutive lines move less than this times their median speed (per frame).
+MAX_SPEED_RATIO = 8.0
 
 
 @dataclass
@@ -196,11 +198,61 @@ def shadow_lines(times: np.ndarray, n_frames: int, planes: list[PlaneInCamera], 
     return lines
 
 
+def monotone_sweep(frames: np.ndarray, centres: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Which of a plane's lines sweep it monotonically and smoothly: the longest such run (bool mask).
+
+    ``frames`` (N,) increasing frame of each line, ``centres`` (N, 2) a point
+    of it and ``normals`` (N, 2) its unit normal, plane coordinates;
+    ``normals`` is turned in place so that every normal points the way the
+    lines move. Each line's position is its signed distance past the lines'
+    mean centre; the sweep's sense is the sign of the median step between
+    consecutive lines. The lines kept are the longest strictly increasing
+    subsequence of positions, cut where it jumps by more than
+    ``MAX_SPEED_RATIO`` times the median speed (per frame), of which the
+    longest piece. A wrong line (an object's isochrone, a surface off the
+    plane, behind, beyond or far ahead of the sweep) is left out instead of
+    turning the sense or breaking the bracketing of every point.
+    """
+    n = len(centres)
+    keep = np.zeros(n, dtype=bool)
+    if n == 0:
+        return keep
+    normals *= np.where(normals @ normals[n // 2] < 0, -1.0, 1.0)[:, None]
+    pos = np.einsum("ij,ij->i", centres - centres.mean(axis=0), normals)
+    if n > 1 and np.median(np.diff(pos)) < 0:
+        normals *= -1.0
+        pos = -pos
+    # Longest strictly increasing subsequence (patience sorting, O(n log n)).
+    tails: list[int] = []
+    parent = np.full(n, -1)
+    for i in range(n):
+        j = int(np.searchsorted(pos[tails], pos[i], side="left")) if tails else 0
+        if j > 0:
+            parent[i] = tails[j - 1]
+        if j == len(tails):
+            tails.append(i)
+        else:
+            tails[j] = i
+    run = []
+    i = tails[-1]
+    while i >= 0:
+        run.append(i)
+        i = int(parent[i])
+    idx = np.array(run[::-1])
+    if len(idx) > 2:
+        speed = np.diff(pos[idx]) / np.diff(np.asarray(frames, dtype=np.float64)[idx])
+        cut = np.flatnonzero(speed > MAX_SPEED_RATIO * np.median(speed)) + 1
+        pieces = np.split(idx, cut)
+        idx = max(pieces, key=len)
+    keep[idx] = True
+    return keep
+
+
 def predicted_times(lines: ReferenceLines, ray_map: np.ndarray) -> np.ndarray:
     """(H, W) the frame (sub-frame) at which the plane's shadow line passes each pixel's point.
 
-    The lines must sweep the plane monotonically (each frame's line beyond the
-    previous one). The pair of consecutive frames with a line whose lines
+    Only the lines that sweep the plane monotonically are used (the longest
+    such run, :func:`monotone_sweep`). The pair of consecutive frames with a line whose lines
     bracket the point is found by bisection, and the point's signed distances
     to them interpolated linearly; pixels the lines never pass (or whose ray
     misses the plane) are NaN.
@@ -218,10 +270,10 @@ def predicted_times(lines: ReferenceLines, ray_map: np.ndarray) -> np.ndarray:
     d3 = lines.direction[found]
     d2 = np.stack([d3 @ plane.e1, d3 @ plane.e2], axis=1)
     normals = np.stack([-d2[:, 1], d2[:, 0]], axis=1)
-    # One sense for every normal: the way the line moves.
-    motion = centres[-1] - centres[0]
-    ref = motion if np.linalg.norm(motion) > 0 else normals[0]
-    normals *= np.where(normals @ ref < 0, -1.0, 1.0)[:, None]
+    keep = monotone_sweep(found, centres, normals)
+    found, centres, normals = found[keep], centres[keep], normals[keep]
+    if len(found) < 2:
+        return out.reshape(h, w)
     offsets = np.einsum("ij,ij->i", centres, normals)
 
     def signed(k: np.ndarray) -> np.ndarray:  # > 0: the point is ahead of line k (not yet reached)
