@@ -177,8 +177,8 @@ def test_predicted_times_ignore_lines_off_the_sweep() -> None:
     """A plane swept by lines x = 10·t mm (frames 5–45), plus the wrong lines a real first pass finds: in
     frame 1 a line beyond the sweep's end (an off-plane surface's isochrone back-projected onto the
     plane: on the stand capture's wall it reversed the sweep's sense and left every pixel unpredicted), in
-    frame 2 one far behind its start and in frame 30 one behind its neighbours. Every pixel the true lines pass gets its time (to 1e-9 frame), and the wrong lines are the
-    ones left out."""
+    frame 2 one far behind its start and in frame 30 one behind its neighbours. Every pixel the true
+    lines pass gets its time (to 1e-9 frame), and the wrong lines are the ones left out."""
     from gnomon.reference_lines import PlaneInCamera, ReferenceLines
     from gnomon.regions import monotone_sweep, predicted_times
 
