@@ -52,6 +52,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from gnomon import toml_io
 from gnomon.cli import main as gnomon
+from gnomon.markers import find_cross
 from score import score_scan
 
 FROG_MARKERS = {  # rough pixels of the printed markers in frame 1 (refined by the scan)
@@ -136,28 +137,6 @@ def frog(mirror: Path, out: Path) -> None:
     print("\n".join(score.lines()), flush=True)
 
 
-def cross_centre(grey: np.ndarray, rough: np.ndarray, search: int = 60, radius: int = 10) -> np.ndarray:
-    """The centre of a hand-drawn cross within ``search`` px of ``rough`` (pixels).
-
-    Thin dark strokes are isolated by a black-hat filter; the cross is where
-    they overlap most (the maximum of the blurred response), refined to the
-    centroid of the strokes within ``radius`` px.
-    """
-    u0, v0 = int(np.rint(rough[0])), int(np.rint(rough[1]))
-    h, w = grey.shape
-    a0, a1 = max(u0 - search, 0), min(u0 + search + 1, w)
-    b0, b1 = max(v0 - search, 0), min(v0 + search + 1, h)
-    patch = grey[b0:b1, a0:a1].astype(np.float32)
-    ink = cv2.morphologyEx(patch, cv2.MORPH_BLACKHAT, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (11, 11)))
-    resp = cv2.GaussianBlur(ink, (0, 0), 4)
-    vv, uu = np.unravel_index(int(np.argmax(resp)), resp.shape)
-    y0, x0 = max(vv - radius, 0), max(uu - radius, 0)
-    win = ink[y0:vv + radius + 1, x0:uu + radius + 1]
-    weight = np.clip(win - 0.3 * win.max(), 0, None)
-    yy, xx = np.mgrid[y0:y0 + win.shape[0], x0:x0 + win.shape[1]]
-    return np.array([a0 + (weight * xx).sum() / weight.sum(), b0 + (weight * yy).sum() / weight.sum()])
-
-
 def phone_camera(mirror: Path, out: Path) -> Path:
     """The video's camera: the stills' calibration (gnomon, 2992×2000) as a centred 16:9 crop scaled to 1920×1080.
 
@@ -192,8 +171,32 @@ def npz_evidence(seq: Path, first: np.ndarray) -> dict:
         pix = cv2.projectPoints(obj, cv2.Rodrigues(e["rmat_" + s])[0], e["tvec_" + s], mtx, dist)[0].reshape(-1, 2)
         out["clicks_" + s] = pix
     nh, nv = e["rmat_h"][:, 2], e["rmat_v"][:, 2]
+    out["offset_h"] = float(abs(nh @ e["tvec_h"].ravel()))
+    out["offset_v"] = float(abs(nv @ e["tvec_v"].ravel()))
     out["angle_deg"] = float(np.degrees(np.arccos(abs(nh @ nv))))
     return out
+
+
+def focal_evidence(camera: Path, pixels: np.ndarray) -> tuple[float, float, float]:
+    """(RMS px at the camera's focal length, best focal length, RMS px there) of the crosses' fit to the
+    152 × 121 mm rectangle, the focal length varied (principal point and distortion kept). A plane's 4
+    points test 2 degrees of freedom; a residual that no focal length removes is in the crosses themselves
+    (not where ``plane_xy`` says, or the paper not flat), one that a focal length removes is the camera's."""
+    cam = toml_io.load(camera)
+    obj = np.array([[0, 0, 0], [PHONE_RECT[0], 0, 0], [PHONE_RECT[0], PHONE_RECT[1], 0], [0, PHONE_RECT[1], 0]],
+                   dtype=np.float64)
+    dist = np.array(cam["dist"], dtype=np.float64)
+
+    def rms(f: float) -> float:
+        K = np.array([[f, 0, cam["cx"]], [0, f, cam["cy"]], [0, 0, 1.0]])
+        _, rv, tv = cv2.solvePnP(obj, pixels, K, dist, flags=cv2.SOLVEPNP_IPPE)
+        rv, tv = cv2.solvePnPRefineLM(obj, pixels, K, dist, rv, tv)
+        return float(np.sqrt(np.mean(np.sum((cv2.projectPoints(obj, rv, tv, K, dist)[0].reshape(-1, 2) - pixels) ** 2,
+                                            axis=1))))
+
+    fs = np.geomspace(0.5, 2.0, 121) * cam["fx"]
+    r = np.array([rms(f) for f in fs])
+    return rms(cam["fx"]), float(fs[np.argmin(r)]), float(r.min())
 
 
 def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
@@ -220,13 +223,19 @@ def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
     for plane, s in (("desk", "h"), ("wall", "v")):
         clicks = ev["clicks_" + s]
         rough = np.array(ROUGH[name][plane], dtype=np.float64) if name in ROUGH else scale * clicks
-        crosses = np.array([cross_centre(first, r) for r in rough])
+        crosses = np.array([find_cross(first, r, name=f'{plane} {k}', source=first_path.name)
+                            for k, r in enumerate(rough)])
         print(f"{name} {plane}: npz clicks re-projected {np.round(clicks, 1).tolist()}; crosses found at "
               f"{np.round(crosses, 1).tolist()} (the scaled clicks off by "
               f"{np.round(np.hypot(*(crosses - rough).T), 1).tolist()} px)")
+        at_f, best_f, best = focal_evidence(camera, crosses)
+        print(f"{name} {plane}: the crosses fit the {PHONE_RECT[0]:g} × {PHONE_RECT[1]:g} mm rectangle to "
+              f"{at_f:.2f} px RMS with the camera (f = {toml_io.load(camera)['fx']:.0f} px); best over focal "
+              f"lengths {best:.2f} px at f = {best_f:.0f} px")
         planes.append(plane_table(plane, PHONE_RECT, crosses, exact=True))
     print(f"{name}: npz intrinsics fx/fy = {ev['fx_over_fy']:.4f} (stills squashed to 1920×1080 give "
-          f"{ev['squash']:.4f}); npz desk–wall angle {ev['angle_deg']:.2f}°", flush=True)
+          f"{ev['squash']:.4f}); npz desk–wall angle {ev['angle_deg']:.2f}°; npz planes {ev['offset_h']:.0f} / "
+          f"{ev['offset_v']:.0f} mm from the camera", flush=True)
     rel = Path(os.path.relpath(camera, folder)).as_posix()
     log = {"capture": {"frames": "frames/*.jpg", "gamma": "srgb"}, "camera": {"file": rel},
            "planes": planes, "light": {"kind": "two-plane"}, "scan": {"normalize_illumination": True}}
@@ -238,7 +247,8 @@ def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
     rep = json.loads((scan / "report.json").read_text())
     for p in rep["reference_planes"]:
         extra = f", {p['angle_to_first_deg']:.2f}° to the desk" if "angle_to_first_deg" in p else ""
-        print(f"{name} {p['plane']}: crosses reprojection RMS {p['rms_px']:.2f} px{extra}")
+        print(f"{name} {p['plane']}: crosses reprojection RMS {p['rms_px']:.2f} px{extra}, "
+              f"{p['offset_cam']:.0f} mm from the camera")
     masks = {p: cv2.imread(str(folder / "regions" / f"{p}_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
              for p in ("desk", "wall")}
     score = score_scan(name, scan, camera, None, region_masks=masks)
