@@ -231,7 +231,9 @@ def find_cross(
     beside the cross, e.g. the stick's trace, pulls a centroid by about a
     pixel, not the symmetric centre: 0.05 px on the synthetic test). A maximum on the search
     window's border means the cross lies beyond it (a rough click far off):
-    the search moves there, up to ``follow`` times. Raises GnomonError when
+    the ink is followed from there through small windows (``2·radius_px``
+    around each border maximum, its local maximum rather than the darkest
+    thing near it), up to ``follow`` times. Raises GnomonError when
     there is no ink.
     """
     img = grey_8bit_scale(image)
@@ -243,7 +245,7 @@ def find_cross(
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (stroke_px, stroke_px))
     s = int(np.ceil(search_px))
     cu, cv_ = int(np.rint(u0)), int(np.rint(v0))
-    for _ in range(follow + 1):
+    for step in range(follow + 1):
         a0, a1 = max(cu - s, 0), min(cu + s + 1, w)
         b0, b1 = max(cv_ - s, 0), min(cv_ + s + 1, h)
         ink = cv2.morphologyEx(img[b0:b1, a0:a1], cv2.MORPH_BLACKHAT, kernel)
@@ -255,7 +257,10 @@ def find_cross(
                      or (vv < radius_px and b0 > 0) or (vv >= resp.shape[0] - radius_px and b1 < h))
         if not on_border:
             break
+        # Follow the ink outwards: a small window around the border maximum (its own local maximum,
+        # not whatever is darkest within the whole search radius of it).
         cu, cv_ = a0 + int(uu), b0 + int(vv)
+        s = 2 * radius_px
     # Mean shift: the centroid of the ink within a disc of radius_px, recentred until it stays (a cross's
     # strokes are point-symmetric about its centre; the blurred maximum leans towards other ink near it).
     yy, xx = np.mgrid[0:ink.shape[0], 0:ink.shape[1]].astype(np.float64)

@@ -17,7 +17,9 @@ surface off the plane has no shadow time or another one. So:
    the other planes' lines;
 2. predict every pixel's shadow time from those lines (the frame at which
    the line, interpolated between consecutive frames, crosses the pixel's
-   point on the plane), for the entering and the leaving edge;
+   point on the plane), for the entering and the leaving edge, from the
+   longest run of lines that sweep the plane monotonically (a wrong line
+   beyond the sweep, e.g. an off-plane surface's isochrone, is left out);
 3. keep the pixels whose measured times agree with both predictions within
    ``tolerance`` frames, and that no other plane explains as well; open the
    mask (drop speckle), drop small pieces and pieces that do not reach into
