@@ -245,7 +245,7 @@ def find_cross(
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (stroke_px, stroke_px))
     s = int(np.ceil(search_px))
     cu, cv_ = int(np.rint(u0)), int(np.rint(v0))
-    for step in range(follow + 1):
+    for _ in range(follow + 1):
         a0, a1 = max(cu - s, 0), min(cu + s + 1, w)
         b0, b1 = max(cv_ - s, 0), min(cv_ + s + 1, h)
         ink = cv2.morphologyEx(img[b0:b1, a0:a1], cv2.MORPH_BLACKHAT, kernel)
