@@ -64,20 +64,30 @@ def test_refusals_are_never_silent(day) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the lamp post's dip, triangulated on the pole's plane at its time, lands "
-                   "7-10 m from the pole, inside the pole's umbra range: there the pole would hide the whole disc, "
-                   "so the dip's depth (measured 0.57-0.86 of the light), its duration and its side all fit the "
-                   "pole; only a second candidate dip per pixel (the pole's, later) or the reference planes' "
-                   "geometry would tell them apart (not done)")
 def test_gross_errors_are_rare(day) -> None:
-    _, _, _, acc = day
+    """The lamp post's dip, triangulated on the pole's plane at its time, lands 7-10 m off and passes
+    every per-pixel check of the pole; the tracker's second candidate dip and the surfaces the two
+    candidates make against the reference planes tell them apart (measured: 0.57 % gross)."""
+    _, _, result, acc = day
     assert acc.gross_rate <= 0.01, acc
+    assert any("pole's dip chosen by geometry" in w and "took their second dip" in w for w in result.warnings)
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the clouds are skipped now, but most swept pixels also see the lamp "
-                   "post's shadow: the tracker keeps one dip and a rival's depth, so a pixel with both is "
-                   "ambiguous (or the post's dip wins) and no point measures the pole's shadow there")
+def test_coverage_of_the_cloud_free_passages(day) -> None:
+    """Where the pole's shadow passed in clear frames, the pole's dip is measured although the lamp
+    post's shadow crosses most of those pixels too (measured: 67.7 % of the swept pixels, of 69.5 %
+    passed in clear frames; 32.5 % with one dip per pixel)."""
+    _, truth, _, acc = day
+    clear = truth["cloud_free_passage"].sum() / truth["swept"].sum()
+    assert acc.coverage >= 0.9 * clear, (acc, clear)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="30 % of the swept pixels (9,256 of 30,349) see the pole's shadow pass "
+                   "during the clouds' frames, which the illumination normaliser skips, so the tracker never sees "
+                   "those dips: coverage 67.7 % (the clear passages are 69.5 %); tracking through the cloud frames "
+                   "(normalised instead of skipped) is not done")
 def test_coverage_of_the_day(day) -> None:
     _, _, _, acc = day
     assert acc.coverage >= 0.85, acc

@@ -443,3 +443,37 @@ def test_numpy_tracker_captures_in_chunks(monkeypatch):
     monkeypatch.setattr(tracking, "_CAPTURE_CHUNK", 7)
     times = track_both(values + rng.normal(0, 1.0, (n, pixels)))
     assert times.ambiguous[0, ::3].all() and times.valid.sum() > pixels // 2
+
+
+@pytest.mark.parametrize("normalize", [False, True])
+def test_the_second_candidate_dip_has_its_own_times(normalize):
+    """Two comparable sharp dips (the pole's and a lamp post's): the pixel is ambiguous, but
+    ShadowTracker.second_dips keeps both candidates' times (sub-frame, noise σ = 1 DN), the
+    second's contrast is the rival's depth in DN of the input (also through the normaliser), and a pixel
+    with one dip has no second above the contrast floor."""
+    from gnomon.tracking import ShadowTracker, TrackerSettings
+
+    rng = np.random.default_rng(14)
+    n, pixels = 150, 40
+    first, second = (30.3, 36.8), (100.5, 107.1)
+    two = np.stack([dips_profile(n, [(*first, SHADOW), (*second, LIT - 0.9 * (LIT - SHADOW))])
+                    for _ in range(pixels)], axis=1)
+    one = np.stack([dips_profile(n, [(*first, SHADOW)]) for _ in range(pixels)], axis=1)
+    # (and lit pixels, most of the image, that set the normaliser's gain)
+    values = np.concatenate([two, one, np.full((n, 10 * pixels), LIT)], axis=1) + rng.normal(0, 1.0, (n, 12 * pixels))
+    frames = to_frames(values, (1, 12 * pixels), np.uint8)
+    settings = TrackerSettings(gamma=1.0, min_contrast=20.0, normalize_illumination=normalize, max_width=16)
+    tracker = ShadowTracker(settings, (1, 12 * pixels), np.dtype(np.uint8))
+    for f in frames:
+        assert tracker.update(f)
+    times, _ = tracker.finish()
+    dips = tracker.second_dips()
+    both, alone = np.s_[0, :pixels], np.s_[0, pixels:2 * pixels]
+    assert times.ambiguous[both].all() and times.valid[alone].all()
+    assert rms(dips.best_enter[both] - first[0]) <= 0.05 and rms(dips.best_leave[both] - first[1]) <= 0.05
+    assert rms(dips.enter[both] - second[0]) <= 0.05 and rms(dips.leave[both] - second[1]) <= 0.05
+    np.testing.assert_allclose(dips.contrast[both], 0.9 * (LIT - SHADOW), atol=4)
+    if not normalize:  # (the normaliser reports the rival in its linear units)
+        np.testing.assert_array_equal(dips.contrast[both], times.rival[both])
+    np.testing.assert_array_equal(dips.best_enter[alone], times.enter[alone])
+    assert np.all(dips.contrast[alone] < 20)  # only the noise's wiggles, below the floor

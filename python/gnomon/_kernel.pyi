@@ -63,6 +63,36 @@ class ShadowTimes:
     @property
     def shape(self) -> tuple[int, int]: ...
 
+class SecondDips:
+    """Every pixel's second candidate dip (the event whose depth is ``ShadowTimes.rival``);
+    read-only float32 arrays (H, W) with ``ShadowTimes``' meanings (0 levels, NaN times where
+    there is none), and the best dip's ``best_*`` times and slopes wherever it exists."""
+
+    @property
+    def imax(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def imin(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def contrast(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def threshold(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def enter(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def leave(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def enter_slope(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def leave_slope(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def best_enter(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def best_leave(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def best_enter_slope(self) -> npt.NDArray[np.float32]: ...
+    @property
+    def best_leave_slope(self) -> npt.NDArray[np.float32]: ...
+
 class FinishedPixels:
     """Pixels whose dip ended (the live watch of :meth:`TemporalTracker.watch`); read-only
     1-D arrays, one entry per pixel, in row order.
@@ -124,6 +154,9 @@ class TemporalTracker:
         ``min_contrast`` in DN. ``lut``: float32 decoding table DN → linear
         irradiance (256 or 65536 finite, non-decreasing entries), identity if None.
         """
+    def finish_second(self, lut: npt.NDArray[np.float32] | None = None) -> SecondDips:
+        """Every pixel's second candidate dip for the frames seen so far (see :class:`SecondDips`);
+        the tracker is unchanged. ``lut`` as in :meth:`finish`."""
     def watch(self, min_contrast: float, recover: int = 3, lut: npt.NDArray[np.float32] | None = None) -> None:
         """Start the live watch from the next frame on (replacing an earlier one).
 

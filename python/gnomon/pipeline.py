@@ -518,6 +518,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
             ray_map = rays.result()
     _check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
+    warnings += setup.light.choose_dips(tracked, ray_map, setup.planes, setup.max_depth_jump,
+                                        _min_contrast_dn(setup.tracker.min_contrast, tracked.noise_dn))
     with _timed(timings, "planes_and_triangulation_s"):
         levels = _Levels(tracked)
         edges = _reconstruct_edges(setup, tracked, ray_map, warnings, levels)

@@ -24,6 +24,7 @@ from __future__ import annotations
 import os
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -32,7 +33,7 @@ import numpy as np
 
 from gnomon.errors import GnomonError
 from gnomon.frames import Frame, FrameSource, decode_image_file, to_grey
-from gnomon.tracking import ShadowTimes, TrackedSequence, TrackerSettings, track_source
+from gnomon.tracking import SecondDips, ShadowTimes, TrackedSequence, TrackerSettings, track_source
 
 __all__ = ["TileGrid", "TileResult", "TiledTracker", "current_rss_bytes", "peak_rss_bytes", "reset_peak_rss", "stitch",
            "track_tile"]
@@ -154,15 +155,20 @@ def stitch(tiles: list[TileResult], shape: tuple[int, int]) -> TrackedSequence:
                 or t.frames_digest != tiles[0].frames_digest):
             raise GnomonError(f"tile {t.bounds}: the frames it tracked differ from the other tiles' "
                               "(did the frames change during the scan?)")
-    maps = {}
-    for f in fields(ShadowTimes):
-        sample = getattr(tiles[0].tracked.times, f.name)
-        maps[f.name] = np.empty(shape, dtype=sample.dtype)
-    for t in tiles:
-        r0, r1, c0, c1 = t.bounds
-        for name, full in maps.items():
-            full[r0:r1, c0:c1] = getattr(t.tracked.times, name)
-    return replace(first, times=ShadowTimes(**maps))
+    def pasted(part: Callable[[TrackedSequence], Any], kind: type) -> Any:
+        maps = {}
+        for f in fields(kind):
+            sample = getattr(part(tiles[0].tracked), f.name)
+            maps[f.name] = np.empty(shape, dtype=sample.dtype)
+        for t in tiles:
+            r0, r1, c0, c1 = t.bounds
+            for name, full in maps.items():
+                full[r0:r1, c0:c1] = getattr(part(t.tracked), name)
+        return kind(**maps)
+
+    second = (pasted(lambda tr: tr.second, SecondDips) if all(t.tracked.second is not None for t in tiles)
+              else None)
+    return replace(first, times=pasted(lambda tr: tr.times, ShadowTimes), second=second)
 
 
 @dataclass

@@ -97,6 +97,38 @@ class ShadowTimes:
         return self.enter.shape
 
 
+@dataclass
+class SecondDips:
+    """Every pixel's second candidate dip (the event whose depth is ``ShadowTimes.rival``), and
+    the best dip's times wherever it exists; every array is (H, W) float32.
+
+    ``imax``, ``imin``, ``contrast`` (DN of the input), ``threshold`` (linear), ``enter``,
+    ``leave`` (frames), ``enter_slope``, ``leave_slope`` (linear per frame): the second dip, as
+    :class:`ShadowTimes` defines them for the best (0 levels and NaN times where there is none).
+    ``best_enter``, ``best_leave``, ``best_enter_slope``, ``best_leave_slope``: the best dip's
+    times and slopes also where it is ambiguous or below the contrast floor. A light model
+    that can tell its own shadow's dip from another chooses between the two
+    (:meth:`gnomon.light.base.LightModel.choose_dips`).
+    """
+
+    imax: np.ndarray
+    imin: np.ndarray
+    contrast: np.ndarray
+    threshold: np.ndarray
+    enter: np.ndarray
+    leave: np.ndarray
+    enter_slope: np.ndarray
+    leave_slope: np.ndarray
+    best_enter: np.ndarray
+    best_leave: np.ndarray
+    best_enter_slope: np.ndarray
+    best_leave_slope: np.ndarray
+
+    @classmethod
+    def from_kernel(cls, result: _kernel.SecondDips) -> SecondDips:
+        return cls(**{f.name: np.asarray(getattr(result, f.name)) for f in fields(cls)})
+
+
 def _check_dtype(dtype) -> np.dtype:
     dt = np.dtype(dtype)
     if dt not in SUPPORTED_DTYPES:
@@ -303,7 +335,7 @@ class ShadowTracker:
         self._tracker.update(grey if self.crop is None else np.ascontiguousarray(grey[self.crop]))
         return True
 
-    def _gain_at_dip(self, times: ShadowTimes) -> np.ndarray:
+    def _gain_at_dip(self, times: ShadowTimes | SecondDips) -> np.ndarray:
         """(H, W) float32: the normaliser's gain at each pixel's dip (between its two times; the
         median gain where a pixel has no time)."""
         assert self.normalizer is not None
@@ -342,6 +374,22 @@ class ShadowTracker:
     def watch_counts(self) -> tuple[int, int, int] | None:
         """Pixels of the live watch lit, in a dip and finished (None before :meth:`watch`)."""
         return self._tracker.watch_counts
+
+    def second_dips(self) -> SecondDips:
+        """The second candidate dips (:class:`SecondDips`), in the units :meth:`finish` reports
+        (the input's DN for the levels; with normalisation, each dip's levels, threshold and slopes
+        at the global gain of its own time, its contrast back in the input's DN)."""
+        if self.normalizer is None:
+            return SecondDips.from_kernel(self._tracker.finish_second(self.input_lut))
+        lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
+        dips = SecondDips.from_kernel(self._tracker.finish_second(lut))
+        scale = self._gain_at_dip(dips)
+        for name in ("imax", "imin", "threshold", "enter_slope", "leave_slope"):
+            setattr(dips, name, (getattr(dips, name) * scale).astype(np.float32))
+        code = lambda lin: np.searchsorted(self.input_lut, lin.astype(np.float32))  # noqa: E731
+        dips.contrast = np.where(dips.contrast > 0, code(dips.imax / LINEAR_SCALE) - code(dips.imin / LINEAR_SCALE),
+                                 0).astype(np.float32)
+        return dips
 
     def finish(self) -> tuple[ShadowTimes, np.ndarray]:
         """The shadow times and the decoding table (DN fed to the kernel → linear) they were measured with."""
@@ -389,6 +437,7 @@ class TrackedSequence:
     lut: np.ndarray
     input_lut: np.ndarray
     info: dict = field(default_factory=dict)
+    second: SecondDips | None = None  # the second candidate dips, when the pass kept them
 
     @property
     def n_frames(self) -> int:
@@ -462,7 +511,8 @@ def track_source(
         raise FrameError(f"{source.name}: fewer than two usable frames (sun below the horizon or clouds)")
     times, lut = tracker.finish()
     noise_dn = float(np.median([n.result() for n in noise])) if noise else 1.0
-    return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, lut, tracker.input_lut)
+    return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, lut, tracker.input_lut,
+                           second=tracker.second_dips())
 
 
 def _check_first(frame: Frame, shape: tuple[int, int], where: str) -> None:

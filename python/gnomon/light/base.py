@@ -6,7 +6,8 @@ units, frames of the tracker):
 
 * which capture frames the tracker must not see (:meth:`LightModel.skipped_frames`),
   and the capture time of a frame (:meth:`LightModel.frame_time`);
-* what the tracking pass means for it (:meth:`LightModel.after_tracking`);
+* what the tracking pass means for it (:meth:`LightModel.after_tracking`), and
+  which of a pixel's two candidate dips is its own shadow's (:meth:`LightModel.choose_dips`);
 * which shadow edges to reconstruct (:meth:`LightModel.edges`) and, for each,
   the shadow planes Π(t) in the camera frame (:meth:`LightModel.shadow_planes`);
 * its entries in ``report.json`` (:meth:`LightModel.report`) and its part of
@@ -27,7 +28,7 @@ import numpy as np
 
 from gnomon.camera import CameraModel
 from gnomon.reference_lines import ReferenceLines, ReferencePlane, measure_reference_lines
-from gnomon.tracking import ShadowTimes
+from gnomon.tracking import ShadowTimes, TrackedSequence
 from gnomon.uncertainty import line_time_sigma
 
 __all__ = ["EdgePlanes", "EdgeTimes", "LightModel", "Recorder", "ReferenceGeometry", "Screening",
@@ -134,6 +135,15 @@ class LightModel:
         """Told which capture frames the tracker saw (in order); returns warnings."""
         if skipped_dips:
             return [skipped_frames_warning(skipped_dips, "sudden illumination dips")]
+        return []
+
+    def choose_dips(self, tracked: TrackedSequence, ray_map: np.ndarray, planes: tuple[ReferencePlane, ...],
+                    max_jump: float, min_contrast_dn: float) -> list[str]:
+        """Choose, per pixel, between the tracker's two candidate dips (``tracked.second``) the one
+        this light's shadow made, rewriting ``tracked.times`` in place; returns warnings.
+        ``ray_map`` (H, W, 3) unit camera rays; ``planes`` the reference planes; ``max_jump`` the
+        relative depth step separating surfaces; ``min_contrast_dn`` the contrast floor (DN).
+        By default the tracker's own verdict stands (its deepest dip, unless ambiguous)."""
         return []
 
     def edges(self, enter: EdgeTimes, leave: EdgeTimes, wanted: str) -> list[EdgeTimes]:

@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from gnomon.camera import CameraModel, Pose
+from gnomon.dip_choice import choose_dips
 from gnomon.errors import GnomonError
 from gnomon.georef import georeference_report
 from gnomon.light.base import (
@@ -39,13 +40,15 @@ from gnomon.light.base import (
     Screening,
     skipped_frames_warning,
 )
-from gnomon.reference_lines import PlaneInCamera, ReferenceLines
+from gnomon.reference_lines import PlaneInCamera, ReferenceLines, ReferencePlane
 from gnomon.shadow_planes import sun_shadow_planes
 from gnomon.sun import Site, enu_to_world, sun_direction_enu, sun_position
 from gnomon.timestamps import interpolate_times
-from gnomon.tracking import ShadowTimes
-from gnomon.uncertainty import MIN_FRAMES_PER_TRANSITION
+from gnomon.tracking import ShadowTimes, TrackedSequence
+from gnomon.triangulation import triangulate
+from gnomon.uncertainty import MIN_FRAMES_PER_TRANSITION, linear_noise_at_threshold
 from gnomon.validity import (
+    contrast_above_noise,
     contrast_like_neighbours,
     event_order,
     fully_lit_like_neighbours,
@@ -279,10 +282,86 @@ class SunWithPole(SunLight):
         return [EdgeTimes("centre", centre, leave.slope, 0.5 * np.hypot(enter.sigma_t, leave.sigma_t))]
 
     def shadow_planes(self, edge: EdgeTimes, geometry: ReferenceGeometry) -> EdgePlanes:
+        return EdgePlanes(self._plane_table(), 0, [], np.zeros(len(self._plane_table())), SUBSTEPS, measured=False)
+
+    def _plane_table(self) -> np.ndarray:
         c = self.clock
-        table = pole_plane_table(self.base_world, self.top_world, self._timeline(), c.site, c.heading_deg,
-                                 self.pose)
-        return EdgePlanes(table, 0, [], np.zeros(len(table)), SUBSTEPS, measured=False)
+        return pole_plane_table(self.base_world, self.top_world, self._timeline(), c.site, c.heading_deg, self.pose)
+
+    def _pole_can_explain(self, enter: np.ndarray, leave: np.ndarray, depth: np.ndarray, ray_map: np.ndarray,
+                          relative_depth: np.ndarray, relative_depth_sigma: np.ndarray, n_frames: int) -> np.ndarray:
+        """(H, W) bool: a dip (times in tracker frames, its centre triangulated at ``depth``) the pole's
+        shadow can explain: in order, inside the sequence, on the shadow side below the top, as long as
+        the shadow lasts there and no deeper than the pole makes it (the checks of :meth:`screen`)."""
+        c, pose = self.clock, self.pose
+        points = ray_map * (depth / ray_map[..., 2])[..., None]
+        check = pole_shadow_consistency(points, enter, leave,
+                                        sun_directions_camera(self._timeline(), c.site, c.heading_deg, pose),
+                                        pose.world_to_camera(self.base_world), pose.world_to_camera(self.top_world),
+                                        self.radius)
+        with np.errstate(invalid="ignore"):
+            too_deep = relative_depth - DEPTH_SIGMAS * relative_depth_sigma > check.occlusion
+        return (np.isfinite(depth) & event_order(enter, leave) & inside_sequence(enter, leave, n_frames)
+                & check.ok & ~too_deep)
+
+    def choose_dips(self, tracked: TrackedSequence, ray_map: np.ndarray, planes: tuple[ReferencePlane, ...],
+                    max_jump: float, min_contrast_dn: float) -> list[str]:
+        """Between each pixel's two candidate dips, the pole's: each candidate's centre triangulated on
+        the pole's planes, kept where the pole's shadow can explain it, and chosen by the surfaces the
+        candidates make against the reference planes (:func:`gnomon.dip_choice.choose_dips`) when the
+        regions show another moving shadow; otherwise the tracker's verdict stands."""
+        second, times = tracked.second, tracked.times
+        if second is None:
+            return []
+        table = self._plane_table()
+        lut, n = tracked.lut, tracked.n_frames
+
+        def candidate(enter: np.ndarray, leave: np.ndarray, imax: np.ndarray, imin: np.ndarray,
+                      contrast: np.ndarray) -> np.ndarray:
+            centre = ((enter + leave) / 2 * SUBSTEPS).astype(np.float32)
+            depth = triangulate(ray_map, centre, table).depth
+            hi = lut[np.clip(np.nan_to_num(imax), 0, len(lut) - 1).astype(np.int64)]
+            lo = lut[np.clip(np.nan_to_num(imin), 0, len(lut) - 1).astype(np.int64)]
+            s_hi = linear_noise_at_threshold(tracked.noise_dn, hi, tracked.input_lut)
+            s_lo = linear_noise_at_threshold(tracked.noise_dn, lo, tracked.input_lut)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                rel = np.where(hi > 0, (hi - lo) / hi, np.nan)
+                rel_sigma = np.where(hi > 0, np.hypot(s_lo / hi, lo * s_hi / hi**2), np.nan)
+            deep = contrast_above_noise(contrast, tracked.noise_dn) & (contrast >= min_contrast_dn)
+            ok = deep & self._pole_can_explain(enter, leave, depth, ray_map, rel, rel_sigma, n)
+            return np.where(ok, depth, np.nan)
+
+        depth = np.stack([candidate(second.best_enter, second.best_leave, times.imax, times.imin, times.contrast),
+                          candidate(second.enter, second.leave, second.imax, second.imin, second.contrast)])
+        shape = times.enter.shape
+        region_depth = np.full(shape, np.nan)
+        plane_depths = []
+        for p in planes:
+            zp = p.plane.intersect(ray_map.reshape(-1, 3).astype(np.float64))[:, 2].reshape(shape)
+            plane_depths.append(zp)
+            region_depth[p.mask] = zp[p.mask]
+        dc = choose_dips(depth, region_depth, plane_depths, max_jump, times.valid)
+        if not dc.strict:  # no other shadow on the regions: the tracker's verdict stands
+            return []
+        best, other = dc.choice == 1, dc.choice == 2
+        old_contrast = times.contrast.copy()
+        for name in ("enter", "leave", "enter_slope", "leave_slope"):
+            getattr(times, name)[best] = getattr(second, f"best_{name}")[best]
+        for name in ("imax", "imin", "contrast", "threshold", "enter", "leave", "enter_slope", "leave_slope"):
+            getattr(times, name)[other] = getattr(second, name)[other]
+        times.rival[other] = old_contrast[other]
+        chosen = dc.choice > 0
+        times.enter[~chosen] = np.nan
+        times.leave[~chosen] = np.nan
+        times.ambiguous = (times.ambiguous & ~chosen) | dc.ambiguous
+        times.valid = chosen
+        k = dc.counts
+        return [f"pole's dip chosen by geometry: the reference regions show another moving shadow "
+                f"({k['off_region']} of {k['on_region'] + k['off_region']} of their candidate dips put the point "
+                f"off their plane), so only surfaces the reference planes support are kept; of {k['candidates']} "
+                f"pixels with a dip the pole's shadow can explain, {k['second_chosen']} took their second dip (the "
+                f"deepest was another shadow's), {k['best_kept']} kept their deepest, {k['ambiguous']} stay "
+                f"ambiguous and {k['refused']} ({100 * k['refused'] / max(k['candidates'], 1):.0f} %) were refused"]
 
     def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int,
                relative_depth: np.ndarray | None = None,

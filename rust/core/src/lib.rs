@@ -30,5 +30,7 @@ pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
 pub use sample::Sample;
 pub use simd::SimdPath;
 pub use surface::{grid_normals, stl_records, STL_RECORD_BYTES};
-pub use tracker::{find_crossing, Crossing, Edge, ShadowTimes, TemporalTracker, TrackerParams};
+pub use tracker::{
+    find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,
+};
 pub use triangulate::{plane_at, triangulate};

@@ -31,6 +31,13 @@
 //! ([`TrackerParams::ambiguity`]): two comparable dips (the stick seen
 //! directly, an interreflection, a cloud), no times.
 //!
+//! The event whose depth is `d2` is kept too, as a *second candidate*
+//! ([`SecondState`], [`TemporalTracker::finish_second`]): a far frame deeper
+//! than the best makes the best the second (its windows are copied), a far
+//! frame deeper than the second (not the best) becomes it (its windows
+//! captured as the best's are). A caller that can tell its own shadow's dip
+//! from another's (a pole's from a lamp post's) chooses between the two.
+//!
 //! The best dip's levels are `hi = min(left, right)` and `lo = I_{k1}`. Its
 //! enter is the last fall through the DN mid-level `(hi + lo)/2` before `k1`
 //! (within the left context), its leave the first rise through it after `k1`
@@ -291,6 +298,39 @@ struct RowState<T: Sample> {
     leave_at: Vec<u32>,
     enter_window: Vec<T>,
     leave_window: Vec<T>,
+    /// The second candidate: the event whose depth is `d2` (see [`SecondDips`]).
+    second: SecondState<T>,
+}
+
+/// The state of one row's second candidate dips.
+///
+/// Invariants (frames `0 … D−1`): where `d2[x] > 0`, the event that set it
+/// has its darkest sample at some frame `k2`, `hi2 − lo2 = d2` (its lit level
+/// and that sample), `enter_at2`/`leave_at2` the centres of its enter and
+/// leave windows and `enter_window2`/`leave_window2` the samples around them,
+/// found exactly as the best dip's ([`capture_dip`]); elsewhere `hi2 = lo2 = 0`
+/// and the centres are `NO_FRAME`.
+#[derive(Debug, Clone)]
+struct SecondState<T: Sample> {
+    hi2: Vec<T>,
+    lo2: Vec<T>,
+    enter_at2: Vec<u32>,
+    leave_at2: Vec<u32>,
+    enter_window2: Vec<T>,
+    leave_window2: Vec<T>,
+}
+
+impl<T: Sample> SecondState<T> {
+    fn new(width: usize, half: usize) -> Self {
+        SecondState {
+            hi2: vec![T::MIN; width],
+            lo2: vec![T::MIN; width],
+            enter_at2: vec![NO_FRAME; width],
+            leave_at2: vec![NO_FRAME; width],
+            enter_window2: vec![T::MIN; width * 2 * half],
+            leave_window2: vec![T::MIN; width * 2 * half],
+        }
+    }
 }
 
 impl<T: Sample> RowState<T> {
@@ -306,6 +346,7 @@ impl<T: Sample> RowState<T> {
             leave_at: vec![NO_FRAME; width],
             enter_window: vec![T::MIN; width * 2 * half],
             leave_window: vec![T::MIN; width * 2 * half],
+            second: SecondState::new(width, half),
         }
     }
 }
@@ -408,6 +449,13 @@ fn evaluate_span<'a, T: Sample, V: Vector<T>>(
     let mut hi: V = load(&state.hi, x0);
     let mut lo: V = load(&state.lo, x0);
     let mut moved = none;
+    // The second candidate: the best event's state at the block's start moves
+    // there when a far frame beats it (FROM_BEST), a far frame deeper than the
+    // second (not the best) becomes it (its offset).
+    let mut hi2: V = load(&state.second.hi2, x0);
+    let mut lo2: V = load(&state.second.lo2, x0);
+    let mut moved2 = none;
+    let from_best = V::splat(T::from_offset(FROM_BEST));
     for (i, r) in rows.iter().enumerate() {
         let cur: V = load(r, x0);
         let lit = left.min(right[i]);
@@ -415,6 +463,15 @@ fn evaluate_span<'a, T: Sample, V: Vector<T>>(
         age = age.add_sat(one);
         let better = depth.gt(d1);
         let far = age.gt(far_after);
+        let promote = V::select(far, better, zero);
+        let deeper2 = V::select(better, zero, V::select(far, depth.gt(d2), zero));
+        hi2 = V::select(promote, hi, V::select(deeper2, lit, hi2));
+        lo2 = V::select(promote, lo, V::select(deeper2, cur, lo2));
+        moved2 = V::select(
+            promote,
+            from_best,
+            V::select(deeper2, V::splat(T::from_offset(i)), moved2),
+        );
         d2 = V::select(far, d2.max(depth.min(d1)), d2);
         d1 = d1.max(depth);
         age = V::select(better, zero, age);
@@ -428,6 +485,24 @@ fn evaluate_span<'a, T: Sample, V: Vector<T>>(
     store(age, &mut state.age, x0);
     store(hi, &mut state.hi, x0);
     store(lo, &mut state.lo, x0);
+    store(hi2, &mut state.second.hi2, x0);
+    store(lo2, &mut state.second.lo2, x0);
+    if moved2.ne(none).any() {
+        // Before the best dip's own capture: FROM_BEST copies its windows of the block's start.
+        let mut offsets = [T::NO_OFFSET; MAX_LANES];
+        store(moved2, &mut offsets, 0);
+        for (i, &offset) in offsets[..V::LANES].iter().enumerate() {
+            if offset == T::NO_OFFSET {
+                continue;
+            }
+            if offset.index() == FROM_BEST {
+                promote_best(state, x0 + i, job.half);
+            } else {
+                let ctx = ctx.get_or_insert_with(|| Context::new(ring, row, job.context()));
+                capture_second(state, ctx, x0 + i, job.start + offset.index(), job);
+            }
+        }
+    }
     if !moved.ne(none).any() {
         return;
     }
@@ -470,6 +545,67 @@ impl BlockJob {
         let first = self.start.saturating_sub(self.max_width + self.half);
         let end = (self.start + 2 * self.max_width + self.half).min(self.last + 1);
         first..end
+    }
+}
+
+/// Marks, among the second candidate's block-local offsets, "the best dip of
+/// the block's start became the second" (offsets are `< W ≤ 128`).
+const FROM_BEST: usize = TrackerParams::MAX_WIDTH + 1;
+
+/// Pixel `x`'s best dip (as captured before this block) became its second candidate.
+fn promote_best<T: Sample>(state: &mut RowState<T>, x: usize, half: usize) {
+    let span = 2 * half;
+    let s = &mut state.second;
+    s.enter_at2[x] = state.enter_at[x];
+    s.leave_at2[x] = state.leave_at[x];
+    s.enter_window2[x * span..(x + 1) * span]
+        .copy_from_slice(&state.enter_window[x * span..(x + 1) * span]);
+    s.leave_window2[x * span..(x + 1) * span]
+        .copy_from_slice(&state.leave_window[x * span..(x + 1) * span]);
+}
+
+/// Record the new second candidate of pixel `x` at frame `k2` of `job`'s
+/// block (levels already set by the vector pass), as [`capture_dip`] does the best.
+fn capture_second<T: Sample>(
+    state: &mut RowState<T>,
+    ctx: &Context<'_, T>,
+    x: usize,
+    k2: usize,
+    job: BlockJob,
+) {
+    let s = &mut state.second;
+    let span = 2 * job.half;
+    let (enter, leave) = dip_crossings(ctx, x, k2, s.hi2[x], s.lo2[x], job);
+    fill_window(ctx, x, job, &mut s.enter_window2[x * span..(x + 1) * span], enter);
+    fill_window(ctx, x, job, &mut s.leave_window2[x * span..(x + 1) * span], leave);
+    s.enter_at2[x] = enter as u32;
+    s.leave_at2[x] = leave as u32;
+}
+
+/// The centres of the enter and leave crossings (in DN, through the mid-level
+/// of `hi` and `lo`) of pixel `x`'s dip whose darkest sample is at frame `k`.
+fn dip_crossings<T: Sample>(
+    ctx: &Context<'_, T>,
+    x: usize,
+    k: usize,
+    hi: T,
+    lo: T,
+    job: BlockJob,
+) -> (usize, usize) {
+    let at = |frame: usize| ctx.at(frame, x);
+    let sum = hi.index() + lo.index();
+    let bright = |frame: usize| 2 * at(frame).index() >= sum;
+    let first = job.start.saturating_sub(job.max_width);
+    let enter = (first..k).rev().find(|&c| bright(c)).map_or(first, |c| c + 1);
+    let stop = (job.start + 2 * job.max_width).min(job.last + 1);
+    let leave = (k + 1..stop).find(|&c| bright(c)).unwrap_or(stop - 1);
+    (enter, leave)
+}
+
+/// The `2m` samples of pixel `x` around centre `j` (frames `j−m … j+m−1`, clamped).
+fn fill_window<T: Sample>(ctx: &Context<'_, T>, x: usize, job: BlockJob, dst: &mut [T], j: usize) {
+    for (i, d) in dst.iter_mut().enumerate() {
+        *d = ctx.at((j + i).saturating_sub(job.half).min(job.last), x);
     }
 }
 
@@ -796,6 +932,185 @@ impl<T: Sample> TemporalTracker<T> {
             });
         Ok(times)
     }
+}
+
+impl<T: Sample> TemporalTracker<T> {
+    /// Every pixel's second candidate dip for the frames seen so far (the
+    /// event whose depth is [`ShadowTimes::rival`]); does not change the
+    /// tracker. `lut` as in [`finish`](Self::finish). No contrast floor: the
+    /// caller compares [`SecondDips::contrast`] with its own.
+    pub fn finish_second(&self, lut: Option<&[f32]>) -> Result<SecondDips, KernelError> {
+        if self.frames_seen == 0 {
+            return Err(KernelError::NoFrames);
+        }
+        let lut = decoding_lut::<T>(lut)?;
+        let last = self.frames_seen - 1;
+        let params = self.params;
+        let pending: Vec<BlockJob> = (self.frames_evaluated..=last)
+            .step_by(params.max_width)
+            .map(|start| BlockJob {
+                start,
+                last,
+                max_width: params.max_width,
+                half: params.window,
+            })
+            .collect();
+        let (h, w) = (self.height, self.width);
+        let mut out = SecondDips::empty(h, w);
+        let rows: Vec<SecondRow> = self
+            .rows
+            .par_iter()
+            .enumerate()
+            .map(|(row, evaluated)| {
+                let mut state = evaluated.clone();
+                for &job in &pending {
+                    evaluate_row(self.path, &mut state, &self.ring, row, job);
+                }
+                resolve_second_row(&state, &lut, params.window)
+            })
+            .collect();
+        for (y, r) in rows.into_iter().enumerate() {
+            let at = y * w..(y + 1) * w;
+            out.imax[at.clone()].copy_from_slice(&r.imax);
+            out.imin[at.clone()].copy_from_slice(&r.imin);
+            out.contrast[at.clone()].copy_from_slice(&r.contrast);
+            out.threshold[at.clone()].copy_from_slice(&r.threshold);
+            out.enter[at.clone()].copy_from_slice(&r.enter);
+            out.leave[at.clone()].copy_from_slice(&r.leave);
+            out.enter_slope[at.clone()].copy_from_slice(&r.enter_slope);
+            out.leave_slope[at.clone()].copy_from_slice(&r.leave_slope);
+            out.best_enter[at.clone()].copy_from_slice(&r.best_enter);
+            out.best_leave[at.clone()].copy_from_slice(&r.best_leave);
+            out.best_enter_slope[at.clone()].copy_from_slice(&r.best_enter_slope);
+            out.best_leave_slope[at].copy_from_slice(&r.best_leave_slope);
+        }
+        Ok(out)
+    }
+}
+
+/// Every pixel's second candidate dip ([`TemporalTracker::finish_second`]):
+/// the deepest dip apart from the best one, with the same definitions as the
+/// best's in [`ShadowTimes`] (levels in DN, threshold and slopes linear,
+/// times in frames; NaN times and 0 levels where there is none). Row-major
+/// `(height, width)` arrays.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SecondDips {
+    pub height: usize,
+    pub width: usize,
+    pub imax: Vec<f32>,
+    pub imin: Vec<f32>,
+    /// `imax − imin` = [`ShadowTimes::rival`] (DN); 0 = none.
+    pub contrast: Vec<f32>,
+    pub threshold: Vec<f32>,
+    pub enter: Vec<f32>,
+    pub leave: Vec<f32>,
+    pub enter_slope: Vec<f32>,
+    pub leave_slope: Vec<f32>,
+    /// The best dip's times and slopes as in [`ShadowTimes`], but wherever it
+    /// exists (also where it is ambiguous or below the contrast floor): what
+    /// a caller choosing between the two candidates needs.
+    pub best_enter: Vec<f32>,
+    pub best_leave: Vec<f32>,
+    pub best_enter_slope: Vec<f32>,
+    pub best_leave_slope: Vec<f32>,
+}
+
+impl SecondDips {
+    fn empty(height: usize, width: usize) -> Self {
+        let n = height * width;
+        SecondDips {
+            height,
+            width,
+            imax: vec![0.0; n],
+            imin: vec![0.0; n],
+            contrast: vec![0.0; n],
+            threshold: vec![0.0; n],
+            enter: vec![f32::NAN; n],
+            leave: vec![f32::NAN; n],
+            enter_slope: vec![f32::NAN; n],
+            leave_slope: vec![f32::NAN; n],
+            best_enter: vec![f32::NAN; n],
+            best_leave: vec![f32::NAN; n],
+            best_enter_slope: vec![f32::NAN; n],
+            best_leave_slope: vec![f32::NAN; n],
+        }
+    }
+}
+
+/// One row of [`SecondDips`].
+struct SecondRow {
+    imax: Vec<f32>,
+    imin: Vec<f32>,
+    contrast: Vec<f32>,
+    threshold: Vec<f32>,
+    enter: Vec<f32>,
+    leave: Vec<f32>,
+    enter_slope: Vec<f32>,
+    leave_slope: Vec<f32>,
+    best_enter: Vec<f32>,
+    best_leave: Vec<f32>,
+    best_enter_slope: Vec<f32>,
+    best_leave_slope: Vec<f32>,
+}
+
+/// One row's second candidates, resolved like the best dips in [`resolve_row`].
+fn resolve_second_row<T: Sample>(state: &RowState<T>, lut: &[f32], half: usize) -> SecondRow {
+    let s = &state.second;
+    let width = s.hi2.len();
+    let span = 2 * half;
+    let mut row = SecondRow {
+        imax: vec![0.0; width],
+        imin: vec![0.0; width],
+        contrast: vec![0.0; width],
+        threshold: vec![0.0; width],
+        enter: vec![f32::NAN; width],
+        leave: vec![f32::NAN; width],
+        enter_slope: vec![f32::NAN; width],
+        leave_slope: vec![f32::NAN; width],
+        best_enter: vec![f32::NAN; width],
+        best_leave: vec![f32::NAN; width],
+        best_enter_slope: vec![f32::NAN; width],
+        best_leave_slope: vec![f32::NAN; width],
+    };
+    let mut linear = vec![0.0f32; span];
+    let mut solve = |at: u32, window: &[T], threshold: f32, edge: Edge| -> (f32, f32) {
+        for (l, v) in linear.iter_mut().zip(window) {
+            *l = lut[v.index()];
+        }
+        match find_crossing(&linear, threshold, edge) {
+            Some(c) => {
+                let frame = at as i64 - half as i64 + c.index as i64;
+                ((frame as f64 + f64::from(c.fraction)) as f32, c.slope)
+            }
+            None => (f32::NAN, f32::NAN),
+        }
+    };
+    for x in 0..width {
+        let (hi, lo) = (state.hi[x], state.lo[x]);
+        if state.enter_at[x] != NO_FRAME && hi > lo {
+            let threshold = (lut[hi.index()] + lut[lo.index()]) * 0.5;
+            let window = &state.enter_window[x * span..(x + 1) * span];
+            (row.best_enter[x], row.best_enter_slope[x]) =
+                solve(state.enter_at[x], window, threshold, Edge::Enter);
+            let window = &state.leave_window[x * span..(x + 1) * span];
+            (row.best_leave[x], row.best_leave_slope[x]) =
+                solve(state.leave_at[x], window, threshold, Edge::Leave);
+        }
+        let (hi, lo) = (s.hi2[x], s.lo2[x]);
+        if s.enter_at2[x] == NO_FRAME || hi <= lo {
+            continue;
+        }
+        let threshold = (lut[hi.index()] + lut[lo.index()]) * 0.5;
+        row.imax[x] = hi.to_f32();
+        row.imin[x] = lo.to_f32();
+        row.contrast[x] = hi.to_f32() - lo.to_f32();
+        row.threshold[x] = threshold;
+        let window = &s.enter_window2[x * span..(x + 1) * span];
+        (row.enter[x], row.enter_slope[x]) = solve(s.enter_at2[x], window, threshold, Edge::Enter);
+        let window = &s.leave_window2[x * span..(x + 1) * span];
+        (row.leave[x], row.leave_slope[x]) = solve(s.leave_at2[x], window, threshold, Edge::Leave);
+    }
+    row
 }
 
 /// The decoding table to use: the caller's after validation, or the identity.

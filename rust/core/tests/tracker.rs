@@ -2,7 +2,8 @@
 //! direct (non-streaming) reference on random sequences.
 
 use gnomon_core::{
-    find_crossing, Edge, KernelError, Sample, ShadowTimes, SimdPath, TemporalTracker, TrackerParams,
+    find_crossing, Edge, KernelError, Sample, SecondDips, ShadowTimes, SimdPath, TemporalTracker,
+    TrackerParams,
 };
 
 /// Frames 0-9: 200; 10-13: 180 140 100 60; 14-23: 40; 24-27: 70 110 150 190;
@@ -43,6 +44,40 @@ fn track<T: Sample>(
     for (path, other) in results {
         assert!(
             identical(&first, &other),
+            "{} differs from the best path",
+            path.name()
+        );
+    }
+    first
+}
+
+/// [`track`]'s second candidates ([`TemporalTracker::finish_second`]), identical on every path.
+fn track_second<T: Sample>(
+    profiles: &[Vec<T>],
+    height: usize,
+    width: usize,
+    params: TrackerParams,
+    lut: Option<&[f32]>,
+) -> SecondDips {
+    let mut results = SimdPath::supported().into_iter().map(|path| {
+        let mut tracker = TemporalTracker::<T>::new(height, width, params).unwrap();
+        tracker.set_simd_path(path).unwrap();
+        for f in 0..profiles[0].len() {
+            let frame: Vec<T> = profiles.iter().map(|p| p[f]).collect();
+            tracker.update(&frame).unwrap();
+        }
+        (path, tracker.finish_second(lut).unwrap())
+    });
+    let (_, first) = results.next().unwrap();
+    let eq = |x: &[f32], y: &[f32]| x.iter().zip(y).all(|(&p, &q)| same(p, q));
+    for (path, o) in results {
+        assert!(
+            eq(&first.imax, &o.imax)
+                && eq(&first.imin, &o.imin)
+                && eq(&first.enter, &o.enter)
+                && eq(&first.leave, &o.leave)
+                && eq(&first.best_enter, &o.best_enter)
+                && eq(&first.best_leave, &o.best_leave),
             "{} differs from the best path",
             path.name()
         );
@@ -299,6 +334,93 @@ fn random_profile(rng: &mut XorShift, len: usize, hi: u64) -> Vec<u16> {
         .collect()
 }
 
+/// The second candidate of one pixel, and the best dip's times whatever its validity.
+#[derive(Debug, Clone, Copy)]
+struct Second {
+    imax: f32,
+    imin: f32,
+    enter: f32,
+    leave: f32,
+    best_enter: f32,
+    best_leave: f32,
+}
+
+/// [`reference`]'s fold, keeping where the second event is: a far frame
+/// deeper than the best makes the best the second; a far frame deeper than
+/// the second (not the best) becomes it.
+fn reference_second(profile: &[u16], p: TrackerParams, lut: &[f32]) -> Second {
+    let (n, w, half) = (profile.len(), p.max_width, p.window);
+    let max_of = |r: std::ops::Range<usize>| profile[r].iter().copied().max().unwrap_or(0);
+    let depth: Vec<(u16, u16)> = (0..n)
+        .map(|k| {
+            let b = k / w;
+            let left = max_of(b.saturating_sub(1) * w..k);
+            let right = max_of((k + 1).min(n)..((b + 2) * w).min(n));
+            let lit = left.min(right);
+            (lit.saturating_sub(profile[k]), lit)
+        })
+        .collect();
+    let (mut d1, mut d2) = (0u16, 0u16);
+    let (mut k1, mut k2) = (None::<usize>, None::<usize>);
+    for (k, &(d, _)) in depth.iter().enumerate() {
+        let same_event = k1.is_some_and(|k1| k - k1 <= w);
+        if same_event {
+            if d > d1 {
+                (d1, k1) = (d, Some(k));
+            }
+        } else if d > d1 {
+            (d2, k2) = (d2.max(d1), k1);
+            (d1, k1) = (d, Some(k));
+        } else if d > d2 {
+            (d2, k2) = (d, Some(k));
+        }
+    }
+    // The times of the dip whose darkest sample is at frame k.
+    let times = |k: usize| -> (f32, f32) {
+        let (hi, lo) = (depth[k].1, profile[k]);
+        let thr = (lut[hi as usize] + lut[lo as usize]) * 0.5;
+        let bright = |c: usize| 2 * u32::from(profile[c]) >= u32::from(hi) + u32::from(lo);
+        let b = k / w;
+        let enter_at = (b.saturating_sub(1) * w..k).rev().find(|&c| bright(c)).unwrap() + 1;
+        let leave_at = (k + 1..n).find(|&c| bright(c)).unwrap();
+        let solve = |j: usize, edge: Edge| -> f32 {
+            let window: Vec<f32> = (0..2 * half)
+                .map(|i| {
+                    let f = (j as i64 - half as i64 + i as i64).clamp(0, n as i64 - 1);
+                    lut[profile[f as usize] as usize]
+                })
+                .collect();
+            find_crossing(&window, thr, edge).map_or(f32::NAN, |c| {
+                let frame = j as i64 - half as i64 + c.index as i64;
+                (frame as f64 + f64::from(c.fraction)) as f32
+            })
+        };
+        (solve(enter_at, Edge::Enter), solve(leave_at, Edge::Leave))
+    };
+    let (best_enter, best_leave) = k1.map_or((f32::NAN, f32::NAN), times);
+    match k2.filter(|_| d2 > 0) {
+        Some(k) => {
+            let (enter, leave) = times(k);
+            Second {
+                imax: f32::from(depth[k].1),
+                imin: f32::from(profile[k]),
+                enter,
+                leave,
+                best_enter,
+                best_leave,
+            }
+        }
+        None => Second {
+            imax: 0.0,
+            imin: 0.0,
+            enter: f32::NAN,
+            leave: f32::NAN,
+            best_enter,
+            best_leave,
+        },
+    }
+}
+
 /// What the tracker reports for one pixel.
 #[derive(Debug, Clone, Copy)]
 struct Pixel {
@@ -457,6 +579,29 @@ fn check_against_reference<T: Sample>(
             assert!(got.enter < got.leave, "pixel {i}: enter after leave");
         }
     }
+    let second = track_second(&profiles, height, width, p, lut_arg);
+    for (i, profile) in profiles16.iter().enumerate() {
+        let want = reference_second(profile, p, lut);
+        let got = Second {
+            imax: second.imax[i],
+            imin: second.imin[i],
+            enter: second.enter[i],
+            leave: second.leave[i],
+            best_enter: second.best_enter[i],
+            best_leave: second.best_leave[i],
+        };
+        let ok = same(got.imax, want.imax)
+            && same(got.imin, want.imin)
+            && same(got.enter, want.enter)
+            && same(got.leave, want.leave)
+            && same(got.best_enter, want.best_enter)
+            && same(got.best_leave, want.best_leave);
+        assert!(
+            ok,
+            "second, pixel {i}, {p:?}:\n got {got:?}\nwant {want:?}\n{profile:?}"
+        );
+        assert_eq!(second.contrast[i], t.rival[i], "pixel {i}: the second is the rival");
+    }
 }
 
 #[test]
@@ -560,6 +705,36 @@ fn a_second_comparable_dip_makes_the_pixel_ambiguous() {
     let later = with_dips(160, &[(30, 6, 120), (110, 6, 40)]);
     let t = track(&[later], 1, 1, params(4, 16), 20.0, None);
     assert_eq!((t.enter[0], t.leave[0], t.rival[0]), (109.5, 115.5, 80.0));
+}
+
+#[test]
+fn the_second_candidate_keeps_the_other_dip_s_times() {
+    // Two comparable dips: ambiguous, but both candidates' times are there.
+    let two = with_dips(160, &[(30, 6, 40), (110, 6, 55)]);
+    let p = params(4, 16);
+    let s = track_second(&[two.clone()], 1, 1, p, None);
+    assert_eq!((s.best_enter[0], s.best_leave[0]), (29.5, 35.5));
+    assert_eq!((s.enter[0], s.leave[0]), (109.5, 115.5));
+    assert_eq!((s.imax[0], s.imin[0], s.contrast[0]), (200.0, 55.0, 145.0));
+    // The deeper dip later in time: the earlier becomes the second.
+    let later = with_dips(160, &[(30, 6, 120), (110, 6, 40)]);
+    let s = track_second(&[later], 1, 1, p, None);
+    assert_eq!((s.best_enter[0], s.best_leave[0]), (109.5, 115.5));
+    assert_eq!((s.enter[0], s.leave[0], s.contrast[0]), (29.5, 35.5, 80.0));
+    // One dip only: no second.
+    let one = with_dips(160, &[(30, 6, 40)]);
+    let s = track_second(&[one], 1, 1, p, None);
+    assert!(s.enter[0].is_nan() && s.leave[0].is_nan() && s.contrast[0] == 0.0);
+    // The stream goes on unchanged after a look at the candidates.
+    let mut tracker = TemporalTracker::<u8>::new(1, 1, p).unwrap();
+    for (f, &v) in two.iter().enumerate() {
+        tracker.update(&[v]).unwrap();
+        if f == 80 {
+            let early = tracker.finish_second(None).unwrap();
+            assert!(early.enter[0].is_nan(), "no second dip yet at frame 80");
+        }
+    }
+    assert_eq!(tracker.finish_second(None).unwrap().enter[0], 109.5);
 }
 
 #[test]

@@ -8,7 +8,7 @@
 //! `ShadowTimes` object. No numerics here: see `gnomon-core`.
 
 use gnomon_core::{
-    FinishedPixel, KernelError, Sample, ShadowTimes, TemporalTracker as Tracker, TrackerParams,
+    FinishedPixel, KernelError, Sample, SecondDips, ShadowTimes, TemporalTracker as Tracker, TrackerParams,
     WatchParams,
 };
 use numpy::ndarray::{Array1, Array2, Array3, ArrayView, Dimension, Ix1, Ix2, Ix3};
@@ -230,6 +230,72 @@ fn shadow_times(py: Python<'_>, times: ShadowTimes) -> PyResult<PyShadowTimes> {
     })
 }
 
+/// Every pixel's second candidate dip: (H, W) arrays, read-only attributes
+/// (same meanings as `ShadowTimes`'; NaN times and 0 levels where there is none).
+#[pyclass(module = "gnomon._kernel", name = "SecondDips", frozen)]
+struct PySecondDips {
+    #[pyo3(get)]
+    imax: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    imin: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    contrast: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    threshold: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    enter: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    leave: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    enter_slope: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    leave_slope: Py<PyArray2<f32>>,
+    /// The best dip's times and slopes wherever it exists (also ambiguous ones).
+    #[pyo3(get)]
+    best_enter: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    best_leave: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    best_enter_slope: Py<PyArray2<f32>>,
+    #[pyo3(get)]
+    best_leave_slope: Py<PyArray2<f32>>,
+}
+
+fn second_dips(py: Python<'_>, d: SecondDips) -> PyResult<PySecondDips> {
+    let (h, w) = (d.height, d.width);
+    Ok(PySecondDips {
+        imax: image(py, d.imax, h, w)?.unbind(),
+        imin: image(py, d.imin, h, w)?.unbind(),
+        contrast: image(py, d.contrast, h, w)?.unbind(),
+        threshold: image(py, d.threshold, h, w)?.unbind(),
+        enter: image(py, d.enter, h, w)?.unbind(),
+        leave: image(py, d.leave, h, w)?.unbind(),
+        enter_slope: image(py, d.enter_slope, h, w)?.unbind(),
+        leave_slope: image(py, d.leave_slope, h, w)?.unbind(),
+        best_enter: image(py, d.best_enter, h, w)?.unbind(),
+        best_leave: image(py, d.best_leave, h, w)?.unbind(),
+        best_enter_slope: image(py, d.best_enter_slope, h, w)?.unbind(),
+        best_leave_slope: image(py, d.best_leave_slope, h, w)?.unbind(),
+    })
+}
+
+fn finish_second_any<T: Sample>(
+    py: Python<'_>,
+    tracker: &Tracker<T>,
+    lut: Option<&Bound<'_, PyAny>>,
+) -> PyResult<SecondDips> {
+    let result = match lut {
+        None => py.detach(|| tracker.finish_second(None)),
+        Some(lut) => {
+            let lut =
+                borrow_array::<f32, Ix1>(lut, "lut", "float32", &[Extent::Exactly(T::LUT_LEN)])?;
+            let view = lut.as_array();
+            py.detach(|| with_slice(&view, |table| tracker.finish_second(Some(table))))
+        }
+    };
+    result.map_err(kernel_error)
+}
+
 /// Pixels whose dip ended (the live watch): 1-D arrays, one entry per pixel.
 #[pyclass(module = "gnomon._kernel", name = "FinishedPixels", frozen)]
 struct PyFinishedPixels {
@@ -408,6 +474,21 @@ impl TemporalTracker {
             AnyTracker::U16(t) => finish_any(py, t, min_contrast, lut)?,
         };
         shadow_times(py, times)
+    }
+
+    /// Every pixel's second candidate dip (the event whose depth is `rival`),
+    /// for the frames seen so far; `lut` as in `finish`.
+    #[pyo3(signature = (lut = None))]
+    fn finish_second(
+        &self,
+        py: Python<'_>,
+        lut: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<PySecondDips> {
+        let dips = match &self.inner {
+            AnyTracker::U8(t) => finish_second_any(py, t, lut)?,
+            AnyTracker::U16(t) => finish_second_any(py, t, lut)?,
+        };
+        second_dips(py, dips)
     }
 
     /// Start the live watch from the next frame on (see `gnomon-core`'s `live`).
@@ -820,6 +901,7 @@ fn simd_paths() -> Vec<&'static str> {
 fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<TemporalTracker>()?;
     m.add_class::<PyShadowTimes>()?;
+    m.add_class::<PySecondDips>()?;
     m.add_class::<PyFinishedPixels>()?;
     m.add_function(wrap_pyfunction!(triangulate, m)?)?;
     m.add_function(wrap_pyfunction!(grid_faces, m)?)?;
