@@ -80,7 +80,9 @@ class CaptureScore:
     on_faces: int = 0
     faces: list[FaceScore] = field(default_factory=list)
     # where the false points are: (place, count), places in the order tested (a point counts in the first)
-    false_where: list[tuple[str, int]] = field(default_factory=list)
+    false_where: list[tuple[str, int, int | None]] = field(default_factory=list)
+    # of false_points, those also farther than 5 of their own predicted σ from every surface (None: no sigma.npy)
+    false_beyond_5_sigma: int | None = None
     notes: list[str] = field(default_factory=list)
 
     def lines(self) -> list[str]:
@@ -104,9 +106,14 @@ class CaptureScore:
             out.extend(f.line() for f in self.faces)
             out.append(f"  false points (off both planes, outside the object and off every outlined face) "
                        f"{100 * self.false_points / max(self.all_points, 1):.2f} % of {self.all_points}")
+        if self.false_beyond_5_sigma is not None:
+            out.append(f"    of which farther than 5 sigma (their own predicted sigma) from every surface: "
+                       f"{100 * self.false_beyond_5_sigma / max(self.all_points, 1):.2f} %")
         if self.false_where:
             out.append("    where: " + "; ".join(f"{place} {100 * n / max(self.all_points, 1):.2f} %"
-                                                for place, n in self.false_where))
+                                                + (f" ({100 * b / max(self.all_points, 1):.2f} beyond 5 sigma)"
+                                                   if b is not None else "")
+                                                for place, n, b in self.false_where))
         out.extend(f"  note: {n}" for n in self.notes)
         return out
 
@@ -206,6 +213,7 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
     result.all_points = int(has.sum())
     off = has & ~obj & (dist_any > false_mm)
     on_face = np.zeros((h, w), dtype=bool)
+    nearest_surface = dist_any.copy()  # distance to the planes, or to the plane of a face whose outline holds it
     first_normal = frames[names[0]][1][:, 2]
     for fname, outline in (other_faces or {}).items():
         face = fit_face(fname, pts_cam, has & _polygon_mask((h, w), [outline], -3), first_normal)
@@ -213,11 +221,19 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
             result.notes.append(f"face '{fname}': too few points to fit a plane")
             continue
         result.faces.append(face)
-        near = np.abs(pts_cam @ face.normal - face.offset) <= false_mm
-        on_face |= _polygon_mask((h, w), [outline], keep_out_px) & near
+        to_face = np.abs(pts_cam @ face.normal - face.offset)
+        inside = _polygon_mask((h, w), [outline], keep_out_px)
+        on_face |= inside & (to_face <= false_mm)
+        nearest_surface = np.where(inside, np.fmin(nearest_surface, to_face), nearest_surface)
     result.on_faces = int((off & on_face).sum())
     false = off & ~on_face
     result.false_points = int(false.sum())
+    beyond = None
+    if (scan_dir / "sigma.npy").exists():
+        sigma = np.load(scan_dir / "sigma.npy")
+        with np.errstate(invalid="ignore"):
+            beyond = false & ~(nearest_surface <= 5.0 * sigma)
+        result.false_beyond_5_sigma = int(beyond.sum())
     border = np.zeros((h, w), dtype=bool)
     border[:, :border_px] = border[:, w - border_px:] = True
     places = [("in the outlined faces, off their planes", others), ("near the markers", markers),
@@ -225,7 +241,8 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
               ("elsewhere", np.ones((h, w), dtype=bool))]
     for place, mask in places:
         if shadow_outlines or place != "in the object's cast shadow":
-            result.false_where.append((place, int((false & mask).sum())))
+            result.false_where.append((place, int((false & mask).sum()),
+                                       None if beyond is None else int((beyond & false & mask).sum())))
         false &= ~mask
     return result
 
