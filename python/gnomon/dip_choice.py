@@ -65,13 +65,16 @@ class DipChoice:
 
 
 def _components(depth: np.ndarray, max_jump: float) -> tuple[np.ndarray, int]:
-    """Labels (2, H, W) of the connected surfaces over the candidates' depths (NaN = no node; label
-    of a missing node is meaningless) and the number of labels."""
+    """Labels (2, H, W) of the connected surfaces over the candidates' depths (NaN = no node, label 0
+    there: meaningless) and the number of labels."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     k, h, w = depth.shape
-    index = np.arange(k * h * w).reshape(k, h, w)
+    # Only the nodes that exist are numbered (int32: two candidates of any image fit).
+    node = np.isfinite(depth)
+    index = np.full((k, h, w), -1, dtype=np.int32)
+    index[node] = np.arange(int(node.sum()), dtype=np.int32)
     rows, cols = [], []
     for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
         src = (slice(0, h - dy), slice(max(0, -dx), w - max(0, dx)))
@@ -84,9 +87,12 @@ def _components(depth: np.ndarray, max_jump: float) -> tuple[np.ndarray, int]:
                 rows.append(index[a][src][linked])
                 cols.append(index[b][dst][linked])
     r, c = np.concatenate(rows), np.concatenate(cols)
-    graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(k * h * w, k * h * w))
-    n, labels = connected_components(graph, directed=False)
-    return labels.reshape(k, h, w), int(n)
+    count = int(node.sum())
+    graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(count, count))
+    n, found = connected_components(graph, directed=False)
+    labels = np.zeros((k, h, w), dtype=np.int32)
+    labels[node] = found
+    return labels, int(n)
 
 
 def choose_dips(depth: np.ndarray, region_depth: np.ndarray, plane_depths: list[np.ndarray],

@@ -84,7 +84,7 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
     planes = tuple(ReferencePlane(p.name, PlaneInCamera.from_world(p.point, p.normal, pose), p.region_mask(shape),
                                   p.regions) for p in log.planes)
     s = log.scan
-    tracker = tracker_settings(log)
+    tracker = dataclasses.replace(tracker_settings(log), second_dips=light.chooses_dips)
     inputs = ScanInputs(log.path, log.camera_file, dict(log.calibration), planes_report)
     return ScanSetup(log.camera, pose, planes, tracker, light, s.edge, s.max_depth_jump, log.capture.units,
                      inputs, tuple(warnings), crop_of(log))

@@ -290,7 +290,9 @@ class TrackerSettings:
     ``normalize_illumination``: divide every frame by its global gain and skip
     sudden dips (:class:`IlluminationNormalizer`); ``max_width`` (frames): the
     widest dip always found; ``ambiguity``: the rival/contrast ratio from which
-    a pixel is ambiguous.
+    a pixel is ambiguous; ``second_dips``: also report every pixel's second
+    candidate dip (:class:`SecondDips`, for a light model that chooses between
+    the two; it costs about as much as the final evaluation itself).
     """
 
     gamma: float | str = "srgb"
@@ -299,6 +301,7 @@ class TrackerSettings:
     normalize_illumination: bool = False
     max_width: int = 32
     ambiguity: float = 0.6
+    second_dips: bool = False
 
 
 class ShadowTracker:
@@ -512,7 +515,7 @@ def track_source(
     times, lut = tracker.finish()
     noise_dn = float(np.median([n.result() for n in noise])) if noise else 1.0
     return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, lut, tracker.input_lut,
-                           second=tracker.second_dips())
+                           second=tracker.second_dips() if settings.second_dips else None)
 
 
 def _check_first(frame: Frame, shape: tuple[int, int], where: str) -> None:

@@ -118,6 +118,8 @@ class LightModel:
     """The light of one scan (see the module docstring). Subclasses set ``kind``."""
 
     kind: ClassVar[str] = ""
+    # True when :meth:`choose_dips` needs the tracker's second candidate dips (``tracked.second``).
+    chooses_dips: ClassVar[bool] = False
 
     def skipped_frames(self, n_frames: int) -> np.ndarray:
         """(n_frames,) bool: capture frames the tracker must not see."""

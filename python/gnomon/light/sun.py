@@ -268,6 +268,7 @@ class SunWithPole(SunLight):
     """
 
     mode = "pole"
+    chooses_dips = True
 
     def __init__(self, clock: SunClock, pose: Pose, base_world: np.ndarray, top_world: np.ndarray,
                  radius: float = 0.0):
