@@ -26,7 +26,7 @@ import resource
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -230,6 +230,8 @@ class ScanBench:
     scan_cpu_seconds: float
     stages: dict[str, float]
     load_average: float
+    stages_cpu: dict[str, float] = field(default_factory=dict)
+    """CPU seconds during the stages that report it (the process's threads; the recording: its own thread)."""
 
     @property
     def ratio(self) -> float:
@@ -267,8 +269,9 @@ def run_scan_bench(field_log: str, out_dir: str) -> ScanBench:
     result = run_scan(field_log, out_dir)
     scan_s, scan_cpu = time.perf_counter() - t0, time.process_time() - c0
     stages = {k: float(v) for k, v in result.report.get("timings_s", {}).items()}
+    stages_cpu = {k: float(v) for k, v in result.report.get("cpu_timings_s", {}).items()}
     return ScanBench(str(field_log), count, int(shape[1]), int(shape[0]), decode, scan_s, scan_cpu,
-                     stages, _load_average())
+                     stages, _load_average(), stages_cpu)
 
 
 def format_scan_table(r: ScanBench) -> str:
@@ -279,7 +282,9 @@ def format_scan_table(r: ScanBench) -> str:
          f"({r.decode.fps:.0f} frames/s)"),
         (f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
          f"{r.ratio:.2f}x the decode-alone wall time, {r.cpu_ratio:.2f}x its CPU time"),
-        *(f"    {name:<28} {sec:8.2f} s" for name, sec in r.stages.items()),
+        f"    {'stage':<28} {'wall s':>8} {'CPU s':>8}",
+        *(f"    {name:<28} {sec:8.2f} {r.stages_cpu[name]:8.2f}" if name in r.stages_cpu
+          else f"    {name:<28} {sec:8.2f}" for name, sec in r.stages.items()),
     ]
     return "\n".join(lines)
 

@@ -150,7 +150,8 @@ def grid_normals(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, camer
     parallel, the same f64 arithmetic); :func:`_grid_normals_numpy` is the
     definition in numpy.
     """
-    if points.dtype == np.float32 and depth.dtype == np.float32:
+    if points.dtype == np.float32 and depth.dtype == np.float32 and hasattr(_kernel, "grid_normals"):
+        # (a kernel built before grid_normals existed, e.g. an older build in a checkout: numpy below)
         centre = np.asarray(camera_centre, dtype=np.float64).reshape(3)
         return _kernel.grid_normals(np.ascontiguousarray(points), np.ascontiguousarray(depth),
                                     np.ascontiguousarray(valid, dtype=np.uint8),
@@ -547,7 +548,10 @@ def write_stl(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     if head.lower().startswith(b"solid"):
         raise ValueError("a binary STL header must not start with 'solid'")
     # the records (normal, corners, attribute) packed by the kernel, rows in parallel (_stl_table_numpy: the same)
-    records = _kernel.stl_records(np.ascontiguousarray(v), np.ascontiguousarray(f, dtype=np.int32))
+    if hasattr(_kernel, "stl_records"):
+        records = _kernel.stl_records(np.ascontiguousarray(v), np.ascontiguousarray(f, dtype=np.int32))
+    else:  # a kernel built before stl_records existed
+        records = _stl_table_numpy(v, f)
     _write_parts(path, [head.ljust(80, b" "), np.uint32(len(f)).astype("<u4").tobytes(), records])
 
 

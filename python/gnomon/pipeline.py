@@ -149,10 +149,15 @@ class ScanResult:
 
 
 @contextmanager
-def _timed(timings: dict[str, float], key: str) -> Iterator[None]:
-    t = time.perf_counter()
+def _timed(timings: dict[str, float], key: str, cpu: dict[str, float] | None = None,
+           clock: Callable[[], float] = time.process_time) -> Iterator[None]:
+    """Wall time of the block into ``timings[key]``; with ``cpu``, its CPU time into ``cpu[key]``
+    (``clock``: the process's, all threads, or ``time.thread_time`` for one thread's)."""
+    t, c = time.perf_counter(), clock()
     yield
     timings[key] = time.perf_counter() - t
+    if cpu is not None:
+        cpu[key] = clock() - c
 
 
 # Colour frames kept during tracking for the scan's colours (gnomon.texture).
@@ -369,9 +374,16 @@ def _reconstruct_edges(setup: ScanSetup, tracked: TrackedSequence, ray_map: np.n
                        warnings: list[str], levels: _Levels | None = None) -> list[EdgeResult]:
     geometry = ReferenceGeometry(setup.camera, setup.planes, tracked.n_frames)
     levels = levels or _Levels(tracked)
-    times = setup.light.edges(*_edge_times(tracked, levels), setup.edge)
-    edges = [_reconstruct_edge(e, setup.light.shadow_planes(e, geometry), ray_map, setup, tracked, levels)
-             for e in times]
+    levels.imax, levels.imin, levels.sigma_at_threshold  # noqa: B018 - computed once, before the threads share them
+    # The edges are independent until they are fused: one thread each (numpy and the kernel release
+    # the GIL; the other core is idle once the frames are decoded). Results and errors in edge order.
+    st = tracked.times
+    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="gnomon-edge") as pool:
+        enter = pool.submit(_edge_time, "enter", st.enter, st.enter_slope, tracked, levels)
+        leave = pool.submit(_edge_time, "leave", st.leave, st.leave_slope, tracked, levels)
+        times = setup.light.edges(enter.result(), leave.result(), setup.edge)
+        edges = list(pool.map(lambda e: _reconstruct_edge(e, setup.light.shadow_planes(e, geometry), ray_map, setup,
+                                                          tracked, levels), times))
     for e, t in zip(edges, times, strict=True):
         _check_line_residuals(e, t.sigma_t, setup.inputs.field_log, warnings)
     for e in edges:
@@ -502,6 +514,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
+    cpu: dict[str, float] = {}  # CPU seconds of the process (all threads) during each stage
     warnings = list(setup.warnings) + (list(recorder.notes) if recorder is not None else [])
     _on_recorder(recorder, lambda rec: _record_setup(rec, setup, source))
     skip = setup.light.skipped_frames(source.count)
@@ -510,7 +523,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     on_frame = _frame_hook(colour, None if recorder is None else _frame_logger(recorder, setup, frame_stride))
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-ray-map") as pool:
         rays = pool.submit(setup.camera.ray_map)
-        with _timed(timings, "tracking_s"):
+        with _timed(timings, "tracking_s", cpu):
             tracked = track(source, setup.tracker, (setup.camera.height, setup.camera.width),
                             skip=skip, on_frame=on_frame,
                             progress=progress, where=f"{setup.inputs.field_log}: [camera]")
@@ -520,10 +533,10 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
     warnings += setup.light.choose_dips(tracked, ray_map, setup.planes, setup.max_depth_jump,
                                         _min_contrast_dn(setup.tracker.min_contrast, tracked.noise_dn))
-    with _timed(timings, "planes_and_triangulation_s"):
+    with _timed(timings, "planes_and_triangulation_s", cpu):
         levels = _Levels(tracked)
         edges = _reconstruct_edges(setup, tracked, ray_map, warnings, levels)
-    with _timed(timings, "fusion_and_mesh_s"):
+    with _timed(timings, "fusion_and_mesh_s", cpu):
         fused = _fuse(edges, tracked, setup.max_depth_jump, levels)
         cropped = _crop(fused, setup, ray_map)
         rgb = _lit_colours(colour, tracked)
@@ -535,6 +548,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     report = _report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
     _report_outputs(report, setup, cropped)
     timings["total_s"] = time.perf_counter() - t0
+    report["cpu_timings_s"] = cpu
     report["warnings"] = warnings
     result = ScanResult(setup, tracked.times, edges, fused.shadow_time, fused.depth, fused.sigma, fused.keep,
                         fused.undersampled, surface, report, warnings, coverage=coverage)
@@ -542,7 +556,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
         return result, None
 
     def record(recorder: ScanRecording) -> None:
-        with _timed(timings, "recording_s"):
+        with _timed(timings, "recording_s", cpu, time.thread_time):  # this thread's CPU
             _record(recorder, setup, edges, surface, fused.shadow_time, warnings, report, frame_stride,
                     tracked.used, coverage)
 
@@ -567,7 +581,7 @@ def write_scan(folder: Path, result: ScanResult, started: float | None = None,
     ``before_report``: called before report.json is written (e.g. to wait for the recording,
     whose timing the report gives).
     """
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     setup, surface = result.setup, result.surface
     with _Writers() as writers:
         write_surface(folder, surface, setup.units, writers)
@@ -580,10 +594,12 @@ def write_scan(folder: Path, result: ScanResult, started: float | None = None,
                         result.coverage, units=setup.units)
         if "site" in result.report:
             writers.add(write_enu_points, folder / "points_enu.ply", surface, result.report["site"])
-    timings = result.report["timings_s"]
+    timings, cpu = result.report["timings_s"], result.report.setdefault("cpu_timings_s", {})
     timings["outputs_s"] = time.perf_counter() - t
+    cpu["outputs_s"] = time.process_time() - c
     if before_report is not None:
-        before_report()
+        with _timed(timings, "recording_wait_s"):  # the recording still being logged or encoded
+            before_report()
     if started is not None:
         timings["total_s"] = time.perf_counter() - started
     atomic.write_text(folder / "report.json", json.dumps(result.report, indent=2, default=_json_default))
