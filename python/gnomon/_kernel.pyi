@@ -8,7 +8,7 @@ kernel error, each naming what was expected and what was given: a bad array
 table ``KernelLutError``, no (or too many) frames ``KernelFramesError``.
 """
 
-from typing import Literal
+from typing import Literal, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -222,14 +222,27 @@ def clean_faces(
     fan meeting only at a vertex its own copy: the new faces (F', 3) and the input
     vertex each new vertex copies (V',), as :func:`gnomon.meshing.remove_small_components`."""
 
+@overload
 def obj_text(
     vertices: npt.NDArray[np.float64],
     vertex_decimals: int,
     uv: npt.NDArray[np.float64] | None,
     normals: npt.NDArray[np.float64] | None,
     faces: npt.NDArray[np.int64],
+    as_parts: Literal[False] = False,
 ) -> bytes:
     """The ``v``/``vt``/``vn``/``f`` lines of :func:`gnomon.meshing.write_obj`, byte for byte."""
+
+@overload
+def obj_text(
+    vertices: npt.NDArray[np.float64],
+    vertex_decimals: int,
+    uv: npt.NDArray[np.float64] | None,
+    normals: npt.NDArray[np.float64] | None,
+    faces: npt.NDArray[np.int64],
+    as_parts: Literal[True],
+) -> list[npt.NDArray[np.uint8]]:
+    """The same text as a list of uint8 arrays (its blocks in order, not copied)."""
 
 def grid_normals(
     points: npt.NDArray[np.float32],

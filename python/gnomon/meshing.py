@@ -459,7 +459,7 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if f.size and (f.min() < 0 or f.max() >= len(v)):
         raise ValueError("faces index vertices out of range")
-    parts: list[bytes] = [f"# gnomon mesh: {len(v)} vertices, {len(f)} faces\n".encode()]
+    parts: list[bytes | np.ndarray] = [f"# gnomon mesh: {len(v)} vertices, {len(f)} faces\n".encode()]
     if comment:
         parts += [f"# {line}\n".encode() for line in comment.splitlines()]
     if texture is not None:
@@ -469,14 +469,16 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     if len(v) or len(f):
         t = None if uv is None else np.ascontiguousarray(uv, dtype=np.float64).reshape(len(v), 2)
         n = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64).reshape(len(v), 3)
-        parts.append(_kernel.obj_text(np.ascontiguousarray(v), _decimals_for(v) if len(v) else 1, t, n,
-                                      np.ascontiguousarray(f)))
+        # the text's blocks as arrays the kernel filled (written one after the other, never joined)
+        parts.extend(_kernel.obj_text(np.ascontiguousarray(v), _decimals_for(v) if len(v) else 1, t, n,
+                                      np.ascontiguousarray(f), as_parts=True))
     _write_obj_material(target, texture)
     _write_parts(target, parts)
 
 
 def _write_parts(path: str | os.PathLike, parts: list) -> None:
-    """Write byte buffers one after the other into ``path``, atomically (no joined copy in memory)."""
+    """Write byte buffers (bytes or uint8 arrays) one after the other into ``path``, atomically (no
+    joined copy in memory)."""
     from gnomon import atomic
 
     with atomic.atomic_path(path) as tmp:

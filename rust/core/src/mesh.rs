@@ -405,56 +405,85 @@ fn digits(mut x: u64) -> usize {
     d
 }
 
-/// One column of fixed-point numbers: `(negative, integer part, fraction)` and its width.
-struct Column {
-    values: Vec<(bool, u64, u64)>,
-    int_digits: usize,
+/// One column of fixed-point numbers: `values[i·stride + offset]`, `decimals` decimals, and the
+/// width of its widest integer part.
+struct Column<'a> {
+    values: &'a [f64],
+    stride: usize,
+    offset: usize,
     decimals: usize,
+    scale: u64,
+    int_digits: usize,
 }
 
-impl Column {
-    /// `values[i·stride + offset]`, NaN and ±inf as 0, rounded half to even at `decimals`.
-    fn new(values: &[f64], stride: usize, offset: usize, decimals: usize) -> Column {
+impl<'a> Column<'a> {
+    fn new(values: &'a [f64], stride: usize, offset: usize, decimals: usize) -> Column<'a> {
         let scale = 10u64.pow(decimals as u32);
-        let values: Vec<(bool, u64, u64)> = values
-            .par_iter()
-            .skip(offset)
-            .step_by(stride)
-            .map(|&x| {
-                let x = if x.is_finite() { x } else { 0.0 };
-                let q = (x.abs() * scale as f64).round_ties_even() as u64;
-                (x < 0.0 && q > 0, q / scale, q % scale)
-            })
-            .collect();
-        let top = values.iter().map(|v| v.1).max().unwrap_or(0);
-        Column {
-            int_digits: digits(top),
+        let mut column = Column {
             values,
+            stride,
+            offset,
             decimals,
-        }
+            scale,
+            int_digits: 1,
+        };
+        let top = values
+            .par_chunks(stride)
+            .map(|row| column.quantise(row[offset]).1)
+            .max()
+            .unwrap_or(0);
+        column.int_digits = digits(top);
+        column
     }
 
-    /// `" " + right-aligned "[-]int" in int_digits + 1 + "." + fraction`.
-    fn write(&self, i: usize, out: &mut Vec<u8>) {
-        let (neg, ip, fp) = self.values[i];
-        let text_len = digits(ip) + neg as usize;
-        out.extend(std::iter::repeat_n(b' ', self.int_digits + 1 - text_len));
-        if neg {
-            out.push(b'-');
-        }
-        write_uint(ip, out);
-        if self.decimals > 0 {
-            out.push(b'.');
-            let mut frac = [b'0'; 20];
-            let mut rest = fp;
-            for k in (0..self.decimals).rev() {
-                frac[k] = b'0' + (rest % 10) as u8;
-                rest /= 10;
+    /// `(negative, integer part, fraction)` of `x`: NaN and ±inf as 0, rounded half to even at `decimals`.
+    fn quantise(&self, x: f64) -> (bool, u64, u64) {
+        let x = if x.is_finite() { x } else { 0.0 };
+        let q = (x.abs() * self.scale as f64).round_ties_even() as u64;
+        (x < 0.0 && q > 0, q / self.scale, q % self.scale)
+    }
+
+    /// Bytes of one field: `" "` + a place for the sign + the integer part + (`"."` + fraction, or `" "`).
+    fn width(&self) -> usize {
+        1 + 1
+            + self.int_digits
+            + if self.decimals > 0 {
+                1 + self.decimals
+            } else {
+                1
             }
-            out.extend_from_slice(&frac[..self.decimals]);
+    }
+
+    /// Row `i`'s field into `out` (`width()` bytes): `" "`, the right-aligned `"[-]int"` in
+    /// `int_digits + 1` places, then `"." + fraction` (or `" "` without decimals).
+    fn write(&self, i: usize, out: &mut [u8]) {
+        let (neg, mut ip, mut fp) = self.quantise(self.values[i * self.stride + self.offset]);
+        let mut k = out.len();
+        if self.decimals > 0 {
+            for _ in 0..self.decimals {
+                k -= 1;
+                out[k] = b'0' + (fp % 10) as u8;
+                fp /= 10;
+            }
+            k -= 1;
+            out[k] = b'.';
         } else {
-            out.push(b' ');
+            k -= 1;
+            out[k] = b' ';
         }
+        loop {
+            k -= 1;
+            out[k] = b'0' + (ip % 10) as u8;
+            ip /= 10;
+            if ip == 0 {
+                break;
+            }
+        }
+        if neg {
+            k -= 1;
+            out[k] = b'-';
+        }
+        out[..k].fill(b' ');
     }
 }
 
@@ -473,25 +502,27 @@ fn write_uint(x: u64, out: &mut Vec<u8>) {
     out.extend_from_slice(&buf[k..]);
 }
 
-/// Lines `prefix col col …\n` for the rows of `columns`, in parallel: one buffer per block of rows.
+/// Lines `prefix col col …\n` for the rows of `columns`: every line has the same width, so the rows
+/// are formatted in parallel straight into one buffer.
 fn column_lines(prefix: &[u8], columns: &[Column], rows: usize) -> Vec<Vec<u8>> {
-    let chunks: Vec<Vec<u8>> = (0..rows)
-        .collect::<Vec<_>>()
-        .par_chunks(ITEMS_PER_TASK)
-        .map(|chunk| {
-            let mut out = Vec::with_capacity(chunk.len() * 48);
-            for &i in chunk {
-                out.extend_from_slice(prefix);
+    let line = prefix.len() + columns.iter().map(Column::width).sum::<usize>() + 1;
+    let mut out = vec![0u8; rows * line];
+    out.par_chunks_mut(line * ITEMS_PER_TASK)
+        .enumerate()
+        .for_each(|(task, block)| {
+            for (r, text) in block.chunks_exact_mut(line).enumerate() {
+                let i = task * ITEMS_PER_TASK + r;
+                text[..prefix.len()].copy_from_slice(prefix);
+                let mut at = prefix.len();
                 for c in columns {
-                    out.push(b' ');
-                    c.write(i, &mut out);
+                    let w = c.width();
+                    c.write(i, &mut text[at..at + w]);
+                    at += w;
                 }
-                out.push(b'\n');
+                text[at] = b'\n';
             }
-            out
-        })
-        .collect();
-    chunks
+        });
+    vec![out]
 }
 
 /// The body of a Wavefront OBJ file (see `gnomon.meshing.write_obj`, whose text this is, byte for byte).
@@ -551,11 +582,9 @@ pub fn obj_text_parts(
     }
     let mut out: Vec<Vec<u8>> = Vec::new();
     if nv > 0 {
-        let cols = |a: &[f64], k: usize, dec: usize| {
-            (0..k)
-                .map(|j| Column::new(a, k, j, dec))
-                .collect::<Vec<_>>()
-        };
+        fn cols(a: &[f64], k: usize, dec: usize) -> Vec<Column<'_>> {
+            (0..k).map(|j| Column::new(a, k, j, dec)).collect()
+        }
         out.extend(column_lines(b"v", &cols(vertices, 3, vertex_decimals), nv));
         if let Some(t) = uv {
             out.extend(column_lines(b"vt", &cols(t, 2, 6), nv));

@@ -728,9 +728,10 @@ fn clean_faces<'py>(
     Ok((rows(py, clean.faces)?, clean.source.into_pyarray(py)))
 }
 
-/// The body of a Wavefront OBJ file, bytes (see `gnomon_core::obj_text`).
+/// The body of a Wavefront OBJ file (see `gnomon_core::obj_text`): bytes, or with `as_parts` a
+/// list of uint8 arrays (its blocks of lines, in order, not copied).
 #[pyfunction]
-#[pyo3(signature = (vertices, vertex_decimals, uv, normals, faces))]
+#[pyo3(signature = (vertices, vertex_decimals, uv, normals, faces, as_parts = false))]
 fn obj_text<'py>(
     py: Python<'py>,
     vertices: &Bound<'py, PyAny>,
@@ -738,7 +739,8 @@ fn obj_text<'py>(
     uv: Option<&Bound<'py, PyAny>>,
     normals: Option<&Bound<'py, PyAny>>,
     faces: &Bound<'py, PyAny>,
-) -> PyResult<Bound<'py, pyo3::types::PyBytes>> {
+    as_parts: bool,
+) -> PyResult<Bound<'py, PyAny>> {
     let vertices = borrow_array::<f64, Ix2>(
         vertices,
         "vertices",
@@ -783,6 +785,12 @@ fn obj_text<'py>(
     let parts = py
         .detach(|| gnomon_core::obj_text_parts(&v, vertex_decimals, t.as_deref(), n.as_deref(), &f))
         .map_err(kernel_error)?;
+    if as_parts {
+        // no copy: each block of lines becomes a uint8 array that owns it
+        return Ok(
+            pyo3::types::PyList::new(py, parts.into_iter().map(|p| p.into_pyarray(py)))?.into_any(),
+        );
+    }
     // one copy, straight into the bytes object
     let len = parts.iter().map(Vec::len).sum();
     pyo3::types::PyBytes::new_with(py, len, |buf| {
@@ -793,6 +801,7 @@ fn obj_text<'py>(
         }
         Ok(())
     })
+    .map(Bound::into_any)
 }
 
 /// Unit normals (H, W, 3) float32 of the surface on the pixel grid (see `gnomon_core::grid_normals`).
