@@ -17,9 +17,9 @@ import numpy as np
 
 from gnomon.aruco import plane_pose_from_aruco, plane_pose_from_charuco
 from gnomon.calibration import fit_camera_to_frames, read_grey
-from gnomon.camera import CalibratedCamera, CameraModel, Pose
+from gnomon.camera import CalibratedCamera, CameraModel, OpenCVCamera, Pose
 from gnomon.crop import Crop
-from gnomon.errors import FieldLogError, FrameError
+from gnomon.errors import FieldLogError, FrameError, GnomonError
 from gnomon.fieldlog import FieldLog, PlaneSpec, check_geometry
 from gnomon.frames import FrameSource, to_grey
 from gnomon.light import LightModel, light_from_field_log
@@ -27,8 +27,8 @@ from gnomon.markers import PlanePose, fit_plane_pose, plane_pose_from_chessboard
 from gnomon.reference_lines import PlaneInCamera, ReferencePlane
 from gnomon.tracking import TrackerSettings, decoding_lut
 
-__all__ = ["ScanInputs", "ScanSetup", "crop_of", "first_frame", "frame_source", "resolve_reference_planes",
-           "resolve_scan", "tracker_settings"]
+__all__ = ["ScanInputs", "ScanSetup", "crop_of", "first_frame", "focal_diagnosis", "frame_source",
+           "resolve_reference_planes", "resolve_scan", "tracker_settings"]
 
 
 @dataclass(frozen=True)
@@ -186,6 +186,51 @@ MARKER_CHECK_P = 1e-3
 MAX_PLANE_TILT_DEG = 5.0
 
 
+#: Focal lengths tried (as factors of the camera's) when a plane's markers do not fit it.
+FOCAL_FACTORS = np.geomspace(0.5, 2.0, 57)
+
+
+def focal_diagnosis(camera: Any, points: np.ndarray, pixels: np.ndarray, limit_rms_px: float) -> str:
+    """Why a plane's points do not fit it, as far as the camera's focal length can tell (one clause).
+
+    ``camera`` an :class:`~gnomon.camera.OpenCVCamera` (other models: no
+    clause); ``points`` (N, 2) plane or (N, 3) coplanar world coordinates;
+    ``pixels`` (N, 2). The pose is refitted with the focal lengths scaled by
+    each of :data:`FOCAL_FACTORS` (principal point and distortion kept). A
+    scale that brings the residuals within ``limit_rms_px`` and below a
+    quarter of their present value means the camera
+    does not fit this capture (a zoom, a refocus, another crop or frame size
+    than the calibration's; with 4 points, whose residuals have 2 degrees of
+    freedom, one misplaced mark can look the same, and the clause says so);
+    no scale bringing them below half their present value means the points
+    themselves are not where their plane coordinates put them (hand-placed
+    marks, a surface that is not flat, a wrong id).
+    """
+    if not isinstance(camera, OpenCVCamera) or len(pixels) < 4:
+        return ""
+    rms = np.full(len(FOCAL_FACTORS), np.inf)
+    for i, k in enumerate(FOCAL_FACTORS):
+        scaled = dataclasses.replace(camera, fx=camera.fx * k, fy=camera.fy * k)
+        try:
+            rms[i] = fit_plane_pose(scaled, points, pixels).rms_px
+        except (GnomonError, ValueError):  # no pose at that focal length (e.g. IPPE gives a non-finite start)
+            continue
+    here = fit_plane_pose(camera, points, pixels).rms_px
+    best = int(np.argmin(rms))
+    if not np.isfinite(rms[best]):
+        return ""
+    if rms[best] <= limit_rms_px and rms[best] < 0.25 * here and abs(FOCAL_FACTORS[best] - 1.0) > 0.02:
+        caveat = " (or a mark is off: 4 points cannot tell)" if len(pixels) == 4 else ""
+        return (f"; they fit to {rms[best]:.1f} px rms with the focal length × {FOCAL_FACTORS[best]:.2f} "
+                f"({camera.fx * FOCAL_FACTORS[best]:.0f} px instead of {camera.fx:.0f}): the camera's calibration "
+                f"does not fit these frames (zoom, focus or crop changed since){caveat}")
+    if rms[best] > 0.5 * here:
+        return (f"; no focal length fits them better than {rms[best]:.1f} px rms (× {FOCAL_FACTORS[best]:.2f}): "
+                "the points are not where their plane coordinates put them (marks placed by hand, a surface "
+                "that is not flat, a wrong id)")
+    return ""
+
+
 def _marker_sigmas(plane: PlaneSpec, n: int) -> np.ndarray:
     """The localisation σ (px) of each of a plane's ``n`` fitted points."""
     if plane.markers and len(plane.markers) == n:
@@ -219,20 +264,23 @@ def check_plane_markers(log: FieldLog, plane: PlaneSpec, pp: PlanePose, declared
     tilt = (_angle_deg(declared.R @ plane.normal, pp.normal_cam) if declared is not None
             else float(pp.std_normal_deg))
     residuals = f"residuals {pp.rms_px:.1f} px rms, {lengths.max():.1f} px at most"
+    expected = float(np.sqrt(np.mean(sigmas**2) * limit / (2 * n)))
+    failing = statistic > limit or (np.isfinite(tilt) and tilt > MAX_PLANE_TILT_DEG)
+    why = focal_diagnosis(log.camera, plane.marker_world(), pp.pixels, expected) if (
+        failing and plane.markers and len(plane.markers) == n) else ""
     if np.isfinite(tilt) and tilt > MAX_PLANE_TILT_DEG:
         what = (f"the plane through its markers is {tilt:.0f}° from the declared one" if declared is not None
                 else f"the plane through its markers is uncertain by {tilt:.0f}° (1 σ)")
         near = (f" ({offsets[worst]:.1f} px from where the declared plane puts it)"
                 if declared is not None and offsets is not lengths else "")
         raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: {worst_name}{near} does not fit: {what} "
-                            f"({residuals}); check its pixel_hint and id")
+                            f"({residuals}{why}); check its pixel_hint and id")
     if statistic > limit:
-        expected = float(np.sqrt(np.mean(sigmas**2) * limit / (2 * n)))
         return (f"{log.path}: [[planes]] {plane.name}: its markers do not fit one plane ({residuals}, worst "
                 f"{worst_name}; a correct plane leaves at most {expected:.1f} px rms with markers found to "
                 f"{MARKER_SIGMA_PX:g} px and clicked to {CLICKED_SIGMA_PX:g} px); the plane is {tilt:.1f}° "
                 + ("from the declared one" if declared is not None else "uncertain (1 σ)")
-                + "; check the markers' pixel_hint and id")
+                + f"{why}; check the markers' pixel_hint and id")
     return None
 
 
@@ -264,7 +312,13 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
     placed = {}
     for plane, pp in measured:
         entry = {"plane": plane.name, **pp.to_report(), "pixels": pp.pixels.tolist()}
-        warning = check_plane_markers(log, plane, pp, log.pose)
+        try:
+            warning = check_plane_markers(log, plane, pp, log.pose)
+        except FieldLogError as exc:  # the planes measured before it may say why (e.g. the camera does not fit)
+            earlier = [e["marker_warning"].removeprefix(f"{log.path}: ") for e in report if "marker_warning" in e]
+            if not earlier:
+                raise
+            raise FieldLogError(f"{exc} (and {'; '.join(earlier)})") from None
         if warning is not None:
             entry["warnings"] = [*entry["warnings"], warning]
             entry["marker_warning"] = warning
