@@ -177,8 +177,9 @@ def test_markers_that_do_not_fit_say_whether_the_camera_or_the_marks_are_at_faul
     a 1920×1080 camera 600 mm away. Filmed at f = 1400 px by a camera calibrated at 1000 px (a zoom since the
     calibration): the residuals vanish with the focal length × 1.40 (to the 2.5 % step of the factors
     tried), and the diagnosis names the camera. Filmed at the calibrated 1000 px but with one mark drawn 8 mm
-    off its place across the rectangle's long side: no focal length halves the residual, and the diagnosis names the marks (with only 4
-    marks a focal length can mimic one misplaced mark, and the diagnosis says so). Exact marks: nothing."""
+    off its place across the rectangle's long side: no focal length halves the residual, and the diagnosis
+    names the marks (with only 4 marks a focal length can mimic one misplaced mark, and the diagnosis says
+    so). Exact marks: nothing."""
     from gnomon.scan_setup import focal_diagnosis
 
     marks = np.array([[0.0, 0.0], [76.0, 0.0], [152.0, 0.0], [152.0, 121.0], [76.0, 121.0], [0.0, 121.0]])

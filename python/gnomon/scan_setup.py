@@ -308,7 +308,7 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
         return log, []
     declared = log.pose is not None
     pose = log.pose if log.pose is not None else measured[0][1].pose
-    report = []
+    report: list[dict[str, Any]] = []
     placed = {}
     for plane, pp in measured:
         entry = {"plane": plane.name, **pp.to_report(), "pixels": pp.pixels.tolist()}
