@@ -469,9 +469,11 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     if len(v) or len(f):
         t = None if uv is None else np.ascontiguousarray(uv, dtype=np.float64).reshape(len(v), 2)
         n = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64).reshape(len(v), 3)
-        # the text's blocks as arrays the kernel filled (written one after the other, never joined)
-        parts.extend(_kernel.obj_text(np.ascontiguousarray(v), _decimals_for(v) if len(v) else 1, t, n,
-                                      np.ascontiguousarray(f), as_parts=True))
+        args = (np.ascontiguousarray(v), _decimals_for(v) if len(v) else 1, t, n, np.ascontiguousarray(f))
+        try:  # the text's blocks as arrays the kernel filled (written one after the other, never joined)
+            parts.extend(_kernel.obj_text(*args, as_parts=True))
+        except TypeError:  # a kernel built before as_parts existed (an older build in a checkout)
+            parts.append(_kernel.obj_text(*args))
     _write_obj_material(target, texture)
     _write_parts(target, parts)
 
