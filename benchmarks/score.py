@@ -74,6 +74,8 @@ class CaptureScore:
     object_points: int = 0
     object_swept: int = 0
     object_swept_points: int = 0
+    # the object's pixels by coverage class (coverage.npy: a point, or why there is none), name → count
+    object_reasons: dict[str, int] = field(default_factory=dict)
     false_points: int = 0
     all_points: int = 0
     # points off both planes and outside the object but within false_mm of an outlined face's plane (real surfaces)
@@ -96,6 +98,9 @@ class CaptureScore:
                        f"{self.object_pixels} pixels "
                        f"({100 * self.object_swept_points / max(self.object_swept, 1):.1f} % "
                        f"of the {self.object_swept} with a shadow time)")
+            if self.object_reasons:
+                out.append("    its pixels: " + ", ".join(f"{name} {100 * n / self.object_pixels:.1f} %"
+                                                       for name, n in self.object_reasons.items() if n))
         what = "outside the object" if self.object_pixels else "object included: no outline"
         off = self.false_points + self.on_faces
         out.append(f"  points off both planes by > 5 mm ({what}) "
@@ -210,6 +215,12 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
         result.object_points = int((tight & has).sum())
         result.object_swept = int((tight & swept).sum())
         result.object_swept_points = int((tight & swept & has).sum())
+        if (scan_dir / "coverage.npy").exists():
+            from gnomon.preview import COVERAGE_CLASSES
+
+            coverage = np.load(scan_dir / "coverage.npy")
+            result.object_reasons = {name: int((tight & (coverage == k)).sum())
+                                     for k, (name, _) in COVERAGE_CLASSES.items()}
     result.all_points = int(has.sum())
     off = has & ~obj & (dist_any > false_mm)
     on_face = np.zeros((h, w), dtype=bool)

@@ -64,6 +64,7 @@ def test_load_scan_reads_a_folder_back(desk_scan, in_memory) -> None:
     np.testing.assert_array_equal(back.normals, in_memory.normals)
     np.testing.assert_array_equal(back.rgb, in_memory.rgb)
     np.testing.assert_array_equal(back.mesh.faces, in_memory.mesh.faces)
+    np.testing.assert_array_equal(back.coverage, in_memory.coverage)  # coverage.npy: why a pixel has no point
     np.testing.assert_allclose(back.camera_centre, in_memory.camera_centre)
     assert back.valid.sum() == len(back.points)
 

@@ -63,8 +63,9 @@ class Scan:
       ``pixels`` (N, 2) float32 (u, v).
 
     ``coverage`` (H, W) uint8 class per pixel (:data:`gnomon.preview.COVERAGE_CLASSES`:
-    no shadow seen, point, no depth, under-sampled point, cropped), in memory only
-    (``preview.png`` shows it; None from :func:`load_scan`).
+    no shadow seen, point, no depth, under-sampled point, cropped, ambiguous, edges
+    disagree, no neighbour at its depth); ``coverage.npy`` in the scan folder (None
+    from :func:`load_scan` of a folder written before it existed).
 
     ``mesh`` (:class:`ScanMesh`), ``K`` (3, 3), ``dist`` lens distortion (OpenCV
     k1 k2 p1 p2 k3; None for a Tsai camera), ``R``, ``t`` world → camera
@@ -271,6 +272,7 @@ def load_scan(folder: str | os.PathLike) -> Scan:
     return Scan(depth=depth, sigma=sigma if sigma is not None else np.full_like(depth, np.nan),
                 shadow_time=_load_npy(f / "shadow_time.npy", (h, w)),
                 undersampled=_load_npy(f / "undersampled.npy", (h, w)), rgb=rgb,
+                coverage=_load_npy(f / "coverage.npy", (h, w)),
                 points=pts["xyz"], colors=pts.get("rgb"), normals=pts.get("normals"),
                 point_sigma=pts.get("sigma"), pixels=pts.get("uv"), mesh=mesh, K=K, dist=dist, R=R, t=t,
                 units=units, report=report, warnings=list(report.get("warnings", [])), folder=f)

@@ -586,6 +586,8 @@ def write_scan(folder: Path, result: ScanResult, started: float | None = None,
     with _Writers() as writers:
         write_surface(folder, surface, setup.units, writers)
         writers.add(atomic.save_npy, folder / "undersampled.npy", result.undersampled)
+        if result.coverage is not None:
+            writers.add(atomic.save_npy, folder / "coverage.npy", result.coverage)
         writers.add(atomic.save_npy, folder / "shadow_time.npy", result.shadow_time.astype(np.float32))
         writers.add(write_depth_npz, folder / "depth.npz", surface.depth, surface.sigma, result.report["camera"],
                     setup.units)

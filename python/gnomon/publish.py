@@ -58,8 +58,8 @@ __all__ = [
 ]
 
 OUTPUT_FILES = ("points.ply", "points_enu.ply", "mesh.ply", "mesh.obj", "mesh.mtl", "mesh.png", "mesh.stl",
-                "depth.npz", "depth.npy", "sigma.npy", "shadow_time.npy", "undersampled.npy", "preview.png",
-                "report.json", "scan.rrd", "merge.rrd")
+                "depth.npz", "depth.npy", "sigma.npy", "shadow_time.npy", "undersampled.npy", "coverage.npy",
+                "preview.png", "report.json", "scan.rrd", "merge.rrd")
 """Files a scan or a merge of this or an earlier version may have published into its output folder
 (a folder written by this version also lists its own in ``.gnomon-outputs``)."""
 
