@@ -95,3 +95,72 @@ def test_only_the_pixels_asked_for_are_retimed() -> None:
     assert np.array_equal(r.times[:, 100:], times[:, 100:].astype(np.float32), equal_nan=True)
     flipped = retime_between_isochrones(times[:, ::-1].copy(), 60, where=where[:, ::-1].copy())
     assert np.array_equal(flipped.retimed[:, ::-1], r.retimed)
+
+
+def _retime_by_loops(m: np.ndarray, n_frames: int, max_gap: float = 40.0, min_gap: float = 3.0,
+                     backstep: float = 0.25) -> tuple[np.ndarray, list[tuple]]:
+    """The re-timing of a map whose sweep runs along its rows, times rising to the right, written out
+    pixel by pixel: runs of pairs that are finite and never go back by more than ``backstep``, each
+    run's first crossing of every integer frame, each non-integer pixel time between its run's
+    crossings of ⌊t⌋ and ⌊t⌋ + 1. Returns the new map and (pixel, gap, fraction) per re-timed pixel."""
+    h, w = m.shape
+    out = m.astype(np.float32)
+    retimed = []
+    for r in range(h):
+        run = [0] * w
+        first: dict[tuple[int, int], float] = {}
+        for j in range(w - 1):
+            a, b = m[r, j], m[r, j + 1]
+            ok = np.isfinite(a) and np.isfinite(b) and b >= a - backstep
+            run[j + 1] = run[j] + (0 if ok else 1)
+            if ok and b > a:
+                for k in range(int(np.floor(a)) + 1, int(np.floor(b)) + 1):
+                    first.setdefault((run[j], min(max(k, -1), n_frames)), j + (k - a) / (b - a))
+        for j in range(w):
+            t = m[r, j]
+            if not np.isfinite(t) or t == np.floor(t):
+                continue
+            k = int(np.floor(t))
+            u0 = first.get((run[j], min(max(k, -1), n_frames)))
+            u1 = first.get((run[j], min(max(k + 1, -1), n_frames)))
+            if u0 is None or u1 is None:
+                continue
+            gap = u1 - u0
+            frac = (j - u0) / gap if gap != 0 else np.nan
+            if min_gap <= gap <= max_gap and 0 <= frac <= 1:
+                out[r, j] = np.float32(k + frac)
+                retimed.append((r * w + j, gap, frac))
+    return out, retimed
+
+
+def _ragged_sweep(seed: int, h: int = 14, w: int = 90, frames: int = 30) -> np.ndarray:
+    """A fast sweep's staircase with noise, holes, backward steps and depth jumps (float32)."""
+    rng = np.random.default_rng(seed)
+    u = np.arange(w)[None, :] + 3 * np.sin(np.arange(h)[:, None] / 2)
+    t = np.floor(u / rng.uniform(4, 9)) + 0.5 + rng.normal(0, 0.08, (h, w))
+    t[:, w // 2:] += rng.integers(-3, 4)  # a depth step shifts the staircase
+    t[rng.random((h, w)) < 0.04] = np.nan
+    t[rng.random((h, w)) < 0.03] -= 1.0  # steps back
+    t[2, 10:13] = np.floor(t[2, 10:13])  # some integer times
+    return np.clip(t, -0.5, frames + 1.5).astype(np.float32)
+
+
+def test_kernel_retiming_equals_a_per_pixel_computation_and_the_numpy_definition() -> None:
+    from gnomon.retiming import _retime_numpy
+
+    for seed in range(4):
+        m = _ragged_sweep(seed)
+        fast = retime_between_isochrones(m, 30)
+        slow, retimed = _retime_by_loops(m.astype(np.float64), 30)
+        assert len(retimed) > 100  # most plateaus are re-timed
+        np.testing.assert_array_equal(fast.times, slow)
+        np.testing.assert_array_equal(fast.pixel, [p for p, _, _ in retimed])
+        np.testing.assert_allclose(fast.gap, [g for _, g, _ in retimed], rtol=1e-12)
+        np.testing.assert_allclose(fast.f, [f for _, _, f in retimed], rtol=1e-12, atol=1e-15)
+        # every orientation (sweep along columns, right to left) and a mask: as the numpy definition
+        where = np.random.default_rng(seed).random(m.shape) < 0.7
+        for mm, mask in ((m, None), (m[:, ::-1], None), (m.T, None), (m.T[::-1], where.T[::-1]), (m, where)):
+            a = retime_between_isochrones(mm, 30, where=mask)
+            b = _retime_numpy(mm, 30, where=mask)
+            for name in ("times", "retimed", "pixel", "left", "right", "phase", "rise", "gap", "f"):
+                np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)

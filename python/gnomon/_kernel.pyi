@@ -257,3 +257,19 @@ def grid_normals(
 def stl_records(vertices: npt.NDArray[np.float32], faces: npt.NDArray[np.int32]) -> npt.NDArray[np.uint8]:
     """The (F·50,) bytes of a binary STL file's records (normal, corners, attribute 0; little-endian),
     as :func:`gnomon.meshing.write_stl` writes them."""
+
+def retime_rows(
+    times: npt.NDArray[np.float64],
+    index: npt.NDArray[np.int64],
+    wanted: npt.NDArray[np.uint8],
+    n_frames: int,
+    max_gap: float,
+    min_gap: float,
+    backstep: float,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_], npt.NDArray[np.int64], npt.NDArray[np.int64],
+           npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
+           npt.NDArray[np.float64]]:
+    """The rows of a shadow-time map oriented along the sweep (times rising to the right) re-timed
+    between its isochrones, as :func:`gnomon.retiming.retime_between_isochrones` defines it: the
+    times, the re-timed mask, and per re-timed pixel (row-major) its ``index`` value, the crossings'
+    pixels (left, right), phases and rises, their gap and the pixel's fraction of it."""

@@ -533,15 +533,17 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
     warnings += setup.light.choose_dips(tracked, ray_map, setup.planes, setup.max_depth_jump,
                                         _min_contrast_dn(setup.tracker.min_contrast, tracked.noise_dn))
-    with _timed(timings, "planes_and_triangulation_s", cpu):
-        levels = _Levels(tracked)
-        edges = _reconstruct_edges(setup, tracked, ray_map, warnings, levels)
-    with _timed(timings, "fusion_and_mesh_s", cpu):
-        fused = _fuse(edges, tracked, setup.max_depth_jump, levels)
-        cropped = _crop(fused, setup, ray_map)
-        rgb = _lit_colours(colour, tracked)
-        surface = build_surface(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, rgb,
-                                setup.max_depth_jump)
+    # The colours need only the tracked times (final from here on): combined on a thread meanwhile.
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-colour") as colour_pool:
+        colours = colour_pool.submit(_lit_colours, colour, tracked)
+        with _timed(timings, "planes_and_triangulation_s", cpu):
+            levels = _Levels(tracked)
+            edges = _reconstruct_edges(setup, tracked, ray_map, warnings, levels)
+        with _timed(timings, "fusion_and_mesh_s", cpu):
+            fused = _fuse(edges, tracked, setup.max_depth_jump, levels)
+            cropped = _crop(fused, setup, ray_map)
+            surface = build_surface(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, colours.result(),
+                                    setup.max_depth_jump)
     coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
                             ambiguous=tracked.times.ambiguous, conflict=fused.conflict, unsupported=fused.unsupported)
     warnings += _fusion_warnings(fused)

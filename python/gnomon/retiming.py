@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gnomon import _kernel
+
 __all__ = ["MAX_GAP_PX", "RetimedTimes", "retime_between_isochrones"]
 
 # Crossings of consecutive frames farther apart than this (pixels) are not interpolated between.
@@ -126,7 +128,42 @@ def retime_between_isochrones(times: np.ndarray, n_frames: int, max_gap: float =
     ones, :func:`gnomon.uncertainty.undersampled`: where the edge is sampled
     by two frames or more, the tracker's own time is already right); the
     crossings are still taken from every pixel.
+
+    The rows (oriented along the sweep here) are re-timed by the kernel
+    (``_kernel.retime_rows``, rows in parallel); :func:`_retime_numpy` is the
+    same in numpy, element for element.
     """
+    if not hasattr(_kernel, "retime_rows"):  # a kernel built before retime_rows existed
+        return _retime_numpy(times, n_frames, max_gap, where)
+    t = np.asarray(times, dtype=np.float64)
+    z2 = np.zeros((0, 2))
+    if t.ndim != 2 or t.size == 0:
+        return RetimedTimes(t.astype(np.float32), np.zeros(t.shape, dtype=bool), np.zeros(0, dtype=np.int64),
+                            z2.astype(np.int64), z2.astype(np.int64), z2, z2, np.zeros(0), np.zeros(0))
+    along_rows, sense = _sweep_axis(t)
+    index = np.arange(t.size).reshape(t.shape)
+    if sense == 0 or (t.shape[1] if along_rows else t.shape[0]) < 2:
+        return RetimedTimes(t.astype(np.float32), np.zeros(t.shape, dtype=bool), np.zeros(0, dtype=np.int64),
+                            z2.astype(np.int64), z2.astype(np.int64), z2, z2, np.zeros(0), np.zeros(0))
+    wanted = np.ones(t.shape, dtype=np.uint8) if where is None else np.asarray(where, dtype=np.uint8)
+
+    def orient(a: np.ndarray) -> np.ndarray:
+        a = a if along_rows else a.T
+        return np.ascontiguousarray(a[:, ::-1] if sense < 0 else a)
+
+    new, done, pixel, left, right, phase, rise, gap, f = _kernel.retime_rows(
+        orient(t), orient(index), orient(wanted), int(n_frames), float(max_gap), MIN_GAP_PX, BACKSTEP)
+    if sense < 0:
+        new, done = new[:, ::-1], done[:, ::-1]
+    if not along_rows:
+        new, done = new.T, done.T
+    return RetimedTimes(np.ascontiguousarray(new), np.ascontiguousarray(done), pixel, left, right, phase, rise,
+                        gap, f)
+
+
+def _retime_numpy(times: np.ndarray, n_frames: int, max_gap: float = MAX_GAP_PX,
+                  where: np.ndarray | None = None) -> RetimedTimes:
+    """:func:`retime_between_isochrones` in numpy (the kernel's ``retime_rows`` gives the same)."""
     t = np.asarray(times, dtype=np.float64)
     empty = np.zeros(0, dtype=np.int64)
 

@@ -7,6 +7,7 @@
 //!   shadow has passed, with provisional times, as soon as it has passed;
 //! * [`triangulate`]: camera rays ∩ interpolated shadow planes;
 //! * [`grid_faces`], [`clean_faces`], [`obj_text`]: the mesh on the pixel grid, its clean-up, its OBJ text;
+//! * [`retime_rows`]: a fast sweep's shadow times between the isochrones;
 //! * [`grid_normals`], [`stl_records`]: the surface's normals on the pixel grid, a mesh's binary STL records;
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
@@ -17,6 +18,7 @@ pub mod error;
 pub mod geometry;
 pub mod live;
 pub mod mesh;
+pub mod retime;
 pub mod sample;
 pub mod simd;
 pub mod surface;
@@ -27,6 +29,7 @@ pub use error::KernelError;
 pub use geometry::{Plane, Ray};
 pub use live::{FinishedPixel, WatchParams};
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
+pub use retime::{retime_rows, RetimeParams, Retimed};
 pub use sample::Sample;
 pub use simd::SimdPath;
 pub use surface::{grid_normals, stl_records, STL_RECORD_BYTES};

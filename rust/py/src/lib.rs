@@ -804,6 +804,80 @@ fn obj_text<'py>(
     .map(Bound::into_any)
 }
 
+/// The rows of an oriented shadow-time map re-timed between its isochrones (see
+/// `gnomon_core::retime_rows`): `(times (H, W) float32, done (H, W) bool, pixel (P,) int64,
+/// left (P, 2) int64, right (P, 2) int64, phase (P, 2), rise (P, 2), gap (P,), f (P,))`.
+#[pyfunction]
+#[pyo3(signature = (times, index, wanted, n_frames, max_gap, min_gap, backstep))]
+#[allow(clippy::too_many_arguments)]
+fn retime_rows<'py>(
+    py: Python<'py>,
+    times: &Bound<'py, PyAny>,
+    index: &Bound<'py, PyAny>,
+    wanted: &Bound<'py, PyAny>,
+    n_frames: i64,
+    max_gap: f64,
+    min_gap: f64,
+    backstep: f64,
+) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    let times = borrow_array::<f64, Ix2>(
+        times,
+        "times",
+        "float64",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (times.shape()[0], times.shape()[1]);
+    let grid = [Extent::Exactly(h), Extent::Exactly(w)];
+    let index = borrow_array::<i64, Ix2>(index, "index", "int64", &grid)?;
+    let wanted = borrow_array::<u8, Ix2>(wanted, "wanted", "uint8", &grid)?;
+    let (times, index, wanted) = (times.as_array(), index.as_array(), wanted.as_array());
+    let params = gnomon_core::RetimeParams {
+        n_frames,
+        max_gap,
+        min_gap,
+        backstep,
+    };
+    let r = py
+        .detach(|| {
+            with_slice(&times, |t| {
+                with_slice(&index, |i| {
+                    with_slice(&wanted, |m| {
+                        gnomon_core::retime_rows(t, i, m, w.max(1), params)
+                    })
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    let pairs_i = |v: Vec<[i64; 2]>| {
+        let n = v.len();
+        Array2::from_shape_vec((n, 2), v.into_iter().flatten().collect())
+            .map(|a| a.into_pyarray(py))
+    };
+    let pairs_f = |v: Vec<[f64; 2]>| {
+        let n = v.len();
+        Array2::from_shape_vec((n, 2), v.into_iter().flatten().collect())
+            .map(|a| a.into_pyarray(py))
+    };
+    let shape_err = |err: numpy::ndarray::ShapeError| {
+        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
+    };
+    let done: Vec<bool> = r.done.iter().map(|&d| d != 0).collect();
+    pyo3::types::PyTuple::new(
+        py,
+        [
+            image(py, r.times, h, w)?.into_any(),
+            image(py, done, h, w)?.into_any(),
+            r.pixel.into_pyarray(py).into_any(),
+            pairs_i(r.left).map_err(shape_err)?.into_any(),
+            pairs_i(r.right).map_err(shape_err)?.into_any(),
+            pairs_f(r.phase).map_err(shape_err)?.into_any(),
+            pairs_f(r.rise).map_err(shape_err)?.into_any(),
+            r.gap.into_pyarray(py).into_any(),
+            r.f.into_pyarray(py).into_any(),
+        ],
+    )
+}
+
 /// Unit normals (H, W, 3) float32 of the surface on the pixel grid (see `gnomon_core::grid_normals`).
 #[pyfunction]
 #[pyo3(signature = (points, depth, valid, camera_centre, max_relative_jump))]
@@ -918,6 +992,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(obj_text, m)?)?;
     m.add_function(wrap_pyfunction!(grid_normals, m)?)?;
     m.add_function(wrap_pyfunction!(stl_records, m)?)?;
+    m.add_function(wrap_pyfunction!(retime_rows, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -1,0 +1,240 @@
+//! Shadow times between the isochrones, row by row (`gnomon.retiming`, whose
+//! numpy definition this reproduces element for element; the tests compare both).
+//!
+//! The map arrives oriented by the caller: the sweep runs along the rows, with
+//! times increasing to the right. Per row, *runs* are the maximal stretches of
+//! pixels whose consecutive pairs are finite and never go back by more than
+//! `backstep` frames. A rising pair `(j, j+1)` of a run owns the crossings of
+//! the integer frames `k` with `a < k ≤ b`, at `u = j + (k − a)/(b − a)`
+//! (times `a`, `b`; `k` clipped to `[−1, n_frames]` as a key). A pixel with a
+//! non-integer time `t` in a run takes `⌊t⌋ + (u − u₀)/(u₁ − u₀)` from the
+//! run's first crossings of `⌊t⌋` and `⌊t⌋ + 1` when they are `min_gap` to
+//! `max_gap` pixels apart and the pixel lies between them. Rows are
+//! independent: processed in parallel, results concatenated in row order.
+
+use rayon::prelude::*;
+
+use crate::error::KernelError;
+
+/// A crossing of an integer frame between two pixels of a row.
+#[derive(Clone, Copy)]
+struct Crossing {
+    run: usize,
+    key: i64,
+    u: f64,
+    phase: f64,
+    left: i64,
+    right: i64,
+    rise: f64,
+}
+
+/// The re-timed map (oriented as given) and, per re-timed pixel in row-major
+/// order, what its time was made of (see `gnomon.retiming.RetimedTimes`).
+#[derive(Default)]
+pub struct Retimed {
+    /// `H·W` times (f32, the input's where not re-timed).
+    pub times: Vec<f32>,
+    /// `H·W`, 1 = re-timed.
+    pub done: Vec<u8>,
+    /// Per re-timed pixel: its `index` value.
+    pub pixel: Vec<i64>,
+    /// The `index` values of the pixels each crossing (of `⌊t⌋`, of `⌊t⌋ + 1`) lies between.
+    pub left: Vec<[i64; 2]>,
+    pub right: Vec<[i64; 2]>,
+    /// Where each crossing lies between its two pixels (0 at the left one).
+    pub phase: Vec<[f64; 2]>,
+    /// How fast the time rises across each crossing's pair (frames per pixel).
+    pub rise: Vec<[f64; 2]>,
+    /// The two crossings' distance (pixels) and the pixel's fraction of it.
+    pub gap: Vec<f64>,
+    pub f: Vec<f64>,
+}
+
+/// Parameters of [`retime_rows`].
+#[derive(Clone, Copy, Debug)]
+pub struct RetimeParams {
+    pub n_frames: i64,
+    pub max_gap: f64,
+    pub min_gap: f64,
+    pub backstep: f64,
+}
+
+/// Re-time the rows of an oriented `H × width` shadow-time map (see the module).
+///
+/// `times` `H·W` frames (NaN = none); `index` `H·W` each pixel's flat index in
+/// the caller's image (carried into the outputs); `wanted` `H·W` non-zero =
+/// may be re-timed (crossings are taken from every pixel).
+pub fn retime_rows(
+    times: &[f64],
+    index: &[i64],
+    wanted: &[u8],
+    width: usize,
+    params: RetimeParams,
+) -> Result<Retimed, KernelError> {
+    let n = times.len();
+    for (what, len) in [
+        ("index (one per pixel)", index.len()),
+        ("wanted (one per pixel)", wanted.len()),
+    ] {
+        if len != n {
+            return Err(KernelError::LengthMismatch {
+                what,
+                expected: n,
+                got: len,
+            });
+        }
+    }
+    if width == 0 || n % width != 0 {
+        return Err(KernelError::parameter(
+            "width",
+            format!("{width} does not divide {n} pixels"),
+        ));
+    }
+    if params.n_frames < 0 {
+        return Err(KernelError::parameter("n_frames", "must be ≥ 0"));
+    }
+    let rows: Vec<Retimed> = times
+        .par_chunks(width)
+        .zip(index.par_chunks(width))
+        .zip(wanted.par_chunks(width))
+        .map(|((t, idx), want)| retime_row(t, idx, want, params))
+        .collect();
+    let mut out = Retimed::default();
+    let count: usize = rows.iter().map(|r| r.pixel.len()).sum();
+    out.times.reserve(n);
+    out.done.reserve(n);
+    out.pixel.reserve(count);
+    for r in rows {
+        out.times.extend(r.times);
+        out.done.extend(r.done);
+        out.pixel.extend(r.pixel);
+        out.left.extend(r.left);
+        out.right.extend(r.right);
+        out.phase.extend(r.phase);
+        out.rise.extend(r.rise);
+        out.gap.extend(r.gap);
+        out.f.extend(r.f);
+    }
+    Ok(out)
+}
+
+fn retime_row(t: &[f64], idx: &[i64], want: &[u8], p: RetimeParams) -> Retimed {
+    let w = t.len();
+    let clip = |k: i64| k.clamp(-1, p.n_frames);
+    let mut out = Retimed {
+        times: t.iter().map(|&x| x as f32).collect(),
+        done: vec![0u8; w],
+        ..Retimed::default()
+    };
+    // Run of each pixel: a new run after each pair that is not ok.
+    let mut run = vec![0usize; w];
+    let mut crossings: Vec<Crossing> = Vec::new();
+    for j in 0..w.saturating_sub(1) {
+        let (a, b) = (t[j], t[j + 1]);
+        let ok = a.is_finite() && b.is_finite() && b >= a - p.backstep;
+        run[j + 1] = run[j] + usize::from(!ok);
+        if ok && b > a {
+            let (lo, hi) = (a.floor() as i64 + 1, b.floor() as i64);
+            for k in lo..=hi {
+                let phase = (k as f64 - a) / (b - a);
+                crossings.push(Crossing {
+                    run: run[j],
+                    key: clip(k),
+                    u: j as f64 + phase,
+                    phase,
+                    left: idx[j],
+                    right: idx[j + 1],
+                    rise: b - a,
+                });
+            }
+        }
+    }
+    if crossings.is_empty() {
+        return out;
+    }
+    // The first crossing (in row order) of each (run, frame): a stable sort, then a binary search.
+    crossings.sort_by_key(|c| (c.run, c.key));
+    let find = |run: usize, key: i64| -> Option<Crossing> {
+        let i = crossings.partition_point(|c| (c.run, c.key) < (run, key));
+        crossings
+            .get(i)
+            .filter(|c| c.run == run && c.key == key)
+            .copied()
+    };
+    for j in 0..w {
+        let tp = t[j];
+        if want[j] == 0 || !tp.is_finite() {
+            continue;
+        }
+        let kf = tp.floor();
+        if tp <= kf {
+            continue; // on an integer frame: keeps its time
+        }
+        let kf = kf as i64;
+        let (Some(c0), Some(c1)) = (find(run[j], clip(kf)), find(run[j], clip(kf + 1))) else {
+            continue;
+        };
+        let gap = c1.u - c0.u;
+        let frac = (j as f64 - c0.u) / gap;
+        if !(gap >= p.min_gap && gap <= p.max_gap && frac >= 0.0 && frac <= 1.0) {
+            continue;
+        }
+        out.times[j] = (kf as f64 + frac) as f32;
+        out.done[j] = 1;
+        out.pixel.push(idx[j]);
+        out.left.push([c0.left, c1.left]);
+        out.right.push([c0.right, c1.right]);
+        out.phase.push([c0.phase, c1.phase]);
+        out.rise.push([c0.rise, c1.rise]);
+        out.gap.push(gap);
+        out.f.push(frac);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const P: RetimeParams = RetimeParams {
+        n_frames: 10,
+        max_gap: 40.0,
+        min_gap: 3.0,
+        backstep: 0.25,
+    };
+
+    #[test]
+    fn staircase_becomes_a_ramp() {
+        // Frames 2 and 3 crossed 5 pixels apart (at u = 0.5 and 5.5); the plateau between gets a ramp.
+        let t = [1.5, 2.5, 2.5, 2.5, 2.5, 2.5, 3.5, 3.5];
+        let idx: Vec<i64> = (0..8).collect();
+        let r = retime_rows(&t, &idx, &[1; 8], 8, P).unwrap();
+        assert_eq!(r.pixel, vec![1, 2, 3, 4, 5]);
+        for (k, &px) in r.pixel.iter().enumerate() {
+            let f = (px as f64 - 0.5) / 5.0;
+            assert!((f64::from(r.times[px as usize]) - (2.0 + f)).abs() < 1e-6);
+            assert!((r.f[k] - f).abs() < 1e-12);
+        }
+        assert_eq!(r.left[0], [0, 5]);
+        assert_eq!(r.right[0], [1, 6]);
+        assert_eq!(r.gap, vec![5.0; 5]);
+        assert_eq!(r.done, vec![0, 1, 1, 1, 1, 1, 0, 0]);
+        // pixels not wanted keep their time
+        let r = retime_rows(&t, &idx, &[1, 1, 0, 1, 1, 1, 1, 1], 8, P).unwrap();
+        assert_eq!(r.pixel, vec![1, 3, 4, 5]);
+        assert_eq!(r.times[2], 2.5);
+    }
+
+    #[test]
+    fn runs_end_at_gaps_and_backsteps() {
+        // A NaN splits the row: the crossings of frame 3 lie in another run.
+        let t = [1.5, 2.5, 2.5, 2.5, f64::NAN, 2.5, 3.5, 3.5];
+        let idx: Vec<i64> = (0..8).collect();
+        let r = retime_rows(&t, &idx, &[1; 8], 8, P).unwrap();
+        assert!(r.pixel.is_empty());
+        assert_eq!(r.times[1], 2.5);
+        assert!(r.times[4].is_nan());
+        assert!(retime_rows(&t, &idx[..7], &[1; 8], 8, P).is_err());
+        assert!(retime_rows(&t, &idx, &[1; 8], 3, P).is_err());
+    }
+}
