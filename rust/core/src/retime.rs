@@ -176,7 +176,7 @@ fn retime_row(t: &[f64], idx: &[i64], want: &[u8], p: RetimeParams) -> Retimed {
         };
         let gap = c1.u - c0.u;
         let frac = (j as f64 - c0.u) / gap;
-        if !(gap >= p.min_gap && gap <= p.max_gap && frac >= 0.0 && frac <= 1.0) {
+        if !((p.min_gap..=p.max_gap).contains(&gap) && (0.0..=1.0).contains(&frac)) {
             continue;
         }
         out.times[j] = (kf as f64 + frac) as f32;
