@@ -76,7 +76,7 @@ def test_normaliser_skips_clouds_not_dawn_or_dusk() -> None:
               100: 0.8, 101: 0.4, 102: 0.3, 103: 0.5, 104: 0.85}
     norm = IlluminationNormalizer(decoding_lut(2.2, np.uint8))
     for frame in _day_frames(clouds):
-        norm.normalize(frame)
+        norm.gain(frame)
     deep = {k for k, c in clouds.items() if c <= 0.7}
     # every frame the cloud darkened by 30 % or more is skipped, and no clear frame (dawn's and
     # dusk's fast changes, the frames after the last cloud) is
@@ -96,7 +96,7 @@ def test_normaliser_takes_a_lasting_darkening_as_a_new_level() -> None:
     for k in range(40):
         level = 1.0 if k < 10 else 0.6  # the exposure stepped down for good at frame 10
         frame = np.clip(np.rint(255 * scene * level + rng.normal(0, 1.0, scene.shape)), 0, 255)
-        norm.normalize(frame.astype(np.uint8))
+        norm.gain(frame.astype(np.uint8))
     # the step is refused for max_run frames at most, then the new level is accepted
     assert norm.skipped == list(range(10, 18))
     assert norm.accepted_gains[-1] == pytest.approx(0.6, rel=0.02)

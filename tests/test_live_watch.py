@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from gnomon import _kernel
-from gnomon.errors import KernelArrayError, KernelParameterError
+from gnomon.errors import KernelParameterError
 from gnomon.tracking import decoding_lut
 
 LIT, DARK = 200.0, 40.0
@@ -28,8 +28,8 @@ def sweep(height: int = 12, width: int = 40, frames: int = 90, speed: float = 0.
 
 
 def run(frames: np.ndarray, recover: int = 3, lut: np.ndarray | None = None):
-    t = _kernel.TemporalTracker(*frames.shape[1:], window=4, max_width=32)
-    t.watch(20.0, recover, lut)
+    t = _kernel.TemporalTracker(*frames.shape[1:], window=4, max_width=32, lut=lut)
+    t.watch(20.0, recover)
     batches = []
     for f in frames:
         t.update(np.ascontiguousarray(f))
@@ -43,7 +43,7 @@ def test_finished_pixels_carry_the_final_times_of_a_clean_sweep():
     tracker, batches = run(frames, 3, lut)
     index = np.concatenate([b.index for b in batches])
     assert len(np.unique(index)) == len(index)  # never twice
-    final = tracker.finish(20.0, lut)
+    final = tracker.finish(20.0)
     valid = np.asarray(final.valid).ravel()
     # every pixel the final pass finds was finished by the watch, and nothing else
     assert set(index.tolist()) == set(np.flatnonzero(valid).tolist())
@@ -76,8 +76,6 @@ def test_the_watch_is_checked():
         t.watch(20.0, 0)
     with pytest.raises(KernelParameterError, match="min_contrast"):
         t.watch(-1.0)
-    with pytest.raises(KernelArrayError, match="lut"):
-        t.watch(20.0, 3, np.zeros(10, np.float32))
     t.watch(20.0)
     assert len(t.take_finished()) == 0
     assert t.watch_counts == (20, 0, 0)

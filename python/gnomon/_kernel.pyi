@@ -26,14 +26,16 @@ def simd_paths() -> list[Literal["avx2", "sse2", "portable"]]:
 class ShadowTimes:
     """The tracker's per-pixel results; read-only, every array (H, W).
 
-    ``imax``, ``imin``, ``contrast`` (DN: the deepest dip's lit level, darkest
-    sample and depth, 0 = no dip), ``threshold`` (linear irradiance, the
-    decoding table's units), ``enter``, ``leave`` (frames, NaN = none or
-    invalid), ``enter_slope``, ``leave_slope`` (linear units per frame),
-    ``rival`` (DN, the deepest other dip): float32; ``valid`` (a dip,
-    ``contrast >= min_contrast``, not ambiguous), ``ambiguous`` (``rival >=
-    ambiguity * contrast``), ``clipped`` (the dip's levels or an interpolated
-    sample at 0 or the dtype's maximum): bool.
+    ``imax``, ``imin``, ``contrast`` (DN of the input: the deepest dip's lit level,
+    darkest sample and depth, 0 = no dip; fractional for a normalised tracker, whose
+    levels are carried back to the light the dip was seen in), ``threshold`` (linear
+    irradiance, the decoding table's units, in that light), ``enter``, ``leave``
+    (frames, NaN = none or invalid), ``enter_slope``, ``leave_slope`` (linear units
+    per frame), ``rival`` (DN, the deepest other dip): float32; ``valid`` (a dip,
+    ``contrast >= min_contrast``, not ambiguous), ``ambiguous`` (``contrast >=
+    min_contrast`` and the other dip at least ``ambiguity`` times as deep),
+    ``clipped`` (the dip's levels or an interpolated sample at 0 or the input's
+    maximum): bool.
     """
 
     @property
@@ -99,10 +101,10 @@ class FinishedPixels:
 
     ``index`` (row-major ``y * width + x``) and ``frame`` (the frame whose sample
     confirmed the recovery): int64. ``imax`` (the lit level before the dip), ``imin``
-    (the dip's darkest sample): DN; ``threshold``: linear irradiance, ``(L(imax) +
-    L(imin)) / 2``; ``enter``, ``leave``: provisional sub-frame times (frames, NaN when
-    the crossing has left the tracker's ring); ``enter_slope``, ``leave_slope``: linear
-    units per frame: float32.
+    (the dip's darkest sample): DN of the input; ``threshold``: linear irradiance,
+    ``(L(imax) + L(imin)) / 2`` (in the light of the dip); ``enter``, ``leave``:
+    provisional sub-frame times (frames, NaN when the crossing has left the tracker's
+    ring); ``enter_slope``, ``leave_slope``: linear units per frame: float32.
     """
 
     @property
@@ -134,7 +136,11 @@ class TemporalTracker:
     leave crossings. ``max_width``: ``W`` (2..128 frames), the widest dip always
     found and the separation of distinct dips; the ring holds ``3W + 2m`` frames.
     ``ambiguity``: in (0, 1]; a pixel whose second dip is at least this fraction of
-    the deepest is ambiguous.
+    the deepest is ambiguous. ``lut``: the capture's decoding table, float32 DN →
+    linear irradiance (256 or 65536 finite, non-decreasing entries; the identity if
+    None), used for every linear value. ``normalise``: the light changes (the sun):
+    every frame comes with its gain, the tracker compares the samples' decoded values
+    divided by it and reports each dip in its own light (``lut`` required).
     """
 
     def __init__(
@@ -145,27 +151,30 @@ class TemporalTracker:
         window: int = 4,
         max_width: int = 32,
         ambiguity: float = 0.6,
+        lut: npt.NDArray[np.float32] | None = None,
+        normalise: bool = False,
     ) -> None: ...
-    def update(self, frame: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
-        """Add the next frame: a (height, width) array of the tracker's dtype."""
-    def finish(self, min_contrast: float, lut: npt.NDArray[np.float32] | None = None) -> ShadowTimes:
+    def update(self, frame: npt.NDArray[np.uint8] | npt.NDArray[np.uint16], gain: float | None = None) -> None:
+        """Add the next frame: a (height, width) array of the tracker's dtype, as decoded
+        from its file (DN); with a normalised tracker, ``gain`` (> 0): the frame's light
+        relative to the first frame's (required), otherwise None."""
+    def finish(self, min_contrast: float) -> ShadowTimes:
         """Per-pixel results for the frames seen so far (see :class:`ShadowTimes`); the tracker is unchanged.
 
-        ``min_contrast`` in DN. ``lut``: float32 decoding table DN → linear
-        irradiance (256 or 65536 finite, non-decreasing entries), identity if None.
+        ``min_contrast``: DN of the input, in every mode.
         """
-    def finish_second(self, lut: npt.NDArray[np.float32] | None = None) -> SecondDips:
-        """Every pixel's second candidate dip for the frames seen so far (see :class:`SecondDips`);
-        the tracker is unchanged. ``lut`` as in :meth:`finish`."""
-    def watch(self, min_contrast: float, recover: int = 3, lut: npt.NDArray[np.float32] | None = None) -> None:
+    def finish_second(self) -> SecondDips:
+        """Every pixel's second candidate dip for the frames seen so far (see :class:`SecondDips`),
+        in :meth:`finish`'s units; the tracker is unchanged."""
+    def watch(self, min_contrast: float, recover: int = 3) -> None:
         """Start the live watch from the next frame on (replacing an earlier one).
 
-        Per pixel: a sample ``min_contrast`` DN (> 0) below the brightest so far opens a
-        dip; ``recover`` (1..255) consecutive samples at or above the DN mid-level between
-        that lit level and the dip's minimum end it, and the pixel is *finished* (one dip
-        per pixel). Its provisional times follow :meth:`finish`'s definitions on the frames
-        still in the ring, decoded with ``lut`` (as in :meth:`finish`). The results of
-        :meth:`finish` are unchanged.
+        Per pixel: a sample ``min_contrast`` DN of the input (> 0) below the brightest so far
+        opens a dip (normalised: the step that many DN span at mid-grey); ``recover``
+        (1..255) consecutive samples at or above the mid-level between that lit level and
+        the dip's minimum end it, and the pixel is *finished* (one dip per pixel). Its
+        provisional times follow :meth:`finish`'s definitions on the frames still in the
+        ring. The results of :meth:`finish` are unchanged.
         """
     def take_finished(self) -> FinishedPixels:
         """The pixels finished since the last call; ``KernelParameterError`` before :meth:`watch`."""
@@ -178,6 +187,8 @@ class TemporalTracker:
     def shape(self) -> tuple[int, int]: ...
     @property
     def dtype(self) -> Literal["uint8", "uint16"]: ...
+    @property
+    def normalised(self) -> bool: ...
     @property
     def window(self) -> int: ...
     @property

@@ -78,6 +78,7 @@ from gnomon.tracking import (
     ShadowTracker,
     TrackedSequence,
     TrackerSettings,
+    linear,
     track_source,
 )
 from gnomon.triangulation import triangulate
@@ -633,13 +634,8 @@ class LiveView:
     def _add_finished(self, fin: Any, k: int, capture_frame: int) -> None:
         idx = np.asarray(fin.index, dtype=np.int64)
         assert self.tracker is not None
-        lut = self.tracker.input_lut if self.tracker.normalizer is None else None
         self.threshold[idx] = fin.threshold
-        if lut is not None:
-            hi = lut[np.clip(np.asarray(fin.imax).astype(np.int64), 0, len(lut) - 1)]
-            self.contrast_lin[idx] = 2.0 * (hi - np.asarray(fin.threshold))
-        else:
-            self.contrast_lin[idx] = 2.0 * (np.asarray(fin.imax) / 32768.0 - np.asarray(fin.threshold))
+        self.contrast_lin[idx] = 2.0 * (linear(fin.imax, self.tracker.lut) - np.asarray(fin.threshold))
         times = {"enter": (np.asarray(fin.enter), np.asarray(fin.enter_slope)),
                  "leave": (np.asarray(fin.leave), np.asarray(fin.leave_slope))}
         for e in self.edges:
@@ -774,11 +770,7 @@ class LiveView:
         """σ of the pixels' times (frames): image noise over the slope, and the edge's sampling."""
         assert self.tracker is not None
         noise = self.noise_dn if self.noise_dn is not None else 1.0
-        lut = self.tracker.input_lut
-        if self.tracker.normalizer is None:
-            sigma_lin = linear_noise_at_threshold(noise, self.threshold[px], lut)
-        else:
-            sigma_lin = linear_noise_at_threshold(noise, self.threshold[px] / 32768.0, lut) * 32768.0
+        sigma_lin = linear_noise_at_threshold(noise, self.threshold[px], self.tracker.lut)
         with np.errstate(invalid="ignore", divide="ignore"):
             st = np.where(slope > 0, sigma_lin / slope, np.nan)
         return np.hypot(st, interpolation_time_sigma(self.contrast_lin[px], slope)).astype(np.float32)

@@ -48,7 +48,7 @@ from gnomon.reference_lines import ReferenceLines
 from gnomon.retiming import retime_between_isochrones
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
 from gnomon.texture import LitColour, sample_indices
-from gnomon.tracking import ShadowTimes, TrackedSequence, track_source
+from gnomon.tracking import ShadowTimes, TrackedSequence, linear, track_source
 from gnomon.triangulation import supported_by_neighbours, triangulate
 from gnomon.uncertainty import (
     depth_sigma,
@@ -172,11 +172,6 @@ def _colors(first_color: np.ndarray | None, first_grey: np.ndarray) -> np.ndarra
     return np.ascontiguousarray(rgb, dtype=np.uint8)
 
 
-def _dn_index(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
-    """Integer LUT indices of per-pixel DN values (NaN → 0)."""
-    return np.clip(np.nan_to_num(values_dn), 0, len(lut) - 1).astype(np.int64)
-
-
 class _Levels:
     """Per-pixel levels of the tracked dips in linear irradiance, each computed once per scan (both
     edges, the screening and the fusion use them)."""
@@ -186,20 +181,18 @@ class _Levels:
 
     @cached_property
     def imax(self) -> np.ndarray:
-        lut = self.tracked.lut
-        return lut[_dn_index(self.tracked.times.imax, lut)]
+        return linear(self.tracked.times.imax, self.tracked.lut)
 
     @cached_property
     def imin(self) -> np.ndarray:
-        lut = self.tracked.lut
-        return lut[_dn_index(self.tracked.times.imin, lut)]
+        return linear(self.tracked.times.imin, self.tracked.lut)
 
     @cached_property
     def sigma_at_threshold(self) -> np.ndarray:
         """The image noise carried to irradiance at each pixel's threshold."""
         t = self.tracked
         # The noise is measured in the input's DN: carry it to irradiance through the input's decoding.
-        return linear_noise_at_threshold(t.noise_dn, t.times.threshold, t.input_lut)
+        return linear_noise_at_threshold(t.noise_dn, t.times.threshold, t.lut)
 
     @cached_property
     def relative_depth(self) -> tuple[np.ndarray, np.ndarray]:
@@ -270,8 +263,8 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
 def _relative_depth(tracked: TrackedSequence, hi: np.ndarray, lo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) each dip's depth over its lit level, ``r = (Imax − Imin)/Imax`` in linear irradiance
     (``hi``, ``lo``: the levels Imax, Imin), and its 1σ from the image noise at both levels."""
-    s_hi = linear_noise_at_threshold(tracked.noise_dn, hi, tracked.input_lut)
-    s_lo = linear_noise_at_threshold(tracked.noise_dn, lo, tracked.input_lut)
+    s_hi = linear_noise_at_threshold(tracked.noise_dn, hi, tracked.lut)
+    s_lo = linear_noise_at_threshold(tracked.noise_dn, lo, tracked.lut)
     with np.errstate(invalid="ignore", divide="ignore"):
         r = np.where(hi > 0, (hi - lo) / hi, np.nan)
         sigma = np.where(hi > 0, np.hypot(s_lo / hi, lo * s_hi / hi**2), np.nan)
@@ -971,7 +964,7 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
             # pixels whose brightest sample is at the input's full scale (clipped: the shadow's
             # edges look steeper and its width narrower there); None when the tracker saw
             # normalised irradiance instead of the input's DN
-            "saturated": (int((times.imax >= len(tracked.input_lut) - 1).sum())
+            "saturated": (int((times.imax >= len(tracked.lut) - 1).sum())
                           if not tr.normalize_illumination else None),
             # pixels with two comparable dips (no point), and with clipped samples
             "ambiguous": int(np.count_nonzero(

@@ -33,6 +33,16 @@ samples around it: ``t = k + (v_k − thr) / (v_k − v_{k+1})``. The slope
 noise model ``σ_t = σ_I / slope``. ``clipped`` flags a dip whose levels or
 interpolated samples are 0 or the type's maximum (times may be biased).
 
+One intensity representation: the frames reach the kernel as they were
+decoded from the files (DN of the input, uint8 or uint16), with the capture's
+one decoding table :func:`decoding_lut`; ``min_contrast`` is in DN of the
+input and the kernel applies it, in every mode. When the light changes (the
+sun, ``normalize_illumination``), :class:`IlluminationNormalizer` measures
+each frame's gain and the kernel divides the decoded samples by it; each dip
+is then reported in the light it was seen in: ``imax``/``imin``/``contrast``
+in (fractional) DN of the input, the threshold and slopes in linear units.
+:func:`linear` decodes such levels.
+
 The work is done by the Rust kernel (:class:`gnomon._kernel.TemporalTracker`,
 streaming, explicit SIMD, memory independent of the number of frames).
 :class:`NumpyTracker` is an independent numpy implementation of the same
@@ -62,7 +72,8 @@ class ShadowTimes:
     """The tracker's per-pixel results; every array is (H, W).
 
     ``imax``, ``imin``, ``contrast``: float32, DN of the input: the deepest
-    dip's lit level, darkest sample and depth (0 where there is no dip).
+    dip's lit level, darkest sample and depth (0 where there is no dip;
+    fractional with illumination normalisation, in the light of the dip).
     ``threshold``: float32, linear irradiance units of the decoding LUT.
     ``enter``, ``leave``: float32 shadow times in frames, NaN = no crossing or
     invalid pixel. ``enter_slope``, ``leave_slope``: float32
@@ -158,6 +169,14 @@ def decoding_lut(gamma: float | str, dtype) -> np.ndarray:
     return linear.astype(np.float32)
 
 
+def linear(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
+    """Linear irradiance (float32) of per-pixel levels in DN of the input (``ShadowTimes.imax``,
+    ``imin``: integers, or fractional with illumination normalisation), decoded by ``lut``
+    (:func:`decoding_lut`), linearly between its entries; NaN → 0."""
+    dn = np.nan_to_num(np.asarray(values_dn, dtype=np.float64))
+    return np.interp(dn, np.arange(len(lut), dtype=np.float64), lut.astype(np.float64)).astype(np.float32)
+
+
 # A frame whose global level falls below the level its recent trend predicts by more than
 # DIP_SIGMAS times the trend's own scatter (log units; at least MIN_DIP, at most log(1/CLOUD_DROP))
 # darkened suddenly and together: a dip (a cloud, a flicker).
@@ -167,8 +186,6 @@ DIP_SIGMAS = 6.0
 # Accepted frames whose level steps (log per frame) give the trend, and whose residuals its scatter.
 GAIN_HISTORY = 5
 SCATTER_HISTORY = 15
-# Normalised linear irradiance is fed to the tracker as uint16 at this scale (headroom ×2).
-LINEAR_SCALE = 32768.0
 # Frame pairs at the start of a sequence used to estimate the image noise.
 NOISE_PAIRS = 4
 # Linear irradiance below which a pixel of the reference frame does not take part in the gain.
@@ -176,10 +193,11 @@ GAIN_FLOOR = 0.02
 
 
 class IlluminationNormalizer:
-    """Per-frame linearisation, gain normalisation and cloud detection (streaming).
+    """Per-frame gain (the light's level) and cloud detection (streaming).
 
-    ``normalize(frame)`` returns the frame as uint16 normalised linear
-    irradiance (``LINEAR_SCALE`` = 1.0), or None for a frame to skip.
+    ``gain(frame)`` returns the frame's gain, its global linear irradiance
+    relative to the first frame's (the kernel divides the decoded samples by
+    it), or None for a frame to skip.
 
     The reference is the last *accepted* frame (subsampled every ``step``
     pixels), so it follows the day's slow change (dawn, the sun's course,
@@ -241,9 +259,9 @@ class IlluminationNormalizer:
         scatter = 1.4826 * float(np.median(np.abs(self.residuals[-SCATTER_HISTORY:])))
         return float(np.clip(DIP_SIGMAS * scatter * gap, MIN_DIP, -np.log(CLOUD_DROP)))
 
-    def normalize(self, frame: np.ndarray) -> np.ndarray | None:
-        # Only the pixels the gain needs are decoded; the frame itself goes through one table
-        # (per input DN: the same float32 arithmetic per pixel, so the same values).
+    def gain(self, frame: np.ndarray) -> float | None:
+        """The frame's gain (> 0), or None for a frame in a sudden dip of the light."""
+        # Only the pixels the gain needs are decoded here.
         sub = self.lut[frame[:: self.step, :: self.step]]
         index = self.frames
         self.frames += 1
@@ -274,21 +292,21 @@ class IlluminationNormalizer:
         self.reference = sub
         self.reference_log_gain = lg
         self.reference_frame = index
-        self.accepted_gains.append(float(np.exp(lg)))
-        table = np.clip(self.lut * (LINEAR_SCALE / max(float(np.exp(lg)), 1e-6)), 0, 65535).astype(np.uint16)
-        return table[frame]
+        gain = max(float(np.exp(lg)), 1e-6)
+        self.accepted_gains.append(gain)
+        return gain
 
 
 @dataclass(frozen=True)
 class TrackerSettings:
     """How frames become shadow times: plain values, resolved from the field log.
 
-    ``gamma``: the frames' encoding (:func:`decoding_lut`); ``min_contrast``:
+    ``gamma``: the frames' encoding (:func:`decoding_lut`, the one decoding table); ``min_contrast``:
     DN of the input (None: no floor here; the scan keeps the dips that stand
     ``MIN_CONTRAST_SIGMAS`` σ of the measured image noise out of it); ``window``: the half-width
     ``m`` of the kept windows;
-    ``normalize_illumination``: divide every frame by its global gain and skip
-    sudden dips (:class:`IlluminationNormalizer`); ``max_width`` (frames): the
+    ``normalize_illumination``: the kernel divides every frame's decoded samples by its global
+    gain, and sudden dips are skipped (:class:`IlluminationNormalizer`); ``max_width`` (frames): the
     widest dip always found; ``ambiguity``: the rival/contrast ratio from which
     a pixel is ambiguous; ``second_dips``: also report every pixel's second
     candidate dip (:class:`SecondDips`, for a light model that chooses between
@@ -307,66 +325,45 @@ class TrackerSettings:
 class ShadowTracker:
     """The kernel tracker fed with one capture's grey frames: the one place that drives it.
 
-    ``shape`` (H, W) and ``dtype`` (uint8 or uint16) of the frames. With
-    ``settings.normalize_illumination`` the kernel sees normalised linear
-    irradiance (uint16, ``LINEAR_SCALE`` = 1.0) and :meth:`update` refuses
-    frames in a sudden dip.
+    ``shape`` (H, W) and ``dtype`` (uint8 or uint16) of the frames, which the
+    kernel receives unchanged with the decoding table ``lut``. With
+    ``settings.normalize_illumination`` each frame goes with its gain and
+    :meth:`update` refuses frames in a sudden dip.
     """
 
     def __init__(self, settings: TrackerSettings, shape: tuple[int, int], dtype: np.dtype,
                  crop: tuple[slice, slice] | None = None):
         self.settings = settings
-        self.input_lut = decoding_lut(settings.gamma, dtype)
-        self.normalizer = (IlluminationNormalizer(self.input_lut, max_run=settings.max_width)
+        self.lut = decoding_lut(settings.gamma, dtype)
+        self.normalizer = (IlluminationNormalizer(self.lut, max_run=settings.max_width)
                            if settings.normalize_illumination else None)
-        wide = self.normalizer is not None or np.dtype(dtype) != np.uint8
         # ``crop`` (rows, columns): track only this part of each frame; the normalisation still sees the
         # whole frame, so a tile's shadow times equal the same pixels' in an untiled pass.
         self.crop = crop
         h, w = np.empty(shape, dtype=bool)[crop].shape if crop is not None else shape
-        self._tracker = _kernel.TemporalTracker(h, w, dtype="uint16" if wide else "uint8",
+        self._tracker = _kernel.TemporalTracker(h, w, dtype="uint8" if _check_dtype(dtype) == np.uint8 else "uint16",
                                                 window=settings.window, max_width=settings.max_width,
-                                                ambiguity=settings.ambiguity)
+                                                ambiguity=settings.ambiguity, lut=self.lut,
+                                                normalise=self.normalizer is not None)
 
     def update(self, grey: np.ndarray) -> bool:
-        """Feed one frame; False when it was skipped as an illumination dip."""
+        """Feed one frame (DN); False when it was skipped as an illumination dip."""
+        gain = None
         if self.normalizer is not None:
-            normalised = self.normalizer.normalize(grey)
-            if normalised is None:
+            gain = self.normalizer.gain(grey)
+            if gain is None:
                 return False
-            grey = normalised
-        self._tracker.update(grey if self.crop is None else np.ascontiguousarray(grey[self.crop]))
+        self._tracker.update(grey if self.crop is None else np.ascontiguousarray(grey[self.crop]), gain)
         return True
-
-    def _gain_at_dip(self, times: ShadowTimes | SecondDips) -> np.ndarray:
-        """(H, W) float32: the normaliser's gain at each pixel's dip (between its two times; the
-        median gain where a pixel has no time)."""
-        assert self.normalizer is not None
-        gains = np.asarray(self.normalizer.accepted_gains, dtype=np.float64)
-        with np.errstate(invalid="ignore"):
-            centre = np.where(np.isfinite(times.enter) & np.isfinite(times.leave),
-                              0.5 * (times.enter + times.leave), np.fmax(times.enter, times.leave))
-        at = np.interp(np.nan_to_num(centre, nan=0.0), np.arange(len(gains)), gains)
-        return np.where(np.isfinite(centre), at, np.median(gains)).astype(np.float32)
 
     def watch(self, min_contrast: float, recover: int = 3) -> None:
         """Start the kernel's live watch (:meth:`gnomon._kernel.TemporalTracker.watch`) from the next frame.
 
         ``min_contrast`` (DN of the input) opens a dip; ``recover`` frames back above the
-        mid-level end it. With illumination normalisation the kernel sees normalised linear
-        irradiance: the contrast is carried there at mid-grey. The provisional times are
-        decoded with the same table as :meth:`finish`'s.
+        mid-level end it. The provisional levels, threshold and slopes are in :meth:`finish`'s
+        units.
         """
-        if self.normalizer is None:
-            self._tracker.watch(float(min_contrast), int(recover), self.input_lut)
-            return
-        top = len(self.input_lut) - 1
-        mid = top // 2
-        half = max(float(min_contrast) / 2.0, 0.5)
-        lo, hi = int(max(mid - half, 0)), int(min(mid + half, top))
-        contrast = max(float(self.input_lut[hi] - self.input_lut[lo]) * LINEAR_SCALE, 1.0)
-        lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
-        self._tracker.watch(contrast, int(recover), lut)
+        self._tracker.watch(float(min_contrast), int(recover))
 
     def take_finished(self) -> _kernel.FinishedPixels:
         """The pixels whose dip ended since the last call (:meth:`watch` first); indices are
@@ -380,42 +377,12 @@ class ShadowTracker:
 
     def second_dips(self) -> SecondDips:
         """The second candidate dips (:class:`SecondDips`), in the units :meth:`finish` reports
-        (the input's DN for the levels; with normalisation, each dip's levels, threshold and slopes
-        at the global gain of its own time, its contrast back in the input's DN)."""
-        if self.normalizer is None:
-            return SecondDips.from_kernel(self._tracker.finish_second(self.input_lut))
-        lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
-        dips = SecondDips.from_kernel(self._tracker.finish_second(lut))
-        scale = self._gain_at_dip(dips)
-        for name in ("imax", "imin", "threshold", "enter_slope", "leave_slope"):
-            setattr(dips, name, (getattr(dips, name) * scale).astype(np.float32))
-        code = lambda lin: np.searchsorted(self.input_lut, lin.astype(np.float32))  # noqa: E731
-        dips.contrast = np.where(dips.contrast > 0, code(dips.imax / LINEAR_SCALE) - code(dips.imin / LINEAR_SCALE),
-                                 0).astype(np.float32)
-        return dips
+        (each dip in its own light)."""
+        return SecondDips.from_kernel(self._tracker.finish_second())
 
-    def finish(self) -> tuple[ShadowTimes, np.ndarray]:
-        """The shadow times and the decoding table (DN fed to the kernel → linear) they were measured with."""
-        if self.normalizer is None:
-            times = ShadowTimes.from_kernel(self._tracker.finish(self.settings.min_contrast or 0.0, self.input_lut))
-            return times, self.input_lut
-        lut = (np.arange(65536, dtype=np.float64) / LINEAR_SCALE).astype(np.float32)
-        times = ShadowTimes.from_kernel(self._tracker.finish(0.0, lut))
-        # Back to each pixel's own light at the time of its dip: the levels, threshold and slopes
-        # (linear units of ``lut``) times the global gain then, so that the contrast in the input's
-        # DN and the noise at the threshold are those of the frames the dip was seen in.
-        scale = self._gain_at_dip(times)
-        for name in ("imax", "imin", "threshold", "enter_slope", "leave_slope", "rival"):
-            setattr(times, name, (getattr(times, name) * scale).astype(np.float32))
-        # The contrast test stays in the input's DN: back through the encoding.
-        code = lambda lin: np.searchsorted(self.input_lut, lin.astype(np.float32))  # noqa: E731
-        contrast_dn = (code(times.imax / LINEAR_SCALE) - code(times.imin / LINEAR_SCALE)).astype(np.float32)
-        valid = times.valid & (contrast_dn >= (self.settings.min_contrast or 0.0))
-        times.enter[~valid] = np.nan
-        times.leave[~valid] = np.nan
-        times.valid = valid
-        times.contrast = contrast_dn
-        return times, lut
+    def finish(self) -> ShadowTimes:
+        """The shadow times so far (``min_contrast`` applied by the kernel, in DN of the input)."""
+        return ShadowTimes.from_kernel(self._tracker.finish(self.settings.min_contrast or 0.0))
 
 
 @dataclass
@@ -426,8 +393,8 @@ class TrackedSequence:
     capture frame ``used[i]``); ``skipped_dips``: capture frames refused as
     illumination dips; ``first_grey``/``first_color``: the first frame (grey,
     and BGR when the capture is in colour); ``noise_dn``: image noise (DN of
-    the input); ``lut``: the decoding table of the values fed to the kernel;
-    ``input_lut``: the capture's decoding table; ``info``: how the pass ran
+    the input); ``lut``: the capture's decoding table (DN of the input →
+    linear, :func:`linear` for the times' levels); ``info``: how the pass ran
     when that is worth reporting (a tiled pass: tiles, workers, memory).
     """
 
@@ -438,7 +405,6 @@ class TrackedSequence:
     first_color: np.ndarray | None
     noise_dn: float
     lut: np.ndarray
-    input_lut: np.ndarray
     info: dict = field(default_factory=dict)
     second: SecondDips | None = None  # the second candidate dips, when the pass kept them
 
@@ -512,9 +478,9 @@ def track_source(
         raise FrameError(f"{source.name}: only {seen} frames, expected {source.expected_count}")
     if len(used) < 2:
         raise FrameError(f"{source.name}: fewer than two usable frames (sun below the horizon or clouds)")
-    times, lut = tracker.finish()
+    times = tracker.finish()
     noise_dn = float(np.median([n.result() for n in noise])) if noise else 1.0
-    return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, lut, tracker.input_lut,
+    return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, tracker.lut,
                            second=tracker.second_dips() if settings.second_dips else None)
 
 
@@ -566,7 +532,7 @@ def track(
             progress(i)
     if tracker is None:
         raise FrameError("no frames to track")
-    return tracker.finish()[0]
+    return tracker.finish()
 
 
 @dataclass
@@ -595,8 +561,9 @@ _CAPTURE_CHUNK = 1 << 16
 class NumpyTracker:
     """The kernel tracker's definitions, implemented independently with numpy.
 
-    Same constructor, ``update``, ``frames_seen`` and ``finish`` as
-    :class:`gnomon._kernel.TemporalTracker` and the same results. Frames are kept
+    Same constructor (without illumination normalisation), ``update``,
+    ``frames_seen`` and ``finish`` as :class:`gnomon._kernel.TemporalTracker`
+    and the same results. Frames are kept
     in a ring of the last ``3W + 2m``; block ``b`` (frames ``bW … bW+W−1``) is
     evaluated as a whole once frame ``(b+2)W + m − 2`` has arrived: its right
     contexts by a backward running maximum, its left contexts, depths and events
@@ -606,8 +573,20 @@ class NumpyTracker:
     """
 
     def __init__(self, height: int, width: int, dtype: str = "uint8", window: int = 4,
-                 max_width: int = 32, ambiguity: float = 0.6):
+                 max_width: int = 32, ambiguity: float = 0.6, lut: np.ndarray | None = None):
         self._dtype = _check_dtype(dtype)
+        top = np.iinfo(self._dtype).max
+        if lut is None:
+            lut = np.arange(top + 1, dtype=np.float32)
+        lut = np.asarray(lut)
+        if lut.dtype != np.float32 or lut.shape != (top + 1,):
+            raise KernelArrayError(
+                f"lut: expected a float32 array of shape ({top + 1},), "
+                f"got a {lut.dtype} array of shape {lut.shape}"
+            )
+        if not np.all(np.isfinite(lut)) or np.any(np.diff(lut) < 0):
+            raise KernelLutError("invalid decoding LUT: must be finite and non-decreasing")
+        self._lut = lut
         if not 2 <= max_width <= 128:
             raise KernelParameterError(f"max_width: must be in 2..=128, got {max_width}")
         if not 1 <= window <= min(64, max_width):
@@ -706,21 +685,12 @@ class NumpyTracker:
             s.enter_window[p] = stack[np.clip(enter[None, :] + offsets, 0, last) - f0, cols].T
             s.leave_window[p] = stack[np.clip(leave[None, :] + offsets, 0, last) - f0, cols].T
 
-    def finish(self, min_contrast: float, lut: np.ndarray | None = None) -> ShadowTimes:
+    def finish(self, min_contrast: float) -> ShadowTimes:
         """Per-pixel results for the frames seen so far, as the kernel's ``finish``."""
         if self.frames_seen == 0:
             raise KernelFramesError("no frames were given to the tracker")
         top = np.iinfo(self._dtype).max
-        if lut is None:
-            lut = np.arange(top + 1, dtype=np.float32)
-        lut = np.asarray(lut)
-        if lut.dtype != np.float32 or lut.shape != (top + 1,):
-            raise KernelArrayError(
-                f"lut: expected a float32 array of shape ({top + 1},), "
-                f"got a {lut.dtype} array of shape {lut.shape}"
-            )
-        if not np.all(np.isfinite(lut)) or np.any(np.diff(lut) < 0):
-            raise KernelLutError("invalid decoding LUT: must be finite and non-decreasing")
+        lut = self._lut
         s = self._state.copy()
         last = self.frames_seen - 1
         while s.evaluated <= last:

@@ -44,7 +44,7 @@ from gnomon.reference_lines import PlaneInCamera, ReferenceLines, ReferencePlane
 from gnomon.shadow_planes import sun_shadow_planes
 from gnomon.sun import Site, enu_to_world, sun_direction_enu, sun_position
 from gnomon.timestamps import interpolate_times
-from gnomon.tracking import ShadowTimes, TrackedSequence
+from gnomon.tracking import ShadowTimes, TrackedSequence, linear
 from gnomon.triangulation import triangulate
 from gnomon.uncertainty import MIN_FRAMES_PER_TRANSITION, linear_noise_at_threshold
 from gnomon.validity import (
@@ -321,10 +321,9 @@ class SunWithPole(SunLight):
                       contrast: np.ndarray) -> np.ndarray:
             centre = ((enter + leave) / 2 * SUBSTEPS).astype(np.float32)
             depth = triangulate(ray_map, centre, table).depth
-            hi = lut[np.clip(np.nan_to_num(imax), 0, len(lut) - 1).astype(np.int64)]
-            lo = lut[np.clip(np.nan_to_num(imin), 0, len(lut) - 1).astype(np.int64)]
-            s_hi = linear_noise_at_threshold(tracked.noise_dn, hi, tracked.input_lut)
-            s_lo = linear_noise_at_threshold(tracked.noise_dn, lo, tracked.input_lut)
+            hi, lo = linear(imax, lut), linear(imin, lut)
+            s_hi = linear_noise_at_threshold(tracked.noise_dn, hi, lut)
+            s_lo = linear_noise_at_threshold(tracked.noise_dn, lo, lut)
             with np.errstate(invalid="ignore", divide="ignore"):
                 rel = np.where(hi > 0, (hi - lo) / hi, np.nan)
                 rel_sigma = np.where(hi > 0, np.hypot(s_lo / hi, lo * s_hi / hi**2), np.nan)

@@ -51,7 +51,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let elapsed = start.elapsed().as_secs_f64();
     let cpu = cpu_seconds() - cpu0;
     let t = Instant::now();
-    let times = tracker.finish(20.0, None)?;
+    let times = tracker.finish(20.0)?;
     let finish = t.elapsed().as_secs_f64();
     let valid = times.valid.iter().filter(|&&v| v == 1).count();
     println!(

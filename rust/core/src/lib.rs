@@ -16,6 +16,7 @@
 
 pub mod error;
 pub mod geometry;
+pub mod intensity;
 pub mod live;
 pub mod mesh;
 pub mod retime;
@@ -27,6 +28,7 @@ pub mod triangulate;
 
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
+pub use intensity::NORMALISED_SCALE;
 pub use live::{FinishedPixel, WatchParams};
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
 pub use retime::{retime_rows, RetimeParams, Retimed};

@@ -4,11 +4,13 @@
 //! dip only `2W + m − 1` frames after it, and only for the whole sequence at
 //! [`finish`](crate::TemporalTracker::finish). A live view needs each pixel
 //! as soon as the shadow has left it. The watch is a small per-pixel state
-//! machine fed with every frame (samples `v` in DN, frame `f`):
+//! machine fed with every frame (the tracker's samples `v`, frame `f`: the
+//! input's DN, or normalised codes, see [`crate::intensity`]):
 //!
 //! * **lit**: `lit` is the brightest sample so far (the lit level before the
 //!   dip). A sample at least `min_contrast` below it opens a dip: `lo = v`,
-//!   `k_min = f`.
+//!   `k_min = f`. (`min_contrast` is given in DN of the input; for normalised
+//!   codes it is the step it spans at the input's mid-grey.)
 //! * **dip**: a darker sample moves the minimum (`lo`, `k_min`) and resets
 //!   the recovery count; a sample at or above the DN mid-level,
 //!   `2·v ≥ lit + lo`, counts one frame of recovery (a sample below it
@@ -23,7 +25,9 @@
 //! around each (clamped to the frames in the ring) are decoded with the LUT
 //! and the crossing of the linear threshold `(L(lit) + L(lo)) / 2` nearest
 //! the window's centre is interpolated ([`find_crossing`]). A dip whose
-//! enter has left the ring (wider than the ring) gets NaN times.
+//! enter has left the ring (wider than the ring) gets NaN times. Levels,
+//! threshold and slopes are reported as [`finish`] reports them: DN of the
+//! input and linear values in the light of the dip.
 //!
 //! The watch does not change the tracker's results: [`finish`] remains the
 //! final word (its lit level is the brighter context on both sides, its dip
@@ -32,6 +36,7 @@
 //! [`finish`]: crate::TemporalTracker::finish
 
 use crate::error::KernelError;
+use crate::intensity::Intensity;
 use crate::sample::Sample;
 use crate::simd::{Portable, SimdPath, Vector};
 use crate::tracker::{find_crossing, Edge, FrameRing};
@@ -45,7 +50,7 @@ const DONE: usize = 2;
 /// Tuning of the live watch.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WatchParams {
-    /// A sample this many DN below the lit level opens a dip (`> 0`).
+    /// A sample this many DN of the input below the lit level opens a dip (`> 0`).
     pub min_contrast: f32,
     /// Consecutive frames at or above the mid-level that end a dip (`1..=255`).
     pub recover: usize,
@@ -58,7 +63,7 @@ pub struct FinishedPixel {
     pub index: u32,
     /// The frame at which the recovery was confirmed.
     pub frame: u32,
-    /// The lit level before the dip and the dip's minimum (DN).
+    /// The lit level before the dip and the dip's minimum (DN of the input).
     pub imax: f32,
     pub imin: f32,
     /// `(L(imax) + L(imin)) / 2` (linear units).
@@ -95,7 +100,6 @@ pub(crate) struct WatchConfig {
     min_contrast: usize,
     recover: u8,
     half: usize,
-    lut: Vec<f32>,
 }
 
 /// The live watch of a whole frame (see the module docs).
@@ -113,7 +117,7 @@ impl<T: Sample> Watch<T> {
         half: usize,
         path: SimdPath,
         params: &WatchParams,
-        lut: Option<&[f32]>,
+        intensity: &Intensity,
     ) -> Result<Self, KernelError> {
         if !(params.min_contrast.is_finite() && params.min_contrast > 0.0) {
             return Err(KernelError::parameter(
@@ -130,7 +134,7 @@ impl<T: Sample> Watch<T> {
                 format!("must be in 1..=255 frames, got {}", params.recover),
             ));
         }
-        let lut = crate::tracker::decoding_lut::<T>(lut)?.into_owned();
+        let contrast = intensity.contrast_in_samples(params.min_contrast);
         let row = WatchRow {
             lit: vec![T::MIN; width],
             lo: vec![T::MIN; width],
@@ -142,11 +146,10 @@ impl<T: Sample> Watch<T> {
         Ok(Watch {
             config: WatchConfig {
                 path,
-                // A dip opens when lit − v ≥ ceil(min_contrast) (integers).
-                min_contrast: params.min_contrast.ceil().min(1e9) as usize,
+                // A dip opens when lit − v ≥ ceil(contrast) (integers).
+                min_contrast: contrast.ceil().min(1e9) as usize,
                 recover: params.recover as u8,
                 half,
-                lut,
             },
             rows: vec![row; height],
         })
@@ -185,6 +188,7 @@ impl WatchConfig {
         &self,
         state: &mut WatchRow<T>,
         ring: &FrameRing<T>,
+        intensity: &Intensity,
         row: usize,
         frame: usize,
         oldest: usize,
@@ -212,7 +216,7 @@ impl WatchConfig {
         for x in 0..width {
             if state.phase[x] == consts.done && state.count[x] == T::MAX {
                 state.count[x] = T::MIN;
-                let pixel = self.solve(state, ring, row, x, frame, oldest);
+                let pixel = self.solve(state, ring, intensity, row, x, frame, oldest);
                 state.finished.push(FinishedPixel {
                     index: (row * width + x) as u32,
                     ..pixel
@@ -223,10 +227,12 @@ impl WatchConfig {
 
     /// Provisional times of pixel `x` of `row`, finished at frame `last`,
     /// from the frames `oldest … last` in the ring.
+    #[allow(clippy::too_many_arguments)]
     fn solve<T: Sample>(
         &self,
         state: &WatchRow<T>,
         ring: &FrameRing<T>,
+        intensity: &Intensity,
         row: usize,
         x: usize,
         last: usize,
@@ -243,7 +249,8 @@ impl WatchConfig {
         let at = |f: usize| ring.row(f, row)[x];
         let sum = hi.index() + lo.index();
         let bright = |f: usize| 2 * at(f).index() >= sum;
-        let threshold = (self.lut[hi.index()] + self.lut[lo.index()]) * 0.5;
+        let lut = intensity.decode();
+        let threshold = (lut[hi.index()] + lut[lo.index()]) * 0.5;
         let enter = k_min.and_then(|k| (oldest..k).rev().find(|&c| bright(c)).map(|c| c + 1));
         let leave = k_min.and_then(|k| ((k + 1).max(oldest)..=last).find(|&c| bright(c)));
         let span = 2 * self.half;
@@ -256,7 +263,7 @@ impl WatchConfig {
             };
             for (i, l) in linear.iter_mut().enumerate() {
                 let f = (j + i).saturating_sub(self.half).clamp(oldest, last);
-                *l = self.lut[at(f).index()];
+                *l = lut[at(f).index()];
             }
             match find_crossing(linear, threshold, edge) {
                 Some(c) => {
@@ -268,16 +275,20 @@ impl WatchConfig {
         };
         let (enter, enter_slope) = cross(enter, Edge::Enter);
         let (leave, leave_slope) = cross(leave, Edge::Leave);
+        // the light of the dip: at the middle of its times (at the newest frame without)
+        let centre = Intensity::dip_time(enter, leave);
+        let gain = intensity.gain_at(centre, intensity.gain_at(last as f32, 1.0));
+        let r = intensity.report(hi, lo, T::MIN, gain);
         FinishedPixel {
             index: 0,
             frame: last as u32,
-            imax: hi.to_f32(),
-            imin: lo.to_f32(),
-            threshold,
+            imax: r.imax,
+            imin: r.imin,
+            threshold: threshold * r.gain,
             enter,
             leave,
-            enter_slope,
-            leave_slope,
+            enter_slope: enter_slope * r.gain,
+            leave_slope: leave_slope * r.gain,
         }
     }
 }

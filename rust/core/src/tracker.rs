@@ -9,7 +9,10 @@
 //! * **leave**: it rises back through it, after enter,
 //!
 //! with the threshold at mid-level in *linear irradiance*,
-//! `thr = (L(hi) + L(lo)) / 2`, `L` a decoding LUT (identity if absent).
+//! `thr = (L(hi) + L(lo)) / 2`, `L` the capture's decoding table (identity
+//! if absent). The samples are the input's DN, or in normalised mode (a
+//! changing light) each frame's normalised irradiance: see
+//! [`crate::intensity`] for what is compared, decoded and reported where.
 //!
 //! # The dip
 //! Frames are grouped in blocks of `W` (block `b` = frames `bW … bW+W−1`).
@@ -59,11 +62,10 @@
 //! and in registers. Windows are captured (a scalar look into the ring) only for
 //! pixels whose best dip moved, which is rare once the sweep is under way.
 
-use std::borrow::Cow;
-
 use rayon::prelude::*;
 
 use crate::error::KernelError;
+use crate::intensity::Intensity;
 use crate::live::{FinishedPixel, Watch, WatchParams};
 use crate::sample::Sample;
 use crate::simd::{Portable, SimdPath, Vector};
@@ -151,8 +153,10 @@ impl TrackerParams {
 
 /// The tracker's per-pixel results, row-major `(height, width)` arrays.
 ///
-/// Intensities are in DN of the input; the threshold and the slopes in the
-/// linear units of the decoding LUT; times in frames (frame `i` is time `i`).
+/// Intensities are in DN of the input (fractional in normalised mode: see
+/// [`crate::intensity`]); the threshold and the slopes in the linear units of
+/// the decoding table, in the light the dip was seen in; times in frames
+/// (frame `i` is time `i`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ShadowTimes {
     pub height: usize,
@@ -161,7 +165,7 @@ pub struct ShadowTimes {
     pub imax: Vec<f32>,
     /// `lo`: the darkest sample of the deepest dip (DN); 0 where there is no dip.
     pub imin: Vec<f32>,
-    /// `imax − imin`: the depth of the deepest dip (DN).
+    /// `imax − imin`: the depth of the deepest dip (DN), which `min_contrast` bounds.
     pub contrast: Vec<f32>,
     /// `(L(imax) + L(imin)) / 2` (linear units).
     pub threshold: Vec<f32>,
@@ -576,8 +580,20 @@ fn capture_second<T: Sample>(
     let s = &mut state.second;
     let span = 2 * job.half;
     let (enter, leave) = dip_crossings(ctx, x, k2, s.hi2[x], s.lo2[x], job);
-    fill_window(ctx, x, job, &mut s.enter_window2[x * span..(x + 1) * span], enter);
-    fill_window(ctx, x, job, &mut s.leave_window2[x * span..(x + 1) * span], leave);
+    fill_window(
+        ctx,
+        x,
+        job,
+        &mut s.enter_window2[x * span..(x + 1) * span],
+        enter,
+    );
+    fill_window(
+        ctx,
+        x,
+        job,
+        &mut s.leave_window2[x * span..(x + 1) * span],
+        leave,
+    );
     s.enter_at2[x] = enter as u32;
     s.leave_at2[x] = leave as u32;
 }
@@ -596,7 +612,10 @@ fn dip_crossings<T: Sample>(
     let sum = hi.index() + lo.index();
     let bright = |frame: usize| 2 * at(frame).index() >= sum;
     let first = job.start.saturating_sub(job.max_width);
-    let enter = (first..k).rev().find(|&c| bright(c)).map_or(first, |c| c + 1);
+    let enter = (first..k)
+        .rev()
+        .find(|&c| bright(c))
+        .map_or(first, |c| c + 1);
     let stop = (job.start + 2 * job.max_width).min(job.last + 1);
     let leave = (k + 1..stop).find(|&c| bright(c)).unwrap_or(stop - 1);
     (enter, leave)
@@ -737,13 +756,37 @@ pub struct TemporalTracker<T: Sample> {
     frames_seen: usize,
     frames_evaluated: usize,
     path: SimdPath,
+    /// What the samples are: the decoding table, and in normalised mode the
+    /// frames' gains.
+    intensity: Intensity,
     /// The live watch, once [`watch`](Self::watch) was called.
     watch: Option<Watch<T>>,
 }
 
 impl<T: Sample> TemporalTracker<T> {
-    /// A tracker for frames of `height × width` samples.
+    /// A tracker for frames of `height × width` samples, DN decoded as
+    /// themselves (linear data).
     pub fn new(height: usize, width: usize, params: TrackerParams) -> Result<Self, KernelError> {
+        Self::build(height, width, params, Intensity::dn::<T>(None)?)
+    }
+
+    /// A tracker for frames of `height × width` DN decoded by the capture's
+    /// `table` (`T::LUT_LEN` finite, non-decreasing values: DN → linear).
+    pub fn with_table(
+        height: usize,
+        width: usize,
+        params: TrackerParams,
+        table: &[f32],
+    ) -> Result<Self, KernelError> {
+        Self::build(height, width, params, Intensity::dn::<T>(Some(table))?)
+    }
+
+    fn build(
+        height: usize,
+        width: usize,
+        params: TrackerParams,
+        intensity: Intensity,
+    ) -> Result<Self, KernelError> {
         params.validate()?;
         if height == 0 || width == 0 {
             return Err(KernelError::parameter(
@@ -762,8 +805,19 @@ impl<T: Sample> TemporalTracker<T> {
             frames_seen: 0,
             frames_evaluated: 0,
             path: SimdPath::active(),
+            intensity,
             watch: None,
         })
+    }
+
+    /// Whether the frames come with a gain ([`TemporalTracker::normalised`]).
+    pub fn is_normalised(&self) -> bool {
+        self.intensity.is_normalised()
+    }
+
+    /// The decoding table of the input's DN (256 or 65536 entries).
+    pub fn input_len(&self) -> usize {
+        self.intensity.input_len()
     }
 
     pub fn height(&self) -> usize {
@@ -803,8 +857,8 @@ impl<T: Sample> TemporalTracker<T> {
         self.frames_seen
     }
 
-    /// Add the next frame (row-major, `height × width` samples).
-    pub fn update(&mut self, frame: &[T]) -> Result<(), KernelError> {
+    /// Check that `frame` (of any sample type) can be the next frame.
+    fn check_frame<I>(&self, frame: &[I]) -> Result<(), KernelError> {
         if frame.len() != self.height * self.width {
             return Err(KernelError::LengthMismatch {
                 what: "frame",
@@ -815,13 +869,34 @@ impl<T: Sample> TemporalTracker<T> {
         if self.frames_seen >= (NO_FRAME - 1) as usize {
             return Err(KernelError::TooManyFrames);
         }
-        let (index, max_width) = (self.frames_seen, self.params.max_width);
+        Ok(())
+    }
+
+    /// Add the next frame (row-major, `height × width` DN). An error for a
+    /// normalised tracker, whose frames come with a gain
+    /// ([`update_with_gain`](TemporalTracker::update_with_gain)).
+    pub fn update(&mut self, frame: &[T]) -> Result<(), KernelError> {
+        self.check_frame(frame)?;
+        if self.intensity.is_normalised() {
+            return Err(KernelError::parameter(
+                "gain",
+                "a normalised tracker needs each frame's gain",
+            ));
+        }
         // In parallel pieces: one core does not saturate the memory bus.
         self.ring
-            .slot_mut(index)
+            .slot_mut(self.frames_seen)
             .par_chunks_mut(STORE_PIECE)
             .zip(frame.par_chunks(STORE_PIECE))
             .for_each(|(dst, src)| dst.copy_from_slice(src));
+        self.stored();
+        Ok(())
+    }
+
+    /// The frame just stored in the ring is the next one: fold it into the
+    /// watch, and evaluate a block when one is due.
+    fn stored(&mut self) {
+        let max_width = self.params.max_width;
         self.frames_seen += 1;
         if let Some(watch) = &mut self.watch {
             let (ring, config) = (&self.ring, &watch.config);
@@ -831,7 +906,9 @@ impl<T: Sample> TemporalTracker<T> {
                 .rows
                 .par_iter_mut()
                 .enumerate()
-                .for_each(|(row, state)| config.update_row(state, ring, row, newest, oldest));
+                .for_each(|(row, state)| {
+                    config.update_row(state, ring, &self.intensity, row, newest, oldest)
+                });
         }
         if self.frames_seen == self.params.evaluate_at(self.frames_evaluated) {
             let job = BlockJob {
@@ -847,20 +924,19 @@ impl<T: Sample> TemporalTracker<T> {
                 .for_each(|(row, state)| evaluate_row(path, state, ring, row, job));
             self.frames_evaluated += max_width;
         }
-        Ok(())
     }
 
-    /// Start the live watch ([`crate::live`]) from the next frame on:
-    /// `params` its settings, `lut` the decoding table of its provisional
-    /// times (as in [`finish`](Self::finish)). Replaces an earlier watch.
-    pub fn watch(&mut self, params: WatchParams, lut: Option<&[f32]>) -> Result<(), KernelError> {
+    /// Start the live watch ([`crate::live`]) from the next frame on, with
+    /// the settings `params` (its provisional times decoded as in
+    /// [`finish`](Self::finish)). Replaces an earlier watch.
+    pub fn watch(&mut self, params: WatchParams) -> Result<(), KernelError> {
         self.watch = Some(Watch::new(
             self.height,
             self.width,
             self.params.window,
             self.path,
             &params,
-            lut,
+            &self.intensity,
         )?);
         Ok(())
     }
@@ -887,15 +963,10 @@ impl<T: Sample> TemporalTracker<T> {
     /// The per-pixel results for the frames seen so far; does not change the
     /// tracker.
     ///
-    /// `min_contrast` (DN): pixels whose deepest dip is shallower are invalid
-    /// (times NaN). `lut`: decoding table from DN to linear irradiance,
-    /// `T::LUT_LEN` finite non-decreasing values (`None` = identity);
-    /// thresholds, interpolation and slopes use decoded values.
-    pub fn finish(
-        &self,
-        min_contrast: f32,
-        lut: Option<&[f32]>,
-    ) -> Result<ShadowTimes, KernelError> {
+    /// `min_contrast` (DN of the input, in every mode): pixels whose deepest
+    /// dip is shallower are invalid (times NaN). Thresholds, interpolation
+    /// and slopes use the decoded values (see [`crate::intensity`]).
+    pub fn finish(&self, min_contrast: f32) -> Result<ShadowTimes, KernelError> {
         if self.frames_seen == 0 {
             return Err(KernelError::NoFrames);
         }
@@ -905,8 +976,9 @@ impl<T: Sample> TemporalTracker<T> {
                 format!("must be finite, got {min_contrast}"),
             ));
         }
-        let lut = decoding_lut::<T>(lut)?;
         let last = self.frames_seen - 1;
+        // the light of a dip without times
+        let fallback = self.intensity.median_gain();
         let params = self.params;
         let pending: Vec<BlockJob> = (self.frames_evaluated..=last)
             .step_by(params.max_width)
@@ -928,7 +1000,12 @@ impl<T: Sample> TemporalTracker<T> {
                 for &job in &pending {
                     evaluate_row(self.path, &mut state, &self.ring, row, job);
                 }
-                resolve_row(&state, &lut, min_contrast, &params, &mut out);
+                let light = Light {
+                    intensity: &self.intensity,
+                    min_contrast,
+                    fallback,
+                };
+                resolve_row(&state, light, &params, &mut out);
             });
         Ok(times)
     }
@@ -937,13 +1014,14 @@ impl<T: Sample> TemporalTracker<T> {
 impl<T: Sample> TemporalTracker<T> {
     /// Every pixel's second candidate dip for the frames seen so far (the
     /// event whose depth is [`ShadowTimes::rival`]); does not change the
-    /// tracker. `lut` as in [`finish`](Self::finish). No contrast floor: the
-    /// caller compares [`SecondDips::contrast`] with its own.
-    pub fn finish_second(&self, lut: Option<&[f32]>) -> Result<SecondDips, KernelError> {
+    /// tracker. Decoded and reported as in [`finish`](Self::finish) (each
+    /// dip in its own light). No contrast floor: the caller compares
+    /// [`SecondDips::contrast`] with its own.
+    pub fn finish_second(&self) -> Result<SecondDips, KernelError> {
         if self.frames_seen == 0 {
             return Err(KernelError::NoFrames);
         }
-        let lut = decoding_lut::<T>(lut)?;
+        let fallback = self.intensity.median_gain();
         let last = self.frames_seen - 1;
         let params = self.params;
         let pending: Vec<BlockJob> = (self.frames_evaluated..=last)
@@ -966,7 +1044,7 @@ impl<T: Sample> TemporalTracker<T> {
                 for &job in &pending {
                     evaluate_row(self.path, &mut state, &self.ring, row, job);
                 }
-                resolve_second_row(&state, &lut, params.window)
+                resolve_second_row(&state, &self.intensity, fallback, params.window)
             })
             .collect();
         for (y, r) in rows.into_iter().enumerate() {
@@ -1053,8 +1131,15 @@ struct SecondRow {
     best_leave_slope: Vec<f32>,
 }
 
-/// One row's second candidates, resolved like the best dips in [`resolve_row`].
-fn resolve_second_row<T: Sample>(state: &RowState<T>, lut: &[f32], half: usize) -> SecondRow {
+/// One row's second candidates, resolved like the best dips in [`resolve_row`]
+/// (`fallback`: the gain of a dip without times).
+fn resolve_second_row<T: Sample>(
+    state: &RowState<T>,
+    intensity: &Intensity,
+    fallback: f64,
+    half: usize,
+) -> SecondRow {
+    let lut = intensity.decode();
     let s = &state.second;
     let width = s.hi2.len();
     let span = 2 * half;
@@ -1095,69 +1180,113 @@ fn resolve_second_row<T: Sample>(state: &RowState<T>, lut: &[f32], half: usize) 
             let window = &state.leave_window[x * span..(x + 1) * span];
             (row.best_leave[x], row.best_leave_slope[x]) =
                 solve(state.leave_at[x], window, threshold, Edge::Leave);
+            // slopes in the light of the best dip, as in `finish`
+            let centre = Intensity::dip_time(row.best_enter[x], row.best_leave[x]);
+            let gain = intensity.gain_at(centre, fallback) as f32;
+            row.best_enter_slope[x] *= gain;
+            row.best_leave_slope[x] *= gain;
         }
         let (hi, lo) = (s.hi2[x], s.lo2[x]);
         if s.enter_at2[x] == NO_FRAME || hi <= lo {
             continue;
         }
         let threshold = (lut[hi.index()] + lut[lo.index()]) * 0.5;
-        row.imax[x] = hi.to_f32();
-        row.imin[x] = lo.to_f32();
-        row.contrast[x] = hi.to_f32() - lo.to_f32();
-        row.threshold[x] = threshold;
         let window = &s.enter_window2[x * span..(x + 1) * span];
-        (row.enter[x], row.enter_slope[x]) = solve(s.enter_at2[x], window, threshold, Edge::Enter);
+        let (enter, enter_slope) = solve(s.enter_at2[x], window, threshold, Edge::Enter);
         let window = &s.leave_window2[x * span..(x + 1) * span];
-        (row.leave[x], row.leave_slope[x]) = solve(s.leave_at2[x], window, threshold, Edge::Leave);
+        let (leave, leave_slope) = solve(s.leave_at2[x], window, threshold, Edge::Leave);
+        // reported in its own light, as the best dip in `finish`
+        let gain = intensity.gain_at(Intensity::dip_time(enter, leave), fallback);
+        let r = intensity.report(hi, lo, T::MIN, gain);
+        row.imax[x] = r.imax;
+        row.imin[x] = r.imin;
+        row.contrast[x] = r.imax - r.imin;
+        row.threshold[x] = threshold * r.gain;
+        (row.enter[x], row.enter_slope[x]) = (enter, enter_slope * r.gain);
+        (row.leave[x], row.leave_slope[x]) = (leave, leave_slope * r.gain);
     }
     row
 }
 
-/// The decoding table to use: the caller's after validation, or the identity.
-pub(crate) fn decoding_lut<T: Sample>(lut: Option<&[f32]>) -> Result<Cow<'_, [f32]>, KernelError> {
-    let Some(lut) = lut else {
-        return Ok(Cow::Owned((0..T::LUT_LEN).map(|v| v as f32).collect()));
-    };
-    if lut.len() != T::LUT_LEN {
-        return Err(KernelError::InvalidLut {
-            reason: format!(
-                "a {} LUT needs {} entries, got {}",
-                T::DTYPE,
-                T::LUT_LEN,
-                lut.len()
-            ),
-        });
+impl TemporalTracker<u16> {
+    /// A tracker for frames whose light changes (the sun through a day):
+    /// each frame of `height × width` DN comes with its gain
+    /// ([`update_with_gain`](Self::update_with_gain)). `table` decodes the
+    /// input's DN (256 entries for `u8` frames, 65536 for `u16`). The samples
+    /// are normalised codes ([`crate::intensity`]).
+    pub fn normalised(
+        height: usize,
+        width: usize,
+        params: TrackerParams,
+        table: &[f32],
+    ) -> Result<Self, KernelError> {
+        Self::build(height, width, params, Intensity::normalised(table)?)
     }
-    if let Some(i) = lut.iter().position(|v| !v.is_finite()) {
-        return Err(KernelError::InvalidLut {
-            reason: format!("entry {i} is {}", lut[i]),
-        });
+
+    /// Add the next frame of a normalised tracker: `frame` the input's DN
+    /// (row-major; `I` the input's type, matching the table), `gain` (> 0)
+    /// its light relative to the first frame's. The kernel decodes each
+    /// sample and divides it by the gain.
+    pub fn update_with_gain<I: Sample>(
+        &mut self,
+        frame: &[I],
+        gain: f64,
+    ) -> Result<(), KernelError> {
+        self.check_frame(frame)?;
+        if self.intensity.is_normalised() && self.intensity.input_len() != I::LUT_LEN {
+            return Err(KernelError::parameter(
+                "frame",
+                format!(
+                    "a {} frame for a tracker whose decoding table has {} entries",
+                    I::DTYPE,
+                    self.intensity.input_len()
+                ),
+            ));
+        }
+        let code = self.intensity.encoder(gain)?;
+        self.ring
+            .slot_mut(self.frames_seen)
+            .par_chunks_mut(STORE_PIECE)
+            .zip(frame.par_chunks(STORE_PIECE))
+            .for_each(|(dst, src)| {
+                for (d, s) in dst.iter_mut().zip(src) {
+                    // (the table has I::LUT_LEN entries: checked above)
+                    *d = code[s.index()];
+                }
+            });
+        self.stored();
+        Ok(())
     }
-    if let Some(i) = lut.windows(2).position(|w| w[1] < w[0]) {
-        return Err(KernelError::InvalidLut {
-            reason: format!(
-                "must be non-decreasing, but entry {} ({}) < entry {i} ({})",
-                i + 1,
-                lut[i + 1],
-                lut[i]
-            ),
-        });
-    }
-    Ok(Cow::Borrowed(lut))
+}
+
+/// What turning a row's state into results needs besides the state.
+#[derive(Clone, Copy)]
+struct Light<'a> {
+    intensity: &'a Intensity,
+    /// DN of the input.
+    min_contrast: f32,
+    /// The gain of a dip without times (normalised mode).
+    fallback: f64,
 }
 
 /// Turn one row's state into results.
+///
+/// In DN mode only a dip deep enough is solved for times. In normalised mode
+/// the contrast in DN depends on the light at the dip, i.e. on its times:
+/// every unambiguous dip is solved, then the contrast decides.
 fn resolve_row<T: Sample>(
     state: &RowState<T>,
-    lut: &[f32],
-    min_contrast: f32,
+    light: Light<'_>,
     params: &TrackerParams,
     out: &mut RowTimesMut<'_>,
 ) {
+    let intensity = light.intensity;
+    let lut = intensity.decode();
+    let normalised = intensity.is_normalised();
+    let top = (intensity.input_len() - 1) as f32;
     let half = params.window;
     let span = 2 * half;
     let mut linear = vec![0.0f32; span];
-    let clipped_sample = |v: T| v == T::MIN || v == T::MAX;
     // (time, slope, a sample interpolated is clipped)
     let mut solve = |at: u32, window: &[T], threshold: f32, edge: Edge| -> (f32, f32, bool) {
         for (l, v) in linear.iter_mut().zip(window) {
@@ -1166,8 +1295,10 @@ fn resolve_row<T: Sample>(
         match find_crossing(&linear, threshold, edge) {
             Some(c) => {
                 let frame = at as i64 - half as i64 + c.index as i64;
-                let clipped =
-                    clipped_sample(window[c.index]) || clipped_sample(window[c.index + 1]);
+                // the frames of the two samples (clamped as when captured)
+                let of = |k: i64| k.max(0) as usize;
+                let clipped = intensity.clipped(window[c.index], of(frame))
+                    || intensity.clipped(window[c.index + 1], of(frame + 1));
                 (
                     (frame as f64 + f64::from(c.fraction)) as f32,
                     c.slope,
@@ -1179,32 +1310,42 @@ fn resolve_row<T: Sample>(
     };
     for x in 0..state.d1.len() {
         let has_dip = state.enter_at[x] != NO_FRAME;
-        let (hi, lo) = (state.hi[x], state.lo[x]);
-        let contrast = hi.to_f32() - lo.to_f32();
+        let (hi, lo, d2) = (state.hi[x], state.lo[x], state.d2[x]);
+        // depths compared in samples
+        let depth = hi.to_f32() - lo.to_f32();
+        let unambiguous = has_dip && d2.to_f32() < params.ambiguity * depth;
         let threshold = (lut[hi.index()] + lut[lo.index()]) * 0.5;
-        let rival = state.d2[x].to_f32();
-        let deep = has_dip && contrast >= min_contrast;
-        let ambiguous = deep && rival >= params.ambiguity * contrast;
-        let valid = deep && !ambiguous;
-        out.imax[x] = hi.to_f32();
-        out.imin[x] = lo.to_f32();
-        out.contrast[x] = contrast;
-        out.threshold[x] = threshold;
-        out.rival[x] = rival;
-        out.valid[x] = u8::from(valid);
-        out.ambiguous[x] = u8::from(ambiguous);
-        let mut clipped = has_dip && (clipped_sample(hi) || clipped_sample(lo));
-        if valid {
+        let wanted = unambiguous && (normalised || depth >= light.min_contrast);
+        let nan = (f32::NAN, f32::NAN, false);
+        let (enter, leave) = if wanted {
             let window = &state.enter_window[x * span..(x + 1) * span];
-            let (t, s, c) = solve(state.enter_at[x], window, threshold, Edge::Enter);
-            (out.enter[x], out.enter_slope[x]) = (t, s);
-            clipped |= c;
+            let enter = solve(state.enter_at[x], window, threshold, Edge::Enter);
             let window = &state.leave_window[x * span..(x + 1) * span];
-            let (t, s, c) = solve(state.leave_at[x], window, threshold, Edge::Leave);
-            (out.leave[x], out.leave_slope[x]) = (t, s);
-            clipped |= c;
-        }
-        out.clipped[x] = u8::from(clipped);
+            (
+                enter,
+                solve(state.leave_at[x], window, threshold, Edge::Leave),
+            )
+        } else {
+            (nan, nan)
+        };
+        let centre = Intensity::dip_time(enter.0, leave.0);
+        let gain = intensity.gain_at(centre, light.fallback);
+        let r = intensity.report(hi, lo, d2, gain);
+        let contrast = r.imax - r.imin;
+        let deep = has_dip && contrast >= light.min_contrast;
+        let valid = deep && unambiguous;
+        let (enter, leave) = if valid { (enter, leave) } else { (nan, nan) };
+        out.imax[x] = r.imax;
+        out.imin[x] = r.imin;
+        out.contrast[x] = contrast;
+        out.threshold[x] = threshold * r.gain;
+        out.rival[x] = r.rival;
+        out.valid[x] = u8::from(valid);
+        out.ambiguous[x] = u8::from(deep && !unambiguous);
+        (out.enter[x], out.enter_slope[x]) = (enter.0, enter.1 * r.gain);
+        (out.leave[x], out.leave_slope[x]) = (leave.0, leave.1 * r.gain);
+        let levels_clipped = r.imax >= top || r.imin <= 0.0 || hi == T::MAX;
+        out.clipped[x] = u8::from(has_dip && levels_clipped || enter.2 || leave.2);
     }
 }
 

@@ -39,7 +39,7 @@ fn run(
 ) -> (TemporalTracker<u8>, Vec<Vec<FinishedPixel>>) {
     let height = profiles.len() / width;
     let mut tracker = TemporalTracker::<u8>::new(height, width, params()).unwrap();
-    tracker.watch(watch(recover), None).unwrap();
+    tracker.watch(watch(recover)).unwrap();
     let mut per_frame = Vec::new();
     for f in 0..profiles[0].len() {
         let frame: Vec<u8> = profiles.iter().map(|p| p[f]).collect();
@@ -63,7 +63,7 @@ fn a_ramp_dip_finishes_after_the_recovery_with_the_tracker_s_times() {
     assert!((p.leave - 25.25).abs() < 1e-6, "{}", p.leave);
     assert!((p.enter_slope - 40.0).abs() < 1e-6 && (p.leave_slope - 40.0).abs() < 1e-6);
     // The block tracker's final word on the same frames agrees.
-    let fin = tracker.finish(20.0, None).unwrap();
+    let fin = tracker.finish(20.0).unwrap();
     assert_eq!((fin.enter[0], fin.leave[0]), (p.enter, p.leave));
     assert_eq!(tracker.watch_counts(), Some((0, 0, 1)));
 }
@@ -90,7 +90,7 @@ fn pixels_finish_in_the_frame_their_own_dip_ends() {
     profiles.iter_mut().for_each(|p| p.truncate(len));
     profiles.push(vec![200; len]);
     let (tracker, per_frame) = run(&profiles, 2, 3);
-    let fin = tracker.finish(20.0, None).unwrap();
+    let fin = tracker.finish(20.0).unwrap();
     for (i, shift) in [0usize, 3, 6].iter().enumerate() {
         let when: Vec<usize> = (0..len)
             .filter(|&f| per_frame[f].iter().any(|p| p.index as usize == i))
@@ -144,7 +144,7 @@ fn a_dip_wider_than_the_ring_has_no_enter_time() {
     p.extend(vec![40u8; 30]);
     p.extend(vec![200u8; 5]);
     let mut tracker = TemporalTracker::<u8>::new(1, 1, small).unwrap();
-    tracker.watch(watch(2), None).unwrap();
+    tracker.watch(watch(2)).unwrap();
     let mut done = Vec::new();
     for &v in &p {
         tracker.update(&[v]).unwrap();
@@ -170,38 +170,30 @@ fn the_watch_checks_its_settings() {
         (10.0, 256, "recover"),
     ] {
         let err = t
-            .watch(
-                WatchParams {
-                    min_contrast,
-                    recover,
-                },
-                None,
-            )
+            .watch(WatchParams {
+                min_contrast,
+                recover,
+            })
             .unwrap_err();
         assert!(
             matches!(err, KernelError::InvalidParameter { name: n, .. } if n == name),
             "{err}"
         );
     }
-    let short = vec![0.0f32; 10];
-    assert!(matches!(
-        t.watch(watch(3), Some(&short)),
-        Err(KernelError::InvalidLut { .. })
-    ));
 }
 
 #[test]
 fn the_lut_sets_the_linear_threshold() {
     // Square law: L(200) = 40000, L(40) = 1600, threshold 20800 ≈ DN 144.2.
     let lut: Vec<f32> = (0..256).map(|v| (v * v) as f32).collect();
-    let mut t = TemporalTracker::<u8>::new(1, 1, params()).unwrap();
-    t.watch(watch(3), Some(&lut)).unwrap();
+    let mut t = TemporalTracker::<u8>::with_table(1, 1, params(), &lut).unwrap();
+    t.watch(watch(3)).unwrap();
     let mut done = Vec::new();
     for &v in &ramp(0) {
         t.update(&[v]).unwrap();
         done.extend(t.take_finished().unwrap());
     }
-    let fin = t.finish(20.0, Some(&lut)).unwrap();
+    let fin = t.finish(20.0).unwrap();
     assert_eq!(done.len(), 1);
     assert_eq!(done[0].threshold, 20800.0);
     assert_eq!((fin.enter[0], fin.leave[0]), (done[0].enter, done[0].leave));
@@ -233,7 +225,7 @@ fn every_instruction_set_finishes_the_same_pixels_at_the_same_frames() {
         .map(|path| {
             let mut t = TemporalTracker::<u8>::new(height, width, params()).unwrap();
             t.set_simd_path(path).unwrap();
-            t.watch(watch(3), None).unwrap();
+            t.watch(watch(3)).unwrap();
             let mut all = Vec::new();
             for f in 0..len {
                 let frame: Vec<u8> = profiles.iter().map(|p| p[f]).collect();

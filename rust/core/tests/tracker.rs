@@ -32,13 +32,17 @@ fn track<T: Sample>(
 ) -> ShadowTimes {
     assert_eq!(profiles.len(), height * width);
     let mut results = SimdPath::supported().into_iter().map(|path| {
-        let mut tracker = TemporalTracker::<T>::new(height, width, params).unwrap();
+        let mut tracker = match lut {
+            Some(lut) => TemporalTracker::<T>::with_table(height, width, params, lut),
+            None => TemporalTracker::<T>::new(height, width, params),
+        }
+        .unwrap();
         tracker.set_simd_path(path).unwrap();
         for f in 0..profiles[0].len() {
             let frame: Vec<T> = profiles.iter().map(|p| p[f]).collect();
             tracker.update(&frame).unwrap();
         }
-        (path, tracker.finish(min_contrast, lut).unwrap())
+        (path, tracker.finish(min_contrast).unwrap())
     });
     let (_, first) = results.next().unwrap();
     for (path, other) in results {
@@ -60,13 +64,17 @@ fn track_second<T: Sample>(
     lut: Option<&[f32]>,
 ) -> SecondDips {
     let mut results = SimdPath::supported().into_iter().map(|path| {
-        let mut tracker = TemporalTracker::<T>::new(height, width, params).unwrap();
+        let mut tracker = match lut {
+            Some(lut) => TemporalTracker::<T>::with_table(height, width, params, lut),
+            None => TemporalTracker::<T>::new(height, width, params),
+        }
+        .unwrap();
         tracker.set_simd_path(path).unwrap();
         for f in 0..profiles[0].len() {
             let frame: Vec<T> = profiles.iter().map(|p| p[f]).collect();
             tracker.update(&frame).unwrap();
         }
-        (path, tracker.finish_second(lut).unwrap())
+        (path, tracker.finish_second().unwrap())
     });
     let (_, first) = results.next().unwrap();
     let eq = |x: &[f32], y: &[f32]| x.iter().zip(y).all(|(&p, &q)| same(p, q));
@@ -245,7 +253,7 @@ fn errors_name_the_problem() {
         assert!(TemporalTracker::<u8>::new(4, 4, p).is_err(), "{ambiguity}");
     }
     let mut t = TemporalTracker::<u8>::new(2, 3, params(4, 16)).unwrap();
-    assert_eq!(t.finish(0.0, None), Err(KernelError::NoFrames));
+    assert_eq!(t.finish(0.0), Err(KernelError::NoFrames));
     let err = t.update(&[0; 5]).unwrap_err();
     assert_eq!(
         err,
@@ -257,23 +265,36 @@ fn errors_name_the_problem() {
     );
     assert!(err.to_string().contains("expected 6"));
     t.update(&[0; 6]).unwrap();
-    assert!(t.finish(f32::NAN, None).is_err());
+    assert!(t.finish(f32::NAN).is_err());
+    // a plain tracker takes no gain, a normalised one needs it
+    let mut plain = TemporalTracker::<u16>::new(2, 3, params(4, 16)).unwrap();
     assert!(matches!(
-        t.finish(0.0, Some(&[0.0; 255])),
-        Err(KernelError::InvalidLut { .. })
+        plain.update_with_gain(&[0u16; 6], 1.0),
+        Err(KernelError::InvalidParameter { name: "gain", .. })
     ));
+    let table: Vec<f32> = (0..256).map(|v| v as f32 / 255.0).collect();
+    let mut n = TemporalTracker::normalised(2, 3, params(4, 16), &table).unwrap();
+    assert!(n.update(&[0u16; 6]).is_err());
+    assert!(n.update_with_gain(&[0u16; 6], 1.0).is_err()); // a u16 frame for a u8 table
+    assert!(n.update_with_gain(&[0u8; 6], 0.0).is_err());
+    assert!(n.update_with_gain(&[0u8; 6], f64::NAN).is_err());
+    n.update_with_gain(&[0u8; 6], 0.5).unwrap();
+    assert_eq!(n.frames_seen(), 1);
+    let short = [0.0; 255];
     let mut decreasing: Vec<f32> = (0..256).map(|v| v as f32).collect();
     decreasing[100] = 0.0;
-    assert!(matches!(
-        t.finish(0.0, Some(&decreasing)),
-        Err(KernelError::InvalidLut { .. })
-    ));
     let mut nan: Vec<f32> = (0..256).map(|v| v as f32).collect();
     nan[3] = f32::NAN;
-    assert!(matches!(
-        t.finish(0.0, Some(&nan)),
-        Err(KernelError::InvalidLut { .. })
-    ));
+    for bad in [&short[..], &decreasing, &nan] {
+        assert!(matches!(
+            TemporalTracker::<u8>::with_table(2, 3, params(4, 16), bad),
+            Err(KernelError::InvalidLut { .. })
+        ));
+        assert!(matches!(
+            TemporalTracker::normalised(2, 3, params(4, 16), bad),
+            Err(KernelError::InvalidLut { .. })
+        ));
+    }
 }
 
 #[test]
@@ -381,7 +402,11 @@ fn reference_second(profile: &[u16], p: TrackerParams, lut: &[f32]) -> Second {
         let thr = (lut[hi as usize] + lut[lo as usize]) * 0.5;
         let bright = |c: usize| 2 * u32::from(profile[c]) >= u32::from(hi) + u32::from(lo);
         let b = k / w;
-        let enter_at = (b.saturating_sub(1) * w..k).rev().find(|&c| bright(c)).unwrap() + 1;
+        let enter_at = (b.saturating_sub(1) * w..k)
+            .rev()
+            .find(|&c| bright(c))
+            .unwrap()
+            + 1;
         let leave_at = (k + 1..n).find(|&c| bright(c)).unwrap();
         let solve = |j: usize, edge: Edge| -> f32 {
             let window: Vec<f32> = (0..2 * half)
@@ -600,7 +625,10 @@ fn check_against_reference<T: Sample>(
             ok,
             "second, pixel {i}, {p:?}:\n got {got:?}\nwant {want:?}\n{profile:?}"
         );
-        assert_eq!(second.contrast[i], t.rival[i], "pixel {i}: the second is the rival");
+        assert_eq!(
+            second.contrast[i], t.rival[i],
+            "pixel {i}: the second is the rival"
+        );
     }
 }
 
@@ -730,11 +758,11 @@ fn the_second_candidate_keeps_the_other_dip_s_times() {
     for (f, &v) in two.iter().enumerate() {
         tracker.update(&[v]).unwrap();
         if f == 80 {
-            let early = tracker.finish_second(None).unwrap();
+            let early = tracker.finish_second().unwrap();
             assert!(early.enter[0].is_nan(), "no second dip yet at frame 80");
         }
     }
-    assert_eq!(tracker.finish_second(None).unwrap().enter[0], 109.5);
+    assert_eq!(tracker.finish_second().unwrap().enter[0], 109.5);
 }
 
 #[test]
@@ -792,12 +820,12 @@ fn finish_is_a_preview_that_does_not_disturb_the_stream() {
         streaming.update(&frame(f)).unwrap();
         assert_eq!(streaming.frames_seen(), f + 1);
         if f % 9 == 4 {
-            let preview = streaming.finish(10.0, None).unwrap();
+            let preview = streaming.finish(10.0).unwrap();
             let mut fresh = TemporalTracker::<u8>::new(3, 40, params(4, 7)).unwrap();
             for g in 0..=f {
                 fresh.update(&frame(g)).unwrap();
             }
-            let expect = fresh.finish(10.0, None).unwrap();
+            let expect = fresh.finish(10.0).unwrap();
             for (a, b) in preview
                 .enter
                 .iter()
@@ -810,7 +838,7 @@ fn finish_is_a_preview_that_does_not_disturb_the_stream() {
     }
     let prefix: Vec<Vec<u8>> = profiles.clone();
     let full = track(&prefix, 3, 40, params(4, 7), 10.0, None);
-    let end = streaming.finish(10.0, None).unwrap();
+    let end = streaming.finish(10.0).unwrap();
     for (a, b) in end
         .enter
         .iter()

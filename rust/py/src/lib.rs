@@ -8,8 +8,8 @@
 //! `ShadowTimes` object. No numerics here: see `gnomon-core`.
 
 use gnomon_core::{
-    FinishedPixel, KernelError, Sample, SecondDips, ShadowTimes, TemporalTracker as Tracker, TrackerParams,
-    WatchParams,
+    FinishedPixel, KernelError, Sample, SecondDips, ShadowTimes, TemporalTracker as Tracker,
+    TrackerParams, WatchParams,
 };
 use numpy::ndarray::{Array1, Array2, Array3, ArrayView, Dimension, Ix1, Ix2, Ix3};
 use numpy::{
@@ -159,16 +159,16 @@ fn mask<'py>(
 /// The tracker's per-pixel results: (H, W) arrays, read-only attributes.
 #[pyclass(module = "gnomon._kernel", name = "ShadowTimes", frozen)]
 struct PyShadowTimes {
-    /// Brightest level of the deepest dip (DN of the frames fed).
+    /// Brightest level of the deepest dip (DN of the input; fractional when normalised).
     #[pyo3(get)]
     imax: Py<PyArray2<f32>>,
-    /// Darkest sample of the dip (DN).
+    /// Darkest sample of the dip (DN of the input).
     #[pyo3(get)]
     imin: Py<PyArray2<f32>>,
     /// `imax - imin` (DN), 0 = no dip.
     #[pyo3(get)]
     contrast: Py<PyArray2<f32>>,
-    /// Mid-level in linear irradiance.
+    /// Mid-level in linear irradiance (in the light of the dip).
     #[pyo3(get)]
     threshold: Py<PyArray2<f32>>,
     /// Entering-edge time (frames), NaN = none.
@@ -189,7 +189,7 @@ struct PyShadowTimes {
     /// A dip with `contrast >= min_contrast` that is not ambiguous.
     #[pyo3(get)]
     valid: Py<PyArray2<bool>>,
-    /// `rival >= ambiguity * contrast`.
+    /// `contrast >= min_contrast` and the rival dip at least `ambiguity` times as deep.
     #[pyo3(get)]
     ambiguous: Py<PyArray2<bool>>,
     /// The dip's levels or an interpolated sample at 0 or the dtype's maximum.
@@ -279,23 +279,6 @@ fn second_dips(py: Python<'_>, d: SecondDips) -> PyResult<PySecondDips> {
     })
 }
 
-fn finish_second_any<T: Sample>(
-    py: Python<'_>,
-    tracker: &Tracker<T>,
-    lut: Option<&Bound<'_, PyAny>>,
-) -> PyResult<SecondDips> {
-    let result = match lut {
-        None => py.detach(|| tracker.finish_second(None)),
-        Some(lut) => {
-            let lut =
-                borrow_array::<f32, Ix1>(lut, "lut", "float32", &[Extent::Exactly(T::LUT_LEN)])?;
-            let view = lut.as_array();
-            py.detach(|| with_slice(&view, |table| tracker.finish_second(Some(table))))
-        }
-    };
-    result.map_err(kernel_error)
-}
-
 /// Pixels whose dip ended (the live watch): 1-D arrays, one entry per pixel.
 #[pyclass(module = "gnomon._kernel", name = "FinishedPixels", frozen)]
 struct PyFinishedPixels {
@@ -305,10 +288,10 @@ struct PyFinishedPixels {
     /// Frame at which the recovery was confirmed (int64).
     #[pyo3(get)]
     frame: Py<PyArray1<i64>>,
-    /// Lit level before the dip (DN).
+    /// Lit level before the dip (DN of the input).
     #[pyo3(get)]
     imax: Py<PyArray1<f32>>,
-    /// The dip's darkest sample (DN).
+    /// The dip's darkest sample (DN of the input).
     #[pyo3(get)]
     imin: Py<PyArray1<f32>>,
     /// Mid-level in linear irradiance.
@@ -363,23 +346,8 @@ fn finished_pixels(py: Python<'_>, pixels: Vec<FinishedPixel>) -> PyFinishedPixe
     }
 }
 
-fn watch_any<T: Sample>(
-    tracker: &mut Tracker<T>,
-    params: WatchParams,
-    lut: Option<&Bound<'_, PyAny>>,
-) -> PyResult<()> {
-    let result = match lut {
-        None => tracker.watch(params, None),
-        Some(lut) => {
-            let lut =
-                borrow_array::<f32, Ix1>(lut, "lut", "float32", &[Extent::Exactly(T::LUT_LEN)])?;
-            let view = lut.as_array();
-            with_slice(&view, |table| tracker.watch(params, Some(table)))
-        }
-    };
-    result.map_err(kernel_error)
-}
-
+/// The core tracker of the samples it stores: the input's DN (`U8`, `U16`),
+/// or normalised codes (`U16`, built with `Tracker::normalised`).
 enum AnyTracker {
     U8(Tracker<u8>),
     U16(Tracker<u16>),
@@ -389,6 +357,46 @@ enum AnyTracker {
 #[pyclass(module = "gnomon._kernel", name = "TemporalTracker")]
 struct TemporalTracker {
     inner: AnyTracker,
+    /// The frames' dtype: "uint8" or "uint16".
+    dtype: &'static str,
+}
+
+/// Borrow the decoding table of a `dtype` input (`len` entries).
+fn table<'py>(lut: &Bound<'py, PyAny>, len: usize) -> PyResult<PyReadonlyArray<'py, f32, Ix1>> {
+    borrow_array::<f32, Ix1>(lut, "lut", "float32", &[Extent::Exactly(len)])
+}
+
+fn plain<T: Sample>(
+    height: usize,
+    width: usize,
+    params: TrackerParams,
+    lut: Option<&Bound<'_, PyAny>>,
+) -> PyResult<Tracker<T>> {
+    let tracker = match lut {
+        None => Tracker::new(height, width, params),
+        Some(lut) => {
+            let lut = table(lut, T::LUT_LEN)?;
+            let view = lut.as_array();
+            with_slice(&view, |t| Tracker::with_table(height, width, params, t))
+        }
+    };
+    tracker.map_err(kernel_error)
+}
+
+fn update_normalised<I: Sample + Element>(
+    py: Python<'_>,
+    tracker: &mut Tracker<u16>,
+    frame: &Bound<'_, PyAny>,
+    gain: f64,
+) -> PyResult<()> {
+    let shape = [
+        Extent::Exactly(tracker.height()),
+        Extent::Exactly(tracker.width()),
+    ];
+    let frame = borrow_array::<I, Ix2>(frame, "frame", I::DTYPE, &shape)?;
+    let view = frame.as_array();
+    py.detach(|| with_slice(&view, |data| tracker.update_with_gain(data, gain)))
+        .map_err(kernel_error)
 }
 
 fn update_any<T: Sample + Element>(
@@ -406,28 +414,12 @@ fn update_any<T: Sample + Element>(
         .map_err(kernel_error)
 }
 
-fn finish_any<T: Sample>(
-    py: Python<'_>,
-    tracker: &Tracker<T>,
-    min_contrast: f32,
-    lut: Option<&Bound<'_, PyAny>>,
-) -> PyResult<ShadowTimes> {
-    let result = match lut {
-        None => py.detach(|| tracker.finish(min_contrast, None)),
-        Some(lut) => {
-            let lut =
-                borrow_array::<f32, Ix1>(lut, "lut", "float32", &[Extent::Exactly(T::LUT_LEN)])?;
-            let view = lut.as_array();
-            py.detach(|| with_slice(&view, |table| tracker.finish(min_contrast, Some(table))))
-        }
-    };
-    result.map_err(kernel_error)
-}
-
 #[pymethods]
 impl TemporalTracker {
     #[new]
-    #[pyo3(signature = (height, width, dtype = "uint8", window = 4, max_width = 32, ambiguity = 0.6))]
+    #[pyo3(signature = (height, width, dtype = "uint8", window = 4, max_width = 32, ambiguity = 0.6,
+                        lut = None, normalise = false))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         height: usize,
         width: usize,
@@ -435,78 +427,100 @@ impl TemporalTracker {
         window: usize,
         max_width: usize,
         ambiguity: f32,
+        lut: Option<&Bound<'_, PyAny>>,
+        normalise: bool,
     ) -> PyResult<Self> {
         let params = TrackerParams {
             window,
             max_width,
             ambiguity,
         };
-        let inner = match dtype {
-            "uint8" => AnyTracker::U8(Tracker::new(height, width, params).map_err(kernel_error)?),
-            "uint16" => AnyTracker::U16(Tracker::new(height, width, params).map_err(kernel_error)?),
+        let (dtype, len) = match dtype {
+            "uint8" => (u8::DTYPE, u8::LUT_LEN),
+            "uint16" => (u16::DTYPE, u16::LUT_LEN),
             other => {
                 return Err(KernelParameterError::new_err(format!(
                     "dtype: expected \"uint8\" or \"uint16\", got {other:?}"
                 )))
             }
         };
-        Ok(TemporalTracker { inner })
+        let inner = if normalise {
+            let Some(lut) = lut else {
+                return Err(KernelParameterError::new_err(
+                    "lut: a normalised tracker needs the input's decoding table",
+                ));
+            };
+            let lut = table(lut, len)?;
+            let view = lut.as_array();
+            let tracker = with_slice(&view, |t| Tracker::normalised(height, width, params, t));
+            AnyTracker::U16(tracker.map_err(kernel_error)?)
+        } else if dtype == u8::DTYPE {
+            AnyTracker::U8(plain(height, width, params, lut)?)
+        } else {
+            AnyTracker::U16(plain(height, width, params, lut)?)
+        };
+        Ok(TemporalTracker { inner, dtype })
     }
 
-    /// Add the next frame: a 2-D array of the tracker's dtype and shape.
-    fn update(&mut self, py: Python<'_>, frame: &Bound<'_, PyAny>) -> PyResult<()> {
-        match &mut self.inner {
-            AnyTracker::U8(t) => update_any(py, t, frame),
-            AnyTracker::U16(t) => update_any(py, t, frame),
+    /// Add the next frame: a 2-D array of the tracker's dtype and shape, and
+    /// with a normalised tracker its gain (> 0).
+    #[pyo3(signature = (frame, gain = None))]
+    fn update(
+        &mut self,
+        py: Python<'_>,
+        frame: &Bound<'_, PyAny>,
+        gain: Option<f64>,
+    ) -> PyResult<()> {
+        match (&mut self.inner, gain) {
+            (AnyTracker::U16(t), Some(gain)) if t.is_normalised() => match self.dtype {
+                "uint8" => update_normalised::<u8>(py, t, frame, gain),
+                _ => update_normalised::<u16>(py, t, frame, gain),
+            },
+            (AnyTracker::U16(t), None) if t.is_normalised() => Err(KernelParameterError::new_err(
+                "gain: a normalised tracker needs each frame's gain",
+            )),
+            (_, Some(_)) => Err(KernelParameterError::new_err(
+                "gain: only a normalised tracker takes a gain with each frame",
+            )),
+            (AnyTracker::U8(t), None) => update_any(py, t, frame),
+            (AnyTracker::U16(t), None) => update_any(py, t, frame),
         }
     }
 
-    /// Per-pixel results for the frames seen so far (the tracker is unchanged).
-    #[pyo3(signature = (min_contrast, lut = None))]
-    fn finish(
-        &self,
-        py: Python<'_>,
-        min_contrast: f32,
-        lut: Option<&Bound<'_, PyAny>>,
-    ) -> PyResult<PyShadowTimes> {
+    /// Per-pixel results for the frames seen so far (the tracker is unchanged);
+    /// `min_contrast` in DN of the input.
+    fn finish(&self, py: Python<'_>, min_contrast: f32) -> PyResult<PyShadowTimes> {
         let times = match &self.inner {
-            AnyTracker::U8(t) => finish_any(py, t, min_contrast, lut)?,
-            AnyTracker::U16(t) => finish_any(py, t, min_contrast, lut)?,
-        };
+            AnyTracker::U8(t) => py.detach(|| t.finish(min_contrast)),
+            AnyTracker::U16(t) => py.detach(|| t.finish(min_contrast)),
+        }
+        .map_err(kernel_error)?;
         shadow_times(py, times)
     }
 
     /// Every pixel's second candidate dip (the event whose depth is `rival`),
-    /// for the frames seen so far; `lut` as in `finish`.
-    #[pyo3(signature = (lut = None))]
-    fn finish_second(
-        &self,
-        py: Python<'_>,
-        lut: Option<&Bound<'_, PyAny>>,
-    ) -> PyResult<PySecondDips> {
+    /// for the frames seen so far, in `finish`'s units.
+    fn finish_second(&self, py: Python<'_>) -> PyResult<PySecondDips> {
         let dips = match &self.inner {
-            AnyTracker::U8(t) => finish_second_any(py, t, lut)?,
-            AnyTracker::U16(t) => finish_second_any(py, t, lut)?,
-        };
+            AnyTracker::U8(t) => py.detach(|| t.finish_second()),
+            AnyTracker::U16(t) => py.detach(|| t.finish_second()),
+        }
+        .map_err(kernel_error)?;
         second_dips(py, dips)
     }
 
     /// Start the live watch from the next frame on (see `gnomon-core`'s `live`).
-    #[pyo3(signature = (min_contrast, recover = 3, lut = None))]
-    fn watch(
-        &mut self,
-        min_contrast: f32,
-        recover: usize,
-        lut: Option<&Bound<'_, PyAny>>,
-    ) -> PyResult<()> {
+    #[pyo3(signature = (min_contrast, recover = 3))]
+    fn watch(&mut self, min_contrast: f32, recover: usize) -> PyResult<()> {
         let params = WatchParams {
             min_contrast,
             recover,
         };
         match &mut self.inner {
-            AnyTracker::U8(t) => watch_any(t, params, lut),
-            AnyTracker::U16(t) => watch_any(t, params, lut),
+            AnyTracker::U8(t) => t.watch(params),
+            AnyTracker::U16(t) => t.watch(params),
         }
+        .map_err(kernel_error)
     }
 
     /// The pixels whose dip ended since the last call, with provisional times.
@@ -545,11 +559,18 @@ impl TemporalTracker {
         }
     }
 
+    /// The frames' dtype.
     #[getter]
     fn dtype(&self) -> &'static str {
+        self.dtype
+    }
+
+    /// Whether each frame comes with a gain (normalised illumination).
+    #[getter]
+    fn normalised(&self) -> bool {
         match &self.inner {
-            AnyTracker::U8(_) => u8::DTYPE,
-            AnyTracker::U16(_) => u16::DTYPE,
+            AnyTracker::U8(t) => t.is_normalised(),
+            AnyTracker::U16(t) => t.is_normalised(),
         }
     }
 
@@ -581,11 +602,12 @@ impl TemporalTracker {
         let (h, w) = self.shape();
         let p = self.params();
         format!(
-            "TemporalTracker(height={h}, width={w}, dtype={:?}, window={}, max_width={}, ambiguity={}, frames_seen={})",
+            "TemporalTracker(height={h}, width={w}, dtype={:?}, window={}, max_width={}, ambiguity={}, normalised={}, frames_seen={})",
             self.dtype(),
             p.window,
             p.max_width,
             p.ambiguity,
+            if self.normalised() { "True" } else { "False" },
             self.frames_seen()
         )
     }
