@@ -56,6 +56,9 @@ def test_accuracy_heading_from_the_gnomon(facade) -> None:
     sun = result.report["sun"]
     assert sun["heading_source"].startswith("gnomon")
     assert abs((sun["heading_deg"] - float(truth["heading_deg"]) + 180) % 360 - 180) <= 0.2
+    # no other moving shadow: the regions' candidate dips lie on their planes, the tracker's verdict stands
+    choice = sun["dip_choice"]
+    assert not choice["another_shadow_on_the_regions"] and choice["off_region"] <= 0.01 * choice["on_region"]
     # shadow times are reported in the capture's frame indices, though cloud frames were skipped
     st = np.load(root / "scan" / "shadow_time.npy")
     m = truth["swept"] & np.isfinite(st)

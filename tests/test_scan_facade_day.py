@@ -71,6 +71,9 @@ def test_gross_errors_are_rare(day) -> None:
     _, _, result, acc = day
     assert acc.gross_rate <= 0.01, acc
     assert any("pole's dip chosen by geometry" in w and "took their second dip" in w for w in result.warnings)
+    choice = result.report["sun"]["dip_choice"]
+    assert choice["another_shadow_on_the_regions"] and choice["off_region"] > 0.1 * choice["on_region"]
+    assert choice["second_chosen"] > 0 and choice["refused"] > 0
 
 
 @pytest.mark.slow

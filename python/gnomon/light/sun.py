@@ -273,6 +273,8 @@ class SunWithPole(SunLight):
     def __init__(self, clock: SunClock, pose: Pose, base_world: np.ndarray, top_world: np.ndarray,
                  radius: float = 0.0):
         super().__init__(clock, pose)
+        # How choose_dips chose (report.json's sun.dip_choice): None before it ran.
+        self.dip_choice: dict[str, Any] | None = None
         self.base_world = np.asarray(base_world, dtype=np.float64)
         self.top_world = np.asarray(top_world, dtype=np.float64)
         self.radius = float(radius)
@@ -341,6 +343,7 @@ class SunWithPole(SunLight):
             plane_depths.append(zp)
             region_depth[p.mask] = zp[p.mask]
         dc = choose_dips(depth, region_depth, plane_depths, max_jump, times.valid)
+        self.dip_choice = {"another_shadow_on_the_regions": dc.strict, **dc.counts}
         if not dc.strict:  # no other shadow on the regions: the tracker's verdict stands
             return []
         best, other = dc.choice == 1, dc.choice == 2
@@ -413,6 +416,12 @@ class SunWithPole(SunLight):
             notes.append(f"{refused} of {n_had} pixels ({100 * refused / n_had:.0f} %) were refused as not the "
                          f"pole's shadow ({', '.join(f'{k}: {v}' for k, v in rejected.items() if v)})")
         return Screening(sound, rejected, notes)
+
+    def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:
+        out = super().report(planes_cam, warnings)
+        if self.dip_choice is not None:
+            out["sun"]["dip_choice"] = self.dip_choice
+        return out
 
     def _anchor(self, points_world: np.ndarray) -> np.ndarray:
         return self.base_world
