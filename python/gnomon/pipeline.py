@@ -34,6 +34,7 @@ from gnomon import __version__, atomic, ply
 from gnomon.calibration import camera_to_table
 from gnomon.camera import Pose
 from gnomon.crop import crop_mask
+from gnomon.deblock import block_grid, deblock_times
 from gnomon.errors import FrameError
 from gnomon.fieldlog import load_field_log
 from gnomon.frames import Frame, FrameSource, sha256_file
@@ -216,6 +217,9 @@ def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: Tracked
     were interpolated between."""
     levels = levels or _Levels(tracked)
     sigma = _pixel_time_sigma(slope, tracked, levels)
+    grid = block_grid(times)
+    if grid is not None:  # compressed video: times constant over the codec's blocks (gnomon.deblock)
+        times = deblock_times(times, grid)
     fast = undersampled(slope, levels.imax, levels.imin)
     timed = np.isfinite(times)
     if timed.any() and fast[timed].mean() > RETIME_UNDERSAMPLED_SHARE:

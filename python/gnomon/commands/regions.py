@@ -68,6 +68,7 @@ def draw_regions(first: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
 
 def run(args: argparse.Namespace) -> int:
     from gnomon import atomic, validate
+    from gnomon.deblock import block_grid, deblock_times
     from gnomon.errors import FieldLogError
     from gnomon.fieldlog import load_field_log
     from gnomon.publish import check_output_folder
@@ -103,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
     times = tracked.times
     maps = [times.enter, times.leave] if log.scan.edge == "both" else [
         times.enter if log.scan.edge == "enter" else times.leave]
+    # Compressed video: times constant over the codec's blocks, interpolated between their centres as the scan does.
+    maps = [deblock_times(m, grid) if (grid := block_grid(m)) is not None else m for m in maps]
     planes = [PlaneInCamera.from_world(p.point, p.normal, log.pose) for p in log.planes]
     names = [p.name for p in log.planes]
     proposals = propose_regions(maps, tracked.n_frames, planes, names, seeds, log.camera,
