@@ -542,3 +542,36 @@ def test_coverage_is_a_segmentation_image_with_named_classes(scan):
     ctx = one(data, ENTITY["coverage"], "AnnotationContext:context")[0]
     labels = {c["class_id"]: c["class_description"]["info"]["label"] for c in ctx}
     assert labels == {k: name for k, (name, _) in COVERAGE_CLASSES.items()}
+
+
+def test_recording_worker_keeps_order_and_reports_a_failure_with_no_file(tmp_path) -> None:
+    """The scan's recording thread (pipeline.RecordingWorker): calls run in order on one thread; a
+    failing call is re-raised by finish in the caller's thread, later calls are skipped, and the
+    unfinished file is removed (nothing half-written)."""
+    import threading
+
+    from gnomon.pipeline import RecordingWorker
+    from gnomon.recording import ScanRecording
+
+    seen: list[tuple[int, str]] = []
+    worker = RecordingWorker(lambda: ScanRecording(tmp_path / "ok.rrd", recording_name="ok"))
+    for i in range(5):
+        worker.submit(lambda rec, i=i: seen.append((i, threading.current_thread().name)))
+    worker.submit(lambda rec: rec.log_frame(0, np.zeros((8, 8), np.uint8)))
+    worker.submit(lambda rec: rec.log_frame(1, None))  # not stored (stride 10): its time only
+    worker.finish()
+    assert [i for i, _ in seen] == list(range(5)) and {n for _, n in seen} == {"gnomon-recording"}
+    assert (tmp_path / "ok.rrd").stat().st_size > 0
+
+    after: list[int] = []
+
+    def fail(rec) -> None:
+        raise OSError(28, "No space left on device", str(tmp_path / "bad.rrd"))
+
+    worker = RecordingWorker(lambda: ScanRecording(tmp_path / "bad.rrd", recording_name="bad"))
+    worker.submit(fail)
+    worker.submit(lambda rec: after.append(1))
+    with pytest.raises(OSError, match="No space left"):
+        worker.finish()
+    assert after == [] and not (tmp_path / "bad.rrd").exists()
+    assert list(tmp_path.iterdir()) == [tmp_path / "ok.rrd"]  # no temporary file left behind
