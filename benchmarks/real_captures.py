@@ -26,11 +26,19 @@ The captures and their conventions (read off the repository's own scripts):
   ``dist``).
 
 The crosses are given as exact pixels (``pixel = [u, v]``): each is the
-centre of the pen strokes found within 60 px of a rough position, which is
-the repository's own click (its extrinsics re-projected through its own
-intrinsics, scaled ×2 where they were made on a half-size display: see the
-evidence printed; the clicks are up to ~60 px off the crosses) — for ``candle-mug``, which
-has no extrinsics, nothing: its objects hide all but three of its crosses.
+centre of the pen strokes (:func:`gnomon.markers.find_cross`) near a rough
+position, which is the repository's own click (its extrinsics re-projected
+through its own intrinsics, scaled ×2 where they were made on a half-size
+display; the clicks are up to ~75 px off the crosses) — for ``candle-mug``,
+which has no extrinsics, nothing: its objects hide all but three of its
+crosses.
+
+The evidence printed per capture: the npz intrinsics' fx/fy against the
+stills squashed to 1920×1080, the npz planes' angle and distances against
+those of the crosses, and each plane's crosses' fit to the 152 × 121 mm
+rectangle at the camera's focal length and at the best one (a residual no
+focal length removes is in the crosses; one that a focal length removes is
+the camera's).
 
 The hand-drawn outlines below (the frog and its cast shadows, in the first
 frame's pixels) are the benchmark's own annotation, used only for scoring.
