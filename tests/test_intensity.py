@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from gnomon import _kernel
-from gnomon.tracking import ShadowTimes, ShadowTracker, TrackerSettings, decoding_lut, linear
+from gnomon.tracking import ShadowTimes, ShadowTracker, TrackerSettings, contrast_floor, decoding_lut, linear
+from gnomon.validity import MIN_CONTRAST_SIGMAS
 
 
 def encode(linear_irradiance: np.ndarray, gamma: float, dtype) -> np.ndarray:
@@ -66,6 +67,29 @@ def test_min_contrast_is_dn_of_the_input_in_both_modes(gamma) -> None:
         np.testing.assert_allclose(norm.enter[ok], plain.enter[ok], atol=0.01)
         np.testing.assert_allclose(norm.leave[ok], plain.leave[ok], atol=0.01)
         np.testing.assert_allclose(norm.enter_slope[ok], plain.enter_slope[ok], rtol=2e-3)
+
+
+@pytest.mark.parametrize("normalise", [False, True])
+def test_the_contrast_floor_is_applied_by_the_tracker(normalise) -> None:
+    """The floor in force is the field log's ``min_contrast`` or MIN_CONTRAST_SIGMAS σ of the image
+    noise, whichever is higher, and the tracker applies it (times NaN below it) in both modes."""
+    contrasts = np.arange(8, 41)
+    frames = _dip_row(170, contrasts)
+    noise = 2.05  # DN: a floor of 16.4 DN
+    for min_contrast, floor in ((None, 16.4), (10.0, 16.4), (20.5, 20.5), (30.5, 30.5)):
+        assert contrast_floor(min_contrast, noise) == pytest.approx(floor)
+        assert floor == pytest.approx(max(min_contrast or 0, MIN_CONTRAST_SIGMAS * noise))
+        settings = TrackerSettings(gamma="srgb", min_contrast=min_contrast, normalize_illumination=normalise,
+                                   max_width=16)
+        tracker = ShadowTracker(settings, frames.shape[1:], np.dtype(np.uint8))
+        for f in frames:
+            assert tracker.update(f)
+        times = tracker.finish(noise)
+        # (normalised: fractional DN, within 0.05 DN of the plain ones, none near a floor)
+        keep = contrasts > floor
+        assert np.array_equal(times.valid[0], keep), (min_contrast, normalise)
+        assert np.isfinite(times.enter[0][keep]).all() and np.isnan(times.enter[0][~keep]).all()
+        assert not times.ambiguous.any()
 
 
 def test_frames_reach_the_kernel_as_their_dn() -> None:

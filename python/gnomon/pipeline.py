@@ -49,7 +49,7 @@ from gnomon.reference_lines import ReferenceLines
 from gnomon.retiming import retime_between_isochrones
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
 from gnomon.texture import LitColour, sample_indices
-from gnomon.tracking import ShadowTimes, TrackedSequence, linear, track_source
+from gnomon.tracking import ShadowTimes, TrackedSequence, contrast_floor, linear, track_source
 from gnomon.triangulation import supported_by_neighbours, triangulate
 from gnomon.uncertainty import (
     depth_sigma,
@@ -61,7 +61,6 @@ from gnomon.validity import (
     LINE_RESIDUAL_MAX_FRAMES,
     LINE_RESIDUAL_WARN_RATIO,
     MIN_CONTRAST_SIGMAS,
-    contrast_above_noise,
     reference_line_residuals,
 )
 
@@ -276,17 +275,10 @@ def _relative_depth(tracked: TrackedSequence, hi: np.ndarray, lo: np.ndarray) ->
 
 
 def _check_contrast(times: ShadowTimes, noise_dn: float, min_contrast: float | None, name: str) -> None:
-    """Only pixels whose dip stands out of the image noise are events; none at all is an error.
-
-    Random frames have a large ``imax − imin`` everywhere but never many σ of
-    their own noise; identical frames have no contrast at all.
+    """Too few events (dips above the contrast floor, which the tracker applied) is an error that
+    says why: random frames have a large ``imax − imin`` everywhere but never many σ of their
+    own noise; identical frames have no contrast at all.
     """
-    loud = contrast_above_noise(times.contrast, noise_dn)
-    drop = times.valid & ~loud
-    if drop.any():
-        times.valid = times.valid & loud
-        times.enter[drop] = np.nan
-        times.leave[drop] = np.nan
     n_pixels = times.valid.size
     if times.valid.sum() <= 0.001 * n_pixels:
         largest = float(np.nanmax(times.contrast)) if np.isfinite(times.contrast).any() else 0.0
@@ -303,8 +295,8 @@ def _check_contrast(times: ShadowTimes, noise_dn: float, min_contrast: float | N
 
 
 def _min_contrast_dn(min_contrast: float | None, noise_dn: float) -> float:
-    """The contrast floor in force (DN of the input): the field log's, else MIN_CONTRAST_SIGMAS σ of the noise."""
-    return float(min_contrast) if min_contrast is not None else MIN_CONTRAST_SIGMAS * noise_dn
+    """The contrast floor in force (DN of the input), as the tracker applied it (:func:`contrast_floor`)."""
+    return contrast_floor(min_contrast, noise_dn)
 
 
 def _check_plane_coverage(edges: list[EdgeResult], path: Path, warnings: list[str]) -> None:
@@ -950,7 +942,8 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
         **setup.light.report([e.planes for e in edges], warnings),
         "settings": {
             "min_contrast_dn": _min_contrast_dn(tr.min_contrast, tracked.noise_dn),
-            "min_contrast_from": "field log" if tr.min_contrast is not None else "image noise",
+            "min_contrast_from": ("field log" if tr.min_contrast is not None
+                                  and tr.min_contrast >= MIN_CONTRAST_SIGMAS * tracked.noise_dn else "image noise"),
             "window": tr.window, "edge": setup.edge,
             "max_depth_jump": setup.max_depth_jump, "gamma": tr.gamma,
         },
@@ -965,11 +958,9 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
             "fraction_of_contrast_ok": float(keep.sum() / max(int(times.valid.sum()), 1)),
             "edge_conflicts": int(fused.conflict.sum()),
             "undersampled": int(fused.undersampled.sum()),
-            # pixels whose brightest sample is at the input's full scale (clipped: the shadow's
-            # edges look steeper and its width narrower there); None when the tracker saw
-            # normalised irradiance instead of the input's DN
-            "saturated": (int((times.imax >= len(tracked.lut) - 1).sum())
-                          if not tr.normalize_illumination else None),
+            # pixels whose lit level is at the input's full scale (clipped: the shadow's edges
+            # look steeper and its width narrower there)
+            "saturated": int((times.imax >= len(tracked.lut) - 1).sum()),
             # pixels with two comparable dips (no point), and with clipped samples
             "ambiguous": int(np.count_nonzero(
                 times.ambiguous & (times.contrast >= _min_contrast_dn(tr.min_contrast, tracked.noise_dn)))),

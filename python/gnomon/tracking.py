@@ -63,6 +63,7 @@ from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, Kerne
 from gnomon.frames import Frame, FrameSource
 from gnomon.progress import Progress
 from gnomon.uncertainty import image_noise_dn
+from gnomon.validity import MIN_CONTRAST_SIGMAS
 
 SUPPORTED_DTYPES = (np.dtype(np.uint8), np.dtype(np.uint16))
 
@@ -167,6 +168,17 @@ def decoding_lut(gamma: float | str, dtype) -> np.ndarray:
             raise ValueError(f"gamma: expected a positive number or 'srgb', got {gamma!r}")
         linear = x**g
     return linear.astype(np.float32)
+
+
+def contrast_floor(min_contrast: float | None, noise_dn: float | None) -> float:
+    """The contrast floor in force (DN of the input): the field log's ``min_contrast`` and
+    ``MIN_CONTRAST_SIGMAS`` σ of the image noise ``noise_dn`` (DN), whichever is higher (a missing
+    one does not count). Random frames have a large ``imax − imin`` everywhere but never many σ
+    of their own noise."""
+    floors = [float(min_contrast) if min_contrast is not None else 0.0]
+    if noise_dn is not None:
+        floors.append(MIN_CONTRAST_SIGMAS * float(noise_dn))
+    return max(floors)
 
 
 def linear(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
@@ -380,9 +392,10 @@ class ShadowTracker:
         (each dip in its own light)."""
         return SecondDips.from_kernel(self._tracker.finish_second())
 
-    def finish(self) -> ShadowTimes:
-        """The shadow times so far (``min_contrast`` applied by the kernel, in DN of the input)."""
-        return ShadowTimes.from_kernel(self._tracker.finish(self.settings.min_contrast or 0.0))
+    def finish(self, noise_dn: float | None = None) -> ShadowTimes:
+        """The shadow times so far: the kernel keeps the dips at least :func:`contrast_floor` deep
+        (``settings.min_contrast`` and, given the image noise ``noise_dn`` (DN), its multiple)."""
+        return ShadowTimes.from_kernel(self._tracker.finish(contrast_floor(self.settings.min_contrast, noise_dn)))
 
 
 @dataclass
@@ -478,8 +491,8 @@ def track_source(
         raise FrameError(f"{source.name}: only {seen} frames, expected {source.expected_count}")
     if len(used) < 2:
         raise FrameError(f"{source.name}: fewer than two usable frames (sun below the horizon or clouds)")
-    times = tracker.finish()
     noise_dn = float(np.median([n.result() for n in noise])) if noise else 1.0
+    times = tracker.finish(noise_dn)
     return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, tracker.lut,
                            second=tracker.second_dips() if settings.second_dips else None)
 
