@@ -28,6 +28,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
 from gnomon import __version__, atomic, ply
@@ -44,7 +45,7 @@ from gnomon.light.base import LightModel, Screening
 from gnomon.meshing import GridMesh, grid_mesh, grid_normals, remove_small_components, write_obj, write_stl
 from gnomon.preview import coverage_map, write_preview
 from gnomon.publish import OUTPUT_FILES, staged_outputs
-from gnomon.recording import ScanRecording, playable_video
+from gnomon.recording import ScanRecording, playable_video, warm_rerun_import
 from gnomon.reference_lines import ReferenceLines
 from gnomon.retiming import retime_between_isochrones
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
@@ -536,11 +537,9 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
                             ambiguous=tracked.times.ambiguous, conflict=fused.conflict, unsupported=fused.unsupported)
     warnings += _fusion_warnings(fused)
-    report = _report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
-    _report_outputs(report, setup, cropped)
     timings["total_s"] = time.perf_counter() - t0
-    report["cpu_timings_s"] = cpu
-    report["warnings"] = warnings
+    report = _report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
+    _report_outputs(report, setup, cropped, cpu, warnings)
     result = ScanResult(setup, tracked.times, edges, fused.shadow_time, fused.depth, fused.sigma, fused.keep,
                         fused.undersampled, surface, report, warnings, coverage=coverage)
     if recorder is None:
@@ -554,8 +553,12 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     return result, record
 
 
-def _report_outputs(report: dict[str, Any], setup: ScanSetup, cropped: np.ndarray) -> None:
-    """The crop and, where the light knows it, the site (georeferencing) in the report."""
+def _report_outputs(report: dict[str, Any], setup: ScanSetup, cropped: np.ndarray, cpu: dict[str, float],
+                    warnings: list[str]) -> None:
+    """The crop, where the light knows it the site (georeferencing), the stages' CPU seconds and the warnings
+    in the report."""
+    report["cpu_timings_s"] = cpu
+    report["warnings"] = warnings
     if setup.crop is not None:
         report["output"] = {"crop": setup.crop.to_report(), "cropped_points": int(cropped.sum())}
         report["coverage"]["cropped"] = int(cropped.sum())
@@ -691,8 +694,6 @@ def write_depth_npz(path: Path, depth: np.ndarray, sigma: np.ndarray, camera: di
     t``); ``image_size`` (width, height); ``units`` the world units;
     ``camera_toml`` the camera table as report.json gives it (JSON text).
     """
-    import cv2
-
     rvec = np.asarray(camera["pose"]["rvec"], dtype=np.float64)
     if "fx" in camera:
         K = np.array([[camera["fx"], 0.0, camera["cx"]], [0.0, camera["fy"], camera["cy"]], [0.0, 0.0, 1.0]])
@@ -756,7 +757,7 @@ def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | 
     opts = options or ScanOptions()
     t0 = time.perf_counter()
     if opts.rrd or opts.view:
-        _warm_rerun_import()
+        warm_rerun_import()
     log = load_field_log(field_log)
     source = frame_source(log)
     setup = resolve_scan(log, source)
@@ -840,22 +841,6 @@ class RecordingWorker:
         self._stop()
         if self._recorder is not None:
             self._recorder.abort()
-
-
-_rerun_warm: threading.Thread | None = None
-
-
-def _warm_rerun_import() -> None:
-    """Import rerun (≈ 1 s) on a thread while the field log is read and the frames are tracked."""
-    global _rerun_warm
-    if _rerun_warm is None:
-        def load() -> None:
-            try:
-                import rerun  # noqa: F401
-            except Exception:  # pragma: no cover - the recorder's own import reports it
-                pass
-        _rerun_warm = threading.Thread(target=load, name="gnomon-import-rerun", daemon=True)
-        _rerun_warm.start()
 
 
 def open_recorder(staging: Path, opts: ScanOptions, name: str, filename: str = "scan.rrd", *,

@@ -111,6 +111,7 @@ import logging
 import os
 import re
 import sys
+import threading
 import uuid
 from collections.abc import Mapping, Sequence
 from contextlib import AbstractContextManager
@@ -133,6 +134,7 @@ __all__ = [
     "display_available",
     "display_to_pixels",
     "playable_video",
+    "warm_rerun_import",
     "ENTITY",
 ]
 
@@ -227,6 +229,25 @@ def _rr():
     import rerun as rr  # imported lazily: a disabled recorder never loads rerun
 
     return rr
+
+
+_rerun_warm: threading.Thread | None = None
+
+
+def warm_rerun_import() -> None:
+    """Import rerun (≈ 1 s) on a daemon thread, once, so that a recorder opened later finds it loaded.
+
+    A failed import is left for the recorder's own import to report.
+    """
+    global _rerun_warm
+    if _rerun_warm is None:
+        def load() -> None:
+            try:
+                _rr()
+            except Exception:  # pragma: no cover - the recorder's own import reports it
+                pass
+        _rerun_warm = threading.Thread(target=load, name="gnomon-import-rerun", daemon=True)
+        _rerun_warm.start()
 
 
 def default_blueprint():
