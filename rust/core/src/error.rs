@@ -33,6 +33,31 @@ impl KernelError {
             reason: reason.into(),
         }
     }
+
+    /// Checks an image's per-pixel inputs: each `(what, expected, got)` length
+    /// matches, and `width` divides the `n` pixels into whole rows.
+    pub(crate) fn check_image(
+        n: usize,
+        width: usize,
+        inputs: &[(&'static str, usize, usize)],
+    ) -> Result<(), KernelError> {
+        for &(what, expected, got) in inputs {
+            if got != expected {
+                return Err(KernelError::LengthMismatch {
+                    what,
+                    expected,
+                    got,
+                });
+            }
+        }
+        if width == 0 || n % width != 0 {
+            return Err(KernelError::parameter(
+                "width",
+                format!("{width} does not divide {n} pixels"),
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl fmt::Display for KernelError {

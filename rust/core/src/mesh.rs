@@ -95,24 +95,14 @@ pub fn grid_faces(
     sigma_factor: f32,
 ) -> Result<Vec<[i32; 3]>, KernelError> {
     let n = valid.len();
-    for (what, len) in [
-        ("depth (one per pixel)", depth.len()),
-        ("sigma (one per pixel)", sigma.len()),
-    ] {
-        if len != n {
-            return Err(KernelError::LengthMismatch {
-                what,
-                expected: n,
-                got: len,
-            });
-        }
-    }
-    if width == 0 || n % width != 0 {
-        return Err(KernelError::parameter(
-            "width",
-            format!("{width} does not divide {n} pixels"),
-        ));
-    }
+    KernelError::check_image(
+        n,
+        width,
+        &[
+            ("depth (one per pixel)", n, depth.len()),
+            ("sigma (one per pixel)", n, sigma.len()),
+        ],
+    )?;
     if n > i32::MAX as usize {
         return Err(KernelError::parameter(
             "valid",

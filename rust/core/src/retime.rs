@@ -72,24 +72,14 @@ pub fn retime_rows(
     params: RetimeParams,
 ) -> Result<Retimed, KernelError> {
     let n = times.len();
-    for (what, len) in [
-        ("index (one per pixel)", index.len()),
-        ("wanted (one per pixel)", wanted.len()),
-    ] {
-        if len != n {
-            return Err(KernelError::LengthMismatch {
-                what,
-                expected: n,
-                got: len,
-            });
-        }
-    }
-    if width == 0 || n % width != 0 {
-        return Err(KernelError::parameter(
-            "width",
-            format!("{width} does not divide {n} pixels"),
-        ));
-    }
+    KernelError::check_image(
+        n,
+        width,
+        &[
+            ("index (one per pixel)", n, index.len()),
+            ("wanted (one per pixel)", n, wanted.len()),
+        ],
+    )?;
     if params.n_frames < 0 {
         return Err(KernelError::parameter("n_frames", "must be ≥ 0"));
     }

@@ -60,26 +60,14 @@ pub fn grid_normals(
     max_relative_jump: f64,
 ) -> Result<Vec<f32>, KernelError> {
     let n = valid.len();
-    if depth.len() != n {
-        return Err(KernelError::LengthMismatch {
-            what: "depth (one per pixel)",
-            expected: n,
-            got: depth.len(),
-        });
-    }
-    if points.len() != 3 * n {
-        return Err(KernelError::LengthMismatch {
-            what: "points (3 per pixel)",
-            expected: 3 * n,
-            got: points.len(),
-        });
-    }
-    if width == 0 || n % width != 0 {
-        return Err(KernelError::parameter(
-            "width",
-            format!("{width} does not divide {n} pixels"),
-        ));
-    }
+    KernelError::check_image(
+        n,
+        width,
+        &[
+            ("depth (one per pixel)", n, depth.len()),
+            ("points (3 per pixel)", 3 * n, points.len()),
+        ],
+    )?;
     let height = n / width;
     let p = |i: usize| -> V3 {
         if valid[i] != 0 {
