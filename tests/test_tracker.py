@@ -3,7 +3,7 @@ decoding LUTs, and input errors."""
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
 import pytest
@@ -464,7 +464,8 @@ def test_the_second_candidate_dip_has_its_own_times(normalize):
     """Two comparable sharp dips (the pole's and a lamp post's): the pixel is ambiguous, but
     ShadowTracker.second_dips keeps both candidates' times (sub-frame, noise σ = 1 DN), the
     second's contrast is the rival's depth in DN of the input (also through the normaliser), and a pixel
-    with one dip has no second above the contrast floor."""
+    with one dip has no second above the contrast floor. Without ``second_dips`` the kernel keeps
+    no second candidates (its best dips and rivals unchanged) and refuses to report them."""
     from gnomon.tracking import ShadowTracker, TrackerSettings
 
     rng = np.random.default_rng(14)
@@ -476,12 +477,19 @@ def test_the_second_candidate_dip_has_its_own_times(normalize):
     # (and lit pixels, most of the image, that set the normaliser's gain)
     values = np.concatenate([two, one, np.full((n, 10 * pixels), LIT)], axis=1) + rng.normal(0, 1.0, (n, 12 * pixels))
     frames = to_frames(values, (1, 12 * pixels), np.uint8)
-    settings = TrackerSettings(gamma=1.0, min_contrast=20.0, normalize_illumination=normalize, max_width=16)
+    settings = TrackerSettings(gamma=1.0, min_contrast=20.0, normalize_illumination=normalize, max_width=16,
+                               second_dips=True)
     tracker = ShadowTracker(settings, (1, 12 * pixels), np.dtype(np.uint8))
+    plain = ShadowTracker(replace(settings, second_dips=False), (1, 12 * pixels), np.dtype(np.uint8))
     for f in frames:
-        assert tracker.update(f)
+        assert tracker.update(f) and plain.update(f)
     times = tracker.finish()
     dips = tracker.second_dips()
+    without = plain.finish()
+    for field in fields(times):
+        np.testing.assert_array_equal(getattr(without, field.name), getattr(times, field.name), err_msg=field.name)
+    with pytest.raises(KernelParameterError, match="second_dips"):
+        plain.second_dips()
     both, alone = np.s_[0, :pixels], np.s_[0, pixels:2 * pixels]
     assert times.ambiguous[both].all() and times.valid[alone].all()
     assert rms(dips.best_enter[both] - first[0]) <= 0.05 and rms(dips.best_leave[both] - first[1]) <= 0.05

@@ -141,6 +141,9 @@ class TemporalTracker:
     None), used for every linear value. ``normalise``: the light changes (the sun):
     every frame comes with its gain, the tracker compares the samples' decoded values
     divided by it and reports each dip in its own light (``lut`` required).
+    ``second_dips``: also keep every pixel's second candidate dip for :meth:`finish_second`
+    (off: the block pass is compiled without it, about a third cheaper per frame; the
+    ``rival`` depth is tracked either way).
     """
 
     def __init__(
@@ -153,6 +156,7 @@ class TemporalTracker:
         ambiguity: float = 0.6,
         lut: npt.NDArray[np.float32] | None = None,
         normalise: bool = False,
+        second_dips: bool = False,
     ) -> None: ...
     def update(self, frame: npt.NDArray[np.uint8] | npt.NDArray[np.uint16], gain: float | None = None) -> None:
         """Add the next frame: a (height, width) array of the tracker's dtype, as decoded
@@ -165,7 +169,8 @@ class TemporalTracker:
         """
     def finish_second(self) -> SecondDips:
         """Every pixel's second candidate dip for the frames seen so far (see :class:`SecondDips`),
-        in :meth:`finish`'s units; the tracker is unchanged."""
+        in :meth:`finish`'s units; the tracker is unchanged. ``KernelParameterError`` unless the
+        tracker was built with ``second_dips=True``."""
     def watch(self, min_contrast: float, recover: int = 3) -> None:
         """Start the live watch from the next frame on (replacing an earlier one).
 
@@ -195,6 +200,8 @@ class TemporalTracker:
     def max_width(self) -> int: ...
     @property
     def ambiguity(self) -> float: ...
+    @property
+    def second_dips(self) -> bool: ...
     @property
     def simd_path(self) -> Literal["avx2", "sse2", "portable"]: ...
 

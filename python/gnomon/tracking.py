@@ -322,7 +322,8 @@ class TrackerSettings:
     widest dip always found; ``ambiguity``: the rival/contrast ratio from which
     a pixel is ambiguous; ``second_dips``: also report every pixel's second
     candidate dip (:class:`SecondDips`, for a light model that chooses between
-    the two; it costs about as much as the final evaluation itself).
+    the two; the kernel keeps them only then: its block pass is about a third
+    cheaper per frame without, and :meth:`ShadowTracker.second_dips` needs it).
     """
 
     gamma: float | str = "srgb"
@@ -356,7 +357,8 @@ class ShadowTracker:
         self._tracker = _kernel.TemporalTracker(h, w, dtype="uint8" if _check_dtype(dtype) == np.uint8 else "uint16",
                                                 window=settings.window, max_width=settings.max_width,
                                                 ambiguity=settings.ambiguity, lut=self.lut,
-                                                normalise=self.normalizer is not None)
+                                                normalise=self.normalizer is not None,
+                                                second_dips=settings.second_dips)
 
     def update(self, grey: np.ndarray) -> bool:
         """Feed one frame (DN); False when it was skipped as an illumination dip."""
@@ -389,7 +391,7 @@ class ShadowTracker:
 
     def second_dips(self) -> SecondDips:
         """The second candidate dips (:class:`SecondDips`), in the units :meth:`finish` reports
-        (each dip in its own light)."""
+        (each dip in its own light); ``KernelParameterError`` unless ``settings.second_dips``."""
         return SecondDips.from_kernel(self._tracker.finish_second())
 
     def finish(self, noise_dn: float | None = None) -> ShadowTimes:

@@ -95,6 +95,11 @@ pub struct TrackerParams {
     /// A pixel whose second-deepest dip is at least this fraction of the
     /// deepest is ambiguous (no times). `0 < ambiguity ≤ 1`.
     pub ambiguity: f32,
+    /// Keep every pixel's second candidate dip (its levels and windows) for
+    /// [`TemporalTracker::finish_second`]. Off (the default), the block pass
+    /// is compiled without it (the rival depth `d2` is still tracked) and
+    /// `finish_second` is refused.
+    pub second_dips: bool,
 }
 
 impl Default for TrackerParams {
@@ -103,6 +108,7 @@ impl Default for TrackerParams {
             window: 4,
             max_width: 32,
             ambiguity: 0.6,
+            second_dips: false,
         }
     }
 }
@@ -325,7 +331,9 @@ struct SecondState<T: Sample> {
 }
 
 impl<T: Sample> SecondState<T> {
-    fn new(width: usize, half: usize) -> Self {
+    /// Empty vectors when the tracker keeps no second candidates (never read then).
+    fn new(width: usize, half: usize, keep: bool) -> Self {
+        let width = if keep { width } else { 0 };
         SecondState {
             hi2: vec![T::MIN; width],
             lo2: vec![T::MIN; width],
@@ -338,7 +346,7 @@ impl<T: Sample> SecondState<T> {
 }
 
 impl<T: Sample> RowState<T> {
-    fn new(width: usize, half: usize) -> Self {
+    fn new(width: usize, half: usize, second: bool) -> Self {
         RowState {
             prev_max: vec![T::MIN; width],
             d1: vec![T::MIN; width],
@@ -350,7 +358,7 @@ impl<T: Sample> RowState<T> {
             leave_at: vec![NO_FRAME; width],
             enter_window: vec![T::MIN; width * 2 * half],
             leave_window: vec![T::MIN; width * 2 * half],
-            second: SecondState::new(width, half),
+            second: SecondState::new(width, half, second),
         }
     }
 }
@@ -413,7 +421,7 @@ impl BlockJob {
 /// events, and the windows of pixels whose best dip moved.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn evaluate_span<'a, T: Sample, V: Vector<T>>(
+fn evaluate_span<'a, T: Sample, V: Vector<T>, const SECOND: bool>(
     state: &mut RowState<T>,
     ring: &'a FrameRing<T>,
     row: usize,
@@ -456,8 +464,12 @@ fn evaluate_span<'a, T: Sample, V: Vector<T>>(
     // The second candidate: the best event's state at the block's start moves
     // there when a far frame beats it (FROM_BEST), a far frame deeper than the
     // second (not the best) becomes it (its offset).
-    let mut hi2: V = load(&state.second.hi2, x0);
-    let mut lo2: V = load(&state.second.lo2, x0);
+    // Without SECOND these lanes are never loaded, updated nor stored.
+    let (mut hi2, mut lo2): (V, V) = if SECOND {
+        (load(&state.second.hi2, x0), load(&state.second.lo2, x0))
+    } else {
+        (zero, zero)
+    };
     let mut moved2 = none;
     let from_best = V::splat(T::from_offset(FROM_BEST));
     for (i, r) in rows.iter().enumerate() {
@@ -467,15 +479,17 @@ fn evaluate_span<'a, T: Sample, V: Vector<T>>(
         age = age.add_sat(one);
         let better = depth.gt(d1);
         let far = age.gt(far_after);
-        let promote = V::select(far, better, zero);
-        let deeper2 = V::select(better, zero, V::select(far, depth.gt(d2), zero));
-        hi2 = V::select(promote, hi, V::select(deeper2, lit, hi2));
-        lo2 = V::select(promote, lo, V::select(deeper2, cur, lo2));
-        moved2 = V::select(
-            promote,
-            from_best,
-            V::select(deeper2, V::splat(T::from_offset(i)), moved2),
-        );
+        if SECOND {
+            let promote = V::select(far, better, zero);
+            let deeper2 = V::select(better, zero, V::select(far, depth.gt(d2), zero));
+            hi2 = V::select(promote, hi, V::select(deeper2, lit, hi2));
+            lo2 = V::select(promote, lo, V::select(deeper2, cur, lo2));
+            moved2 = V::select(
+                promote,
+                from_best,
+                V::select(deeper2, V::splat(T::from_offset(i)), moved2),
+            );
+        }
         d2 = V::select(far, d2.max(depth.min(d1)), d2);
         d1 = d1.max(depth);
         age = V::select(better, zero, age);
@@ -489,9 +503,11 @@ fn evaluate_span<'a, T: Sample, V: Vector<T>>(
     store(age, &mut state.age, x0);
     store(hi, &mut state.hi, x0);
     store(lo, &mut state.lo, x0);
-    store(hi2, &mut state.second.hi2, x0);
-    store(lo2, &mut state.second.lo2, x0);
-    if moved2.ne(none).any() {
+    if SECOND {
+        store(hi2, &mut state.second.hi2, x0);
+        store(lo2, &mut state.second.lo2, x0);
+    }
+    if SECOND && moved2.ne(none).any() {
         // Before the best dip's own capture: FROM_BEST copies its windows of the block's start.
         let mut offsets = [T::NO_OFFSET; MAX_LANES];
         store(moved2, &mut offsets, 0);
@@ -668,7 +684,7 @@ fn capture_dip<T: Sample>(
 
 /// Evaluate `job`'s block of one row with vectors `V`.
 #[inline(always)]
-fn evaluate_row_with<T: Sample, V: Vector<T>>(
+fn evaluate_row_with<T: Sample, V: Vector<T>, const SECOND: bool>(
     state: &mut RowState<T>,
     ring: &FrameRing<T>,
     row: usize,
@@ -683,13 +699,13 @@ fn evaluate_row_with<T: Sample, V: Vector<T>>(
     let mut ctx = None;
     let split = width - width % V::LANES;
     for x0 in (0..split).step_by(V::LANES) {
-        evaluate_span::<T, V>(
+        evaluate_span::<T, V, SECOND>(
             state, ring, row, &mut ctx, &rows, &next, &mut right, job, x0,
         );
     }
     let mut right = vec![Portable::<T, 1>::splat(T::MIN); rows.len()];
     for x0 in split..width {
-        evaluate_span::<T, Portable<T, 1>>(
+        evaluate_span::<T, Portable<T, 1>, SECOND>(
             state, ring, row, &mut ctx, &rows, &next, &mut right, job, x0,
         );
     }
@@ -701,18 +717,36 @@ fn evaluate_row_with<T: Sample, V: Vector<T>>(
 /// The CPU must have AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn evaluate_row_avx2<T: Sample>(
+unsafe fn evaluate_row_avx2<T: Sample, const SECOND: bool>(
     state: &mut RowState<T>,
     ring: &FrameRing<T>,
     row: usize,
     job: BlockJob,
 ) {
-    evaluate_row_with::<T, T::Avx2>(state, ring, row, job)
+    evaluate_row_with::<T, T::Avx2, SECOND>(state, ring, row, job)
 }
 
 /// Evaluate `job`'s block of one row on the instruction set `path` (which
-/// the CPU must support: checked when it is set).
+/// the CPU must support: checked when it is set), keeping the second
+/// candidates when `second` (the tracker's [`TrackerParams::second_dips`];
+/// the row's state was allocated for it).
 fn evaluate_row<T: Sample>(
+    path: SimdPath,
+    second: bool,
+    state: &mut RowState<T>,
+    ring: &FrameRing<T>,
+    row: usize,
+    job: BlockJob,
+) {
+    if second {
+        evaluate_row_on::<T, true>(path, state, ring, row, job)
+    } else {
+        evaluate_row_on::<T, false>(path, state, ring, row, job)
+    }
+}
+
+/// [`evaluate_row`] with the second candidates' choice made at compile time.
+fn evaluate_row_on<T: Sample, const SECOND: bool>(
     path: SimdPath,
     state: &mut RowState<T>,
     ring: &FrameRing<T>,
@@ -724,11 +758,11 @@ fn evaluate_row<T: Sample>(
         SimdPath::Avx2 => {
             debug_assert!(path.is_supported());
             // SAFETY: the tracker only holds a path the CPU supports.
-            unsafe { evaluate_row_avx2(state, ring, row, job) }
+            unsafe { evaluate_row_avx2::<T, SECOND>(state, ring, row, job) }
         }
         #[cfg(target_arch = "x86_64")]
-        SimdPath::Sse2 => evaluate_row_with::<T, T::Sse2>(state, ring, row, job),
-        _ => evaluate_row_with::<T, T::Portable>(state, ring, row, job),
+        SimdPath::Sse2 => evaluate_row_with::<T, T::Sse2, SECOND>(state, ring, row, job),
+        _ => evaluate_row_with::<T, T::Portable, SECOND>(state, ring, row, job),
     }
 }
 
@@ -800,7 +834,7 @@ impl<T: Sample> TemporalTracker<T> {
             params,
             ring: FrameRing::new(height, width, params.ring_slots()),
             rows: (0..height)
-                .map(|_| RowState::new(width, params.window))
+                .map(|_| RowState::new(width, params.window, params.second_dips))
                 .collect(),
             frames_seen: 0,
             frames_evaluated: 0,
@@ -917,11 +951,11 @@ impl<T: Sample> TemporalTracker<T> {
                 max_width,
                 half: self.params.window,
             };
-            let (ring, path) = (&self.ring, self.path);
+            let (ring, path, second) = (&self.ring, self.path, self.params.second_dips);
             self.rows
                 .par_iter_mut()
                 .enumerate()
-                .for_each(|(row, state)| evaluate_row(path, state, ring, row, job));
+                .for_each(|(row, state)| evaluate_row(path, second, state, ring, row, job));
             self.frames_evaluated += max_width;
         }
     }
@@ -998,7 +1032,14 @@ impl<T: Sample> TemporalTracker<T> {
             .for_each(|(row, (mut out, evaluated))| {
                 let mut state = evaluated.clone();
                 for &job in &pending {
-                    evaluate_row(self.path, &mut state, &self.ring, row, job);
+                    evaluate_row(
+                        self.path,
+                        self.params.second_dips,
+                        &mut state,
+                        &self.ring,
+                        row,
+                        job,
+                    );
                 }
                 let light = Light {
                     intensity: &self.intensity,
@@ -1018,6 +1059,13 @@ impl<T: Sample> TemporalTracker<T> {
     /// dip in its own light). No contrast floor: the caller compares
     /// [`SecondDips::contrast`] with its own.
     pub fn finish_second(&self) -> Result<SecondDips, KernelError> {
+        if !self.params.second_dips {
+            return Err(KernelError::parameter(
+                "second_dips",
+                "finish_second needs a tracker built with second_dips = true \
+                 (it keeps no second candidates otherwise)",
+            ));
+        }
         if self.frames_seen == 0 {
             return Err(KernelError::NoFrames);
         }
@@ -1042,7 +1090,14 @@ impl<T: Sample> TemporalTracker<T> {
             .map(|(row, evaluated)| {
                 let mut state = evaluated.clone();
                 for &job in &pending {
-                    evaluate_row(self.path, &mut state, &self.ring, row, job);
+                    evaluate_row(
+                        self.path,
+                        self.params.second_dips,
+                        &mut state,
+                        &self.ring,
+                        row,
+                        job,
+                    );
                 }
                 resolve_second_row(&state, &self.intensity, fallback, params.window)
             })

@@ -20,6 +20,7 @@ fn params() -> TrackerParams {
         window: 4,
         max_width: 32,
         ambiguity: 0.6,
+        second_dips: false,
     }
 }
 
@@ -139,6 +140,7 @@ fn a_dip_wider_than_the_ring_has_no_enter_time() {
         window: 2,
         max_width: 4,
         ambiguity: 0.6,
+        second_dips: false,
     };
     let mut p = vec![200u8; 5];
     p.extend(vec![40u8; 30]);

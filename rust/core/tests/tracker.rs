@@ -55,7 +55,9 @@ fn track<T: Sample>(
     first
 }
 
-/// [`track`]'s second candidates ([`TemporalTracker::finish_second`]), identical on every path.
+/// [`track`]'s second candidates ([`TemporalTracker::finish_second`], with
+/// `second_dips` on), identical on every path; the best dips' times equal
+/// those of a tracker without second candidates.
 fn track_second<T: Sample>(
     profiles: &[Vec<T>],
     height: usize,
@@ -63,6 +65,15 @@ fn track_second<T: Sample>(
     params: TrackerParams,
     lut: Option<&[f32]>,
 ) -> SecondDips {
+    let without = TrackerParams {
+        second_dips: false,
+        ..params
+    };
+    let plain = track(profiles, height, width, without, 0.0, lut);
+    let params = TrackerParams {
+        second_dips: true,
+        ..params
+    };
     let mut results = SimdPath::supported().into_iter().map(|path| {
         let mut tracker = match lut {
             Some(lut) => TemporalTracker::<T>::with_table(height, width, params, lut),
@@ -74,6 +85,11 @@ fn track_second<T: Sample>(
             let frame: Vec<T> = profiles.iter().map(|p| p[f]).collect();
             tracker.update(&frame).unwrap();
         }
+        assert!(
+            identical(&tracker.finish(0.0).unwrap(), &plain),
+            "{}: the best dips change with second_dips",
+            path.name()
+        );
         (path, tracker.finish_second().unwrap())
     });
     let (_, first) = results.next().unwrap();
@@ -648,6 +664,7 @@ fn random_sequences_match_the_reference() {
                         window: half,
                         max_width,
                         ambiguity,
+                        second_dips: false,
                     };
                     check_against_reference(&profiles, |v| v as u8, p, &identity8, None);
                 }
@@ -754,6 +771,10 @@ fn the_second_candidate_keeps_the_other_dip_s_times() {
     let s = track_second(&[one], 1, 1, p, None);
     assert!(s.enter[0].is_nan() && s.leave[0].is_nan() && s.contrast[0] == 0.0);
     // The stream goes on unchanged after a look at the candidates.
+    let p = TrackerParams {
+        second_dips: true,
+        ..p
+    };
     let mut tracker = TemporalTracker::<u8>::new(1, 1, p).unwrap();
     for (f, &v) in two.iter().enumerate() {
         tracker.update(&[v]).unwrap();
@@ -847,4 +868,20 @@ fn finish_is_a_preview_that_does_not_disturb_the_stream() {
     {
         assert!(same(*a, *b));
     }
+}
+
+#[test]
+fn finish_second_is_refused_without_second_dips() {
+    let two = with_dips(160, &[(30, 6, 40), (110, 6, 55)]);
+    let mut tracker = TemporalTracker::<u8>::new(1, 1, params(4, 16)).unwrap();
+    for &v in &two {
+        tracker.update(&[v]).unwrap();
+    }
+    match tracker.finish_second() {
+        Err(KernelError::InvalidParameter { name, .. }) => assert_eq!(name, "second_dips"),
+        other => panic!("expected the second_dips refusal, got {other:?}"),
+    }
+    // The rival depth (the second dip's contrast, 200 − 55) is still tracked.
+    let t = tracker.finish(0.0).unwrap();
+    assert_eq!(t.rival[0], 145.0);
 }

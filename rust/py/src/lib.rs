@@ -418,7 +418,7 @@ fn update_any<T: Sample + Element>(
 impl TemporalTracker {
     #[new]
     #[pyo3(signature = (height, width, dtype = "uint8", window = 4, max_width = 32, ambiguity = 0.6,
-                        lut = None, normalise = false))]
+                        lut = None, normalise = false, second_dips = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         height: usize,
@@ -429,11 +429,13 @@ impl TemporalTracker {
         ambiguity: f32,
         lut: Option<&Bound<'_, PyAny>>,
         normalise: bool,
+        second_dips: bool,
     ) -> PyResult<Self> {
         let params = TrackerParams {
             window,
             max_width,
             ambiguity,
+            second_dips,
         };
         let (dtype, len) = match dtype {
             "uint8" => (u8::DTYPE, u8::LUT_LEN),
@@ -499,7 +501,8 @@ impl TemporalTracker {
     }
 
     /// Every pixel's second candidate dip (the event whose depth is `rival`),
-    /// for the frames seen so far, in `finish`'s units.
+    /// for the frames seen so far, in `finish`'s units. Needs a tracker built
+    /// with `second_dips=True` (KernelParameterError otherwise).
     fn finish_second(&self, py: Python<'_>) -> PyResult<PySecondDips> {
         let dips = match &self.inner {
             AnyTracker::U8(t) => py.detach(|| t.finish_second()),
@@ -587,6 +590,12 @@ impl TemporalTracker {
     #[getter]
     fn ambiguity(&self) -> f32 {
         self.params().ambiguity
+    }
+
+    /// Whether the tracker keeps second candidate dips (`finish_second`).
+    #[getter(second_dips)]
+    fn keeps_second_dips(&self) -> bool {
+        self.params().second_dips
     }
 
     /// The instruction set this tracker's hot loops run on.
