@@ -150,8 +150,7 @@ def grid_normals(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, camer
     parallel, the same f64 arithmetic); :func:`_grid_normals_numpy` is the
     definition in numpy.
     """
-    if points.dtype == np.float32 and depth.dtype == np.float32 and hasattr(_kernel, "grid_normals"):
-        # (a kernel built before grid_normals existed, e.g. an older build in a checkout: numpy below)
+    if points.dtype == np.float32 and depth.dtype == np.float32:
         centre = np.asarray(camera_centre, dtype=np.float64).reshape(3)
         return _kernel.grid_normals(np.ascontiguousarray(points), np.ascontiguousarray(depth),
                                     np.ascontiguousarray(valid, dtype=np.uint8),
@@ -470,10 +469,8 @@ def write_obj(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
         t = None if uv is None else np.ascontiguousarray(uv, dtype=np.float64).reshape(len(v), 2)
         n = None if normals is None else np.ascontiguousarray(normals, dtype=np.float64).reshape(len(v), 3)
         args = (np.ascontiguousarray(v), _decimals_for(v) if len(v) else 1, t, n, np.ascontiguousarray(f))
-        try:  # the text's blocks as arrays the kernel filled (written one after the other, never joined)
-            parts.extend(_kernel.obj_text(*args, as_parts=True))
-        except TypeError:  # a kernel built before as_parts existed (an older build in a checkout)
-            parts.append(_kernel.obj_text(*args))
+        # the text's blocks as arrays the kernel filled (written one after the other, never joined)
+        parts.extend(_kernel.obj_text(*args, as_parts=True))
     _write_obj_material(target, texture)
     _write_parts(target, parts)
 
@@ -552,10 +549,7 @@ def write_stl(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, 
     if head.lower().startswith(b"solid"):
         raise ValueError("a binary STL header must not start with 'solid'")
     # the records (normal, corners, attribute) packed by the kernel, rows in parallel (_stl_table_numpy: the same)
-    if hasattr(_kernel, "stl_records"):
-        records = _kernel.stl_records(np.ascontiguousarray(v), np.ascontiguousarray(f, dtype=np.int32))
-    else:  # a kernel built before stl_records existed
-        records = _stl_table_numpy(v, f)
+    records = _kernel.stl_records(np.ascontiguousarray(v), np.ascontiguousarray(f, dtype=np.int32))
     _write_parts(path, [head.ljust(80, b" "), np.uint32(len(f)).astype("<u4").tobytes(), records])
 
 
