@@ -387,16 +387,7 @@ struct Second {
 /// the second (not the best) becomes it.
 fn reference_second(profile: &[u16], p: TrackerParams, lut: &[f32]) -> Second {
     let (n, w, half) = (profile.len(), p.max_width, p.window);
-    let max_of = |r: std::ops::Range<usize>| profile[r].iter().copied().max().unwrap_or(0);
-    let depth: Vec<(u16, u16)> = (0..n)
-        .map(|k| {
-            let b = k / w;
-            let left = max_of(b.saturating_sub(1) * w..k);
-            let right = max_of((k + 1).min(n)..((b + 2) * w).min(n));
-            let lit = left.min(right);
-            (lit.saturating_sub(profile[k]), lit)
-        })
-        .collect();
+    let depth = frame_depths(profile, w);
     let (mut d1, mut d2) = (0u16, 0u16);
     let (mut k1, mut k2) = (None::<usize>, None::<usize>);
     for (k, &(d, _)) in depth.iter().enumerate() {
@@ -476,13 +467,14 @@ struct Pixel {
     leave_slope: f32,
 }
 
-/// The dip of the module documentation on a whole stored profile, straight
-/// from the definitions (no streaming, no blocks of work, no SIMD).
-fn reference(profile: &[u16], p: TrackerParams, lut: &[f32], min_contrast: f32) -> Pixel {
-    let (n, w, half) = (profile.len(), p.max_width, p.window);
+/// (depth, lit level) of every frame of a stored profile, straight from the
+/// definitions: the lit level is the lower of the brightest sample before the
+/// frame (from block `b − 1` on) and after it (to the end of block `b + 1`),
+/// blocks of `w` frames.
+fn frame_depths(profile: &[u16], w: usize) -> Vec<(u16, u16)> {
+    let n = profile.len();
     let max_of = |r: std::ops::Range<usize>| profile[r].iter().copied().max().unwrap_or(0);
-    // (depth, lit level) of every frame.
-    let depth: Vec<(u16, u16)> = (0..n)
+    (0..n)
         .map(|k| {
             let b = k / w;
             let left = max_of(b.saturating_sub(1) * w..k);
@@ -490,7 +482,14 @@ fn reference(profile: &[u16], p: TrackerParams, lut: &[f32], min_contrast: f32) 
             let lit = left.min(right);
             (lit.saturating_sub(profile[k]), lit)
         })
-        .collect();
+        .collect()
+}
+
+/// The dip of the module documentation on a whole stored profile, straight
+/// from the definitions (no streaming, no blocks of work, no SIMD).
+fn reference(profile: &[u16], p: TrackerParams, lut: &[f32], min_contrast: f32) -> Pixel {
+    let (n, w, half) = (profile.len(), p.max_width, p.window);
+    let depth = frame_depths(profile, w);
     let (mut d1, mut d2, mut k1) = (0u16, 0u16, None::<usize>);
     for (k, &(d, _)) in depth.iter().enumerate() {
         let same_event = k1.is_some_and(|k1| k - k1 <= w);
