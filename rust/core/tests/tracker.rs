@@ -20,6 +20,29 @@ fn ramp_profile() -> Vec<u16> {
     p
 }
 
+/// A tracker on SIMD path `path` (with the decoding table `lut` when given)
+/// that has seen every frame of the per-pixel `profiles`.
+fn fed<T: Sample>(
+    profiles: &[Vec<T>],
+    height: usize,
+    width: usize,
+    params: TrackerParams,
+    lut: Option<&[f32]>,
+    path: SimdPath,
+) -> TemporalTracker<T> {
+    let mut tracker = match lut {
+        Some(lut) => TemporalTracker::<T>::with_table(height, width, params, lut),
+        None => TemporalTracker::<T>::new(height, width, params),
+    }
+    .unwrap();
+    tracker.set_simd_path(path).unwrap();
+    for f in 0..profiles[0].len() {
+        let frame: Vec<T> = profiles.iter().map(|p| p[f]).collect();
+        tracker.update(&frame).unwrap();
+    }
+    tracker
+}
+
 /// Feed per-pixel profiles (all the same length) as frames of `height × width`,
 /// on every instruction set this CPU supports: the results must be identical.
 fn track<T: Sample>(
@@ -32,16 +55,7 @@ fn track<T: Sample>(
 ) -> ShadowTimes {
     assert_eq!(profiles.len(), height * width);
     let mut results = SimdPath::supported().into_iter().map(|path| {
-        let mut tracker = match lut {
-            Some(lut) => TemporalTracker::<T>::with_table(height, width, params, lut),
-            None => TemporalTracker::<T>::new(height, width, params),
-        }
-        .unwrap();
-        tracker.set_simd_path(path).unwrap();
-        for f in 0..profiles[0].len() {
-            let frame: Vec<T> = profiles.iter().map(|p| p[f]).collect();
-            tracker.update(&frame).unwrap();
-        }
+        let tracker = fed(profiles, height, width, params, lut, path);
         (path, tracker.finish(min_contrast).unwrap())
     });
     let (_, first) = results.next().unwrap();
@@ -75,16 +89,7 @@ fn track_second<T: Sample>(
         ..params
     };
     let mut results = SimdPath::supported().into_iter().map(|path| {
-        let mut tracker = match lut {
-            Some(lut) => TemporalTracker::<T>::with_table(height, width, params, lut),
-            None => TemporalTracker::<T>::new(height, width, params),
-        }
-        .unwrap();
-        tracker.set_simd_path(path).unwrap();
-        for f in 0..profiles[0].len() {
-            let frame: Vec<T> = profiles.iter().map(|p| p[f]).collect();
-            tracker.update(&frame).unwrap();
-        }
+        let tracker = fed(profiles, height, width, params, lut, path);
         assert!(
             identical(&tracker.finish(0.0).unwrap(), &plain),
             "{}: the best dips change with second_dips",
