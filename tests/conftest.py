@@ -65,14 +65,15 @@ def tiny_capture(tmp_path: Path) -> Path:
 
 @pytest.fixture(scope="session")
 def desk_scan(tmp_path_factory) -> Path:
-    """A small desk_lamp capture (400×300, 120 frames) scanned by the CLI: ROOT/capture, ROOT/scan."""
+    """A small desk_lamp capture (400×300, 120 frames) scanned by the CLI with every mesh format:
+    ROOT/capture, ROOT/scan."""
     from gnomon.cli import main
     from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
     root = tmp_path_factory.mktemp("desk_scan")
     simulate_desk_lamp(root / "capture", DeskLampConfig(width=400, height=300, frames=120, seed=5, pencil_photos=0))
     assert main(["scan", str(root / "capture" / "field_log.toml"), "--out", str(root / "scan"), "--quiet",
-                 "--frame-stride", "10"]) == 0
+                 "--frame-stride", "10", "--mesh-formats", "all"]) == 0
     return root
 
 

@@ -28,7 +28,7 @@ import gnomon
 from gnomon.pipeline import ScanOptions, run_scan
 
 PYTHON_DIR = str(Path(gnomon.__file__).resolve().parent.parent)
-COMPARED = ("depth.npy", "sigma.npy", "shadow_time.npy", "undersampled.npy", "points.ply", "mesh.ply", "mesh.obj")
+COMPARED = ("depth.npy", "sigma.npy", "shadow_time.npy", "undersampled.npy", "points.ply", "mesh.ply", "mesh.png")
 START_TIMEOUT_S = 60
 BATCH_TIMEOUT_S = 180
 

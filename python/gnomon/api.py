@@ -165,7 +165,7 @@ def _tracker(field_log: str | os.PathLike, tiles: str | None, scheduler: str | N
 def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, rrd: bool | None = None,
          rrd_path: str | os.PathLike | None = None, view: bool = False, progress: bool = False,
          frame_stride: int = 10, tiles: str | None = None, scheduler: str | None = None,
-         workers: int | None = None) -> Scan:
+         workers: int | None = None, mesh_formats: tuple[str, ...] | None = None) -> Scan:
     """Scan the capture a field log describes; return the result, and write it if ``out`` is given.
 
     ``field_log`` the capture's TOML field log (format: field_logs/README.md;
@@ -177,7 +177,9 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
     to ``rrd_path`` (default ``out/scan.rrd``); ``view`` also stream it to a
     rerun viewer started here (where a display exists; the file is written
     either way); ``frame_stride`` keep every n-th frame image in it.
-    ``progress`` a progress bar on stderr.
+    ``progress`` a progress bar on stderr. ``mesh_formats`` the mesh's files among
+    ``("ply", "obj", "stl")`` (mesh.ply always; default: the field log's ``[output] mesh_formats``,
+    else mesh.ply only).
 
     ``tiles`` ``"RxC"``: track R × C image tiles on Dask workers and stitch
     the maps (the same result; ``pip install "gnomon[dask]"``, see
@@ -201,7 +203,8 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
         if out is not None:
             opts = ScanOptions(rrd=True if rrd is None else bool(rrd), progress=progress,
                                rrd_path=None if rrd_path is None else Path(rrd_path), view=view,
-                               frame_stride=frame_stride, track=track)
+                               frame_stride=frame_stride, track=track,
+                               mesh_formats=_mesh_formats(mesh_formats))
             return _from_result(run_scan(Path(field_log), Path(out), opts), Path(out))
         log = load_field_log(Path(field_log))
         source = frame_source(log)
@@ -209,6 +212,18 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
         result = scan_in_memory(setup, source, None, progress=progress, frame_stride=frame_stride,
                                 **({} if track is None else {"track": track}))
         return _from_result(result, None)
+
+
+def _mesh_formats(value: Any) -> tuple[str, ...] | None:
+    """scan()'s ``mesh_formats`` checked (None: the field log's)."""
+    from gnomon.fieldlog import MESH_FORMATS, mesh_formats
+
+    if value is None:
+        return None
+    chosen = mesh_formats(list(value) if isinstance(value, (list, tuple)) else value)
+    if chosen is None:
+        raise GnomonError(f"mesh_formats: expected 'all' or formats among {', '.join(MESH_FORMATS)}, got {value!r}")
+    return chosen
 
 
 def _load_npy(path: Path, shape: tuple[int, int] | None = None) -> np.ndarray | None:

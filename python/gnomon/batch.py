@@ -58,9 +58,9 @@ __all__ = [
 ]
 
 # The files a finished scan (with and without a recording) and a finished merge leave.
-SCAN_FILES = ("points.ply", "mesh.ply", "mesh.obj", "depth.npy", "sigma.npy", "shadow_time.npy",
+SCAN_FILES = ("points.ply", "mesh.ply", "depth.npy", "sigma.npy", "shadow_time.npy",
               "undersampled.npy", "report.json")
-MERGE_FILES = ("points.ply", "mesh.ply", "mesh.obj", "depth.npy", "sigma.npy", "report.json")
+MERGE_FILES = ("points.ply", "mesh.ply", "depth.npy", "sigma.npy", "report.json")
 
 SUMMARY_COLUMNS = ("name", "kind", "status", "points", "coverage_of_image", "coverage_of_swept",
                    "rms", "rms_pct", "units", "warnings", "time_s", "worker", "error", "out")

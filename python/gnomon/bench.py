@@ -232,6 +232,8 @@ class ScanBench:
     load_average: float
     stages_cpu: dict[str, float] = field(default_factory=dict)
     """CPU seconds during the stages that report it (the process's threads; the recording: its own thread)."""
+    mesh_formats: list[str] = field(default_factory=list)
+    """The mesh's files the scan wrote (gnomon.fieldlog.MESH_FORMATS)."""
 
     @property
     def ratio(self) -> float:
@@ -250,13 +252,14 @@ class ScanBench:
         return d
 
 
-def run_scan_bench(field_log: str, out_dir: str) -> ScanBench:
+def run_scan_bench(field_log: str, out_dir: str, mesh_formats: tuple[str, ...] | None = None) -> ScanBench:
     """Time decoding the frames of ``field_log``'s capture alone (the scan's own
     reader: background thread, grey conversion), then the whole default scan
-    into ``out_dir`` (outputs and recording included)."""
+    into ``out_dir`` (outputs and recording included; ``mesh_formats`` the mesh's
+    files, default the field log's)."""
     from gnomon.fieldlog import load_field_log
     from gnomon.frames import FrameSource
-    from gnomon.pipeline import run_scan
+    from gnomon.pipeline import ScanOptions, run_scan
 
     log = load_field_log(field_log)
     source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
@@ -266,12 +269,12 @@ def run_scan_bench(field_log: str, out_dir: str) -> ScanBench:
         count, shape = count + 1, frame.grey.shape
     decode = Throughput(count, time.perf_counter() - t0, time.process_time() - c0)
     t0, c0 = time.perf_counter(), time.process_time()
-    result = run_scan(field_log, out_dir)
+    result = run_scan(field_log, out_dir, ScanOptions(mesh_formats=mesh_formats))
     scan_s, scan_cpu = time.perf_counter() - t0, time.process_time() - c0
     stages = {k: float(v) for k, v in result.report.get("timings_s", {}).items()}
     stages_cpu = {k: float(v) for k, v in result.report.get("cpu_timings_s", {}).items()}
     return ScanBench(str(field_log), count, int(shape[1]), int(shape[0]), decode, scan_s, scan_cpu,
-                     stages, _load_average(), stages_cpu)
+                     stages, _load_average(), stages_cpu, list(result.setup.mesh_formats))
 
 
 def format_scan_table(r: ScanBench) -> str:
@@ -281,7 +284,8 @@ def format_scan_table(r: ScanBench) -> str:
         (f"  decode alone  {r.decode.seconds:8.2f} s wall {r.decode.cpu_seconds:8.2f} s CPU "
          f"({r.decode.fps:.0f} frames/s)"),
         (f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
-         f"{r.ratio:.2f}x the decode-alone wall time, {r.cpu_ratio:.2f}x its CPU time"),
+         f"{r.ratio:.2f}x the decode-alone wall time, {r.cpu_ratio:.2f}x its CPU time"
+         + (f" (mesh formats {', '.join(r.mesh_formats)})" if r.mesh_formats else "")),
         f"    {'stage':<28} {'wall s':>8} {'CPU s':>8}",
         *(f"    {name:<28} {sec:8.2f} {r.stages_cpu[name]:8.2f}" if name in r.stages_cpu
           else f"    {name:<28} {sec:8.2f}" for name, sec in r.stages.items()),

@@ -228,6 +228,26 @@ class ScanSettings:
     normalize_illumination: bool = False
 
 
+# The mesh's file formats: mesh.ply is always written (load_scan, merge and the recording's readers
+# take it); mesh.obj (+ .mtl, .png) and mesh.stl on request (`[output] mesh_formats`, `--mesh-formats`).
+MESH_FORMATS = ("ply", "obj", "stl")
+DEFAULT_MESH_FORMATS = ("ply",)
+
+
+def mesh_formats(value: object) -> tuple[str, ...] | None:
+    """The mesh formats a value asks for (``"all"``, a list of names, or names joined by commas),
+    ``mesh.ply`` always among them, in :data:`MESH_FORMATS` order; None if it names no known format."""
+    names = value.split(",") if isinstance(value, str) else value
+    if not isinstance(names, (list, tuple)) or not all(isinstance(n, str) for n in names):
+        return None
+    wanted = {n.strip().lower() for n in names} - {""}
+    if wanted == {"all"}:
+        return MESH_FORMATS
+    if not wanted <= set(MESH_FORMATS):
+        return None
+    return tuple(f for f in MESH_FORMATS if f in wanted or f == "ply")
+
+
 @dataclass(frozen=True)
 class OutputSpec:
     """[output]: what the written outputs keep (world frame, world units).
@@ -235,12 +255,15 @@ class OutputSpec:
     ``crop_box`` (2, 3) min and max corners of an axis-aligned box;
     ``crop_above`` a plane name with ``crop_min_height`` (and optionally
     ``crop_max_height``): heights above that plane, on the camera's side.
+    ``mesh_formats`` the mesh's files: ``ply`` (always), ``obj`` (with its
+    ``.mtl`` and ``.png`` texture), ``stl`` (:func:`mesh_formats`).
     """
 
     crop_box: np.ndarray | None = None
     crop_above: str | None = None
     crop_min_height: float = 0.0
     crop_max_height: float | None = None
+    mesh_formats: tuple[str, ...] = ("ply",)  # the mesh's files (MESH_FORMATS); mesh.ply always
 
     @property
     def crops(self) -> bool:
@@ -595,6 +618,14 @@ def _parse_scan(t: _Table | None) -> ScanSettings:
 def _parse_output(t: _Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec:
     if t is None:
         return OutputSpec()
+    formats: tuple[str, ...] = DEFAULT_MESH_FORMATS
+    if "mesh_formats" in t.data:
+        raw = t.take("mesh_formats")
+        chosen = mesh_formats(raw)
+        if chosen is None:
+            raise t.error("mesh_formats", f"expected \"all\" or a list of {', '.join(map(repr, MESH_FORMATS))}, "
+                                          f"got {raw!r}")
+        formats = chosen
     box = None
     if "crop_box" in t.data:
         raw = t.take("crop_box")
@@ -618,7 +649,7 @@ def _parse_output(t: _Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec
     elif "crop_min_height" in t.data or "crop_max_height" in t.data:
         raise t.error("crop_above", "crop_min_height/crop_max_height need crop_above (a [[planes]] name)")
     t.done()
-    return OutputSpec(box, above, low, high)
+    return OutputSpec(box, above, low, high, formats)
 
 
 def load_field_log(path: str | Path) -> FieldLog:

@@ -41,6 +41,7 @@ __all__ = [
     "face_normals",
     "write_obj",
     "write_stl",
+    "write_texture",
 ]
 
 
@@ -522,17 +523,24 @@ def _write_obj_material(target: Path, texture: np.ndarray | None) -> None:
     from gnomon import atomic
 
     if texture is not None:
-        import cv2
-
-        img = np.asarray(texture, dtype=np.uint8)
-        ok, png = cv2.imencode(".png", img[:, :, ::-1] if img.ndim == 3 else img)
-        if not ok:  # pragma: no cover
-            raise RuntimeError("PNG encoding failed")
-        atomic.write_bytes(target.with_suffix(".png"), png.tobytes())
+        write_texture(target.with_suffix(".png"), texture)
         atomic.write_text(target.with_suffix(".mtl"),
                           "# gnomon material: the scan's colours as a texture\n"
                           "newmtl gnomon\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\n"
                           f"map_Kd {target.stem}.png\n")
+
+
+def write_texture(path: str | os.PathLike, texture: np.ndarray) -> None:
+    """The colour image (H, W, 3) uint8 RGB (or (H, W) grey) as a PNG, atomically (an OBJ's texture)."""
+    import cv2
+
+    from gnomon import atomic
+
+    img = np.asarray(texture, dtype=np.uint8)
+    ok, png = cv2.imencode(".png", img[:, :, ::-1] if img.ndim == 3 else img)
+    if not ok:  # pragma: no cover
+        raise RuntimeError("PNG encoding failed")
+    atomic.write_bytes(path, png.tobytes())
 
 
 def write_stl(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, header: str = "gnomon mesh") -> None:

@@ -16,6 +16,7 @@ previous scan's files mixed with the new ones.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import queue
 import threading
@@ -37,12 +38,20 @@ from gnomon.camera import Pose
 from gnomon.crop import crop_mask
 from gnomon.deblock import block_grid, deblock_times
 from gnomon.errors import FrameError
-from gnomon.fieldlog import load_field_log
+from gnomon.fieldlog import DEFAULT_MESH_FORMATS, load_field_log
 from gnomon.frames import Frame, FrameSource, sha256_file
 from gnomon.fusion import fuse_depths
 from gnomon.light import EdgePlanes, EdgeTimes, ReferenceGeometry
 from gnomon.light.base import LightModel, Screening
-from gnomon.meshing import GridMesh, grid_mesh, grid_normals, remove_small_components, write_obj, write_stl
+from gnomon.meshing import (
+    GridMesh,
+    grid_mesh,
+    grid_normals,
+    remove_small_components,
+    write_obj,
+    write_stl,
+    write_texture,
+)
 from gnomon.preview import coverage_map, write_preview
 from gnomon.publish import OUTPUT_FILES, staged_outputs
 from gnomon.recording import ScanRecording, playable_video, warm_rerun_import
@@ -85,6 +94,9 @@ class ScanOptions:
     view: bool = False  # stream to a viewer
     progress: bool = True
     frame_stride: int = 10  # frames kept in the recording
+    # The mesh's files (gnomon.fieldlog.MESH_FORMATS, mesh.ply always); None: the field log's
+    # [output] mesh_formats (default mesh.ply only).
+    mesh_formats: tuple[str, ...] | None = None
     # The pass over the frames: gnomon.tracking.track_source, or a drop-in with its signature
     # (gnomon.tiles.TiledTracker tracks image tiles on a Dask cluster).
     track: Callable[..., TrackedSequence] | None = None
@@ -578,7 +590,7 @@ def write_scan(folder: Path, result: ScanResult, started: float | None = None,
     t, c = time.perf_counter(), time.process_time()
     setup, surface = result.setup, result.surface
     with _Writers() as writers:
-        write_surface(folder, surface, setup.units, writers)
+        write_surface(folder, surface, setup.units, writers, setup.mesh_formats)
         writers.add(atomic.save_npy, folder / "undersampled.npy", result.undersampled)
         if result.coverage is not None:
             writers.add(atomic.save_npy, folder / "coverage.npy", result.coverage)
@@ -658,24 +670,30 @@ class _Writers:
                 job.result()
 
 
-def write_surface(folder: Path, surface: Surface, units: str, writers: _Writers | None = None) -> None:
-    """points.ply, mesh.ply, mesh.obj (+ .mtl, .png texture), mesh.stl, depth.npy, sigma.npy (each atomically).
+def write_surface(folder: Path, surface: Surface, units: str, writers: _Writers | None = None,
+                  mesh_formats: tuple[str, ...] = DEFAULT_MESH_FORMATS) -> None:
+    """points.ply, mesh.ply, depth.npy, sigma.npy and, in ``mesh_formats``, mesh.obj (+ .mtl, .png
+    texture) and mesh.stl (each atomically).
 
     ``writers``: write on its threads (waited for by its owner), else here, concurrently."""
     if writers is None:
         with _Writers() as own:
-            write_surface(folder, surface, units, own)
+            write_surface(folder, surface, units, own, mesh_formats)
         return
     comments = [f"gnomon {__version__}", ply.units_comment(units), "frame world"]
     mesh = surface.mesh
     h, w = surface.valid.shape
-    tex_uv = (mesh.pixel_uv(w) + 0.5) / np.array([w, h], dtype=np.float32)
-    tex_uv[:, 1] = 1.0 - tex_uv[:, 1]  # OBJ: v up from the image's bottom
     # the longest first
-    writers.add(write_obj, folder / "mesh.obj", mesh.vertices, mesh.faces, normals=mesh.normals, uv=tex_uv,
-                texture=surface.rgb, comment=f"gnomon {__version__}, units {units}, frame world")
-    writers.add(write_stl, folder / "mesh.stl", mesh.vertices, mesh.faces,
-                header=f"gnomon {__version__} mesh, units {units}")
+    if "obj" in mesh_formats:
+        tex_uv = (mesh.pixel_uv(w) + 0.5) / np.array([w, h], dtype=np.float32)
+        tex_uv[:, 1] = 1.0 - tex_uv[:, 1]  # OBJ: v up from the image's bottom
+        writers.add(write_obj, folder / "mesh.obj", mesh.vertices, mesh.faces, normals=mesh.normals, uv=tex_uv,
+                    texture=surface.rgb, comment=f"gnomon {__version__}, units {units}, frame world")
+    else:  # the colour image alone (load_scan's and merge's colours)
+        writers.add(write_texture, folder / "mesh.png", surface.rgb)
+    if "stl" in mesh_formats:
+        writers.add(write_stl, folder / "mesh.stl", mesh.vertices, mesh.faces,
+                    header=f"gnomon {__version__} mesh, units {units}")
     writers.add(ply.write_points_ply, folder / "points.ply", surface.points_world, surface.colors,
                 surface.sigma[surface.valid], surface.uv, comments=comments, normals=surface.normals)
     writers.add(ply.write_mesh_ply, folder / "mesh.ply", mesh.vertices, mesh.faces, surface.vertex_rgb,
@@ -761,6 +779,8 @@ def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | 
     log = load_field_log(field_log)
     source = frame_source(log)
     setup = resolve_scan(log, source)
+    if opts.mesh_formats is not None:
+        setup = dataclasses.replace(setup, mesh_formats=opts.mesh_formats)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
         full = source.video is not None and (opts.rrd or opts.view) and playable_video(source.video)
         with _recording(staging, opts, f"scan {log.path.name}", image_scale=1.0 if full else 0.5) as recorder:

@@ -61,6 +61,7 @@ class ScanSetup:
     inputs: ScanInputs
     warnings: tuple[str, ...] = ()
     crop: Crop | None = None  # [output] crop (world frame)
+    mesh_formats: tuple[str, ...] = ("ply",)  # [output] mesh_formats: the mesh's files (fieldlog.MESH_FORMATS)
 
 
 def frame_source(log: FieldLog) -> FrameSource:
@@ -87,7 +88,7 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
     tracker = dataclasses.replace(tracker_settings(log), second_dips=light.chooses_dips)
     inputs = ScanInputs(log.path, log.camera_file, dict(log.calibration), planes_report)
     return ScanSetup(log.camera, pose, planes, tracker, light, s.edge, s.max_depth_jump, log.capture.units,
-                     inputs, tuple(warnings), crop_of(log))
+                     inputs, tuple(warnings), crop_of(log), log.output.mesh_formats)
 
 
 def crop_of(log: FieldLog) -> Crop | None:

@@ -12,6 +12,7 @@ import json
 
 from gnomon.atomic import write_text
 from gnomon.bench import format_table, run_bench
+from gnomon.commands.scan import _mesh_formats
 from gnomon.errors import GnomonError
 
 
@@ -34,6 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scan", metavar="FIELD_LOG",
                    help="instead: time decoding this capture's frames alone, then its whole scan")
     p.add_argument("--scan-out", metavar="DIR", help="output folder of the --scan run (default: a temporary one)")
+    p.add_argument("--mesh-formats", type=_mesh_formats, default=None, metavar="LIST",
+                   help="with --scan: the mesh's files, as gnomon scan --mesh-formats ('all': every format)")
     p.add_argument("--no-memory", action="store_true", help="skip the peak-memory subprocesses")
     p.add_argument("--json", metavar="PATH", help="also write the figures as JSON to PATH")
     p.set_defaults(func=run)
@@ -78,7 +81,7 @@ def _run_scan(args: argparse.Namespace) -> int:
     from gnomon.bench import format_scan_table, run_scan_bench
 
     with tempfile.TemporaryDirectory(prefix="gnomon-bench-") as tmp:
-        result = run_scan_bench(args.scan, args.scan_out or tmp)
+        result = run_scan_bench(args.scan, args.scan_out or tmp, args.mesh_formats)
     print(format_scan_table(result))
     if args.json:
         write_text(args.json, json.dumps(result.to_dict(), indent=2) + "\n")

@@ -14,12 +14,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "scan",
         help="reconstruct 3D from a field log",
         description="Track the shadow in every pixel, find the shadow planes and triangulate. "
-        "Writes points.ply, mesh.ply/.obj/.stl, depth.npz (with the camera), depth.npy, sigma.npy, "
-        "shadow_time.npy, preview.png, report.json and scan.rrd (points_enu.ply for a sun scan), "
-        "all at once on success. The same as gnomon.scan(FIELD_LOG, OUT) in Python.",
+        "Writes points.ply, mesh.ply (and mesh.obj, mesh.stl with --mesh-formats), depth.npz (with the "
+        "camera), depth.npy, sigma.npy, shadow_time.npy, preview.png, report.json and scan.rrd "
+        "(points_enu.ply for a sun scan), all at once on success. The same as gnomon.scan(FIELD_LOG, OUT) "
+        "in Python.",
     )
     p.add_argument("field_log", type=Path, help="the capture's field log (TOML)")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: scan/ beside the field log)")
+    p.add_argument("--mesh-formats", type=_mesh_formats, default=None, metavar="LIST",
+                   help="the mesh's files: 'all', or formats joined by commas among ply (always), obj (with "
+                   "its .mtl and .png texture) and stl; default: the field log's [output] mesh_formats, "
+                   "else ply only")
     add_recording_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     tiles = p.add_argument_group("tiled scan on Dask (pip install \"gnomon[dask]\"; see docs/batch.md)")
@@ -31,13 +36,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _mesh_formats(value: str) -> tuple[str, ...]:
+    """--mesh-formats: the formats it names (argparse's error otherwise)."""
+    from gnomon.fieldlog import MESH_FORMATS, mesh_formats
+
+    chosen = mesh_formats(value)
+    if chosen is None:
+        raise argparse.ArgumentTypeError(f"expected 'all' or formats among {', '.join(MESH_FORMATS)}, got {value!r}")
+    return chosen
+
+
 def run(args: argparse.Namespace) -> int:
     from gnomon import api
 
     out = args.out if args.out is not None else args.field_log.parent / "scan"
     s = api.scan(args.field_log, out, rrd=not args.no_rrd, rrd_path=args.rrd, view=args.view,
                  progress=not args.quiet, frame_stride=args.frame_stride, tiles=args.tiles,
-                 scheduler=args.scheduler, workers=args.workers)
+                 scheduler=args.scheduler, workers=args.workers, mesh_formats=args.mesh_formats)
     if args.tiles is not None:
         info = s.report["tracking"]
         peaks = [p for p in info["worker_peak_rss_bytes"] if p is not None]
