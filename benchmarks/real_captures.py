@@ -8,7 +8,8 @@ here, never downloaded by tests). For each capture the script writes, under
 ``--out`` (default ``real_captures/``), a camera file, a field log (markers
 only), runs ``gnomon regions`` and adds the proposed masks to the field log,
 runs ``gnomon preview`` and ``gnomon scan``, and scores the scan
-(``benchmarks/score.py``).
+(``benchmarks/score.py``; for the frog, ``false_points.png`` shows its false
+points in red on the first frame).
 
 The captures and their conventions (read off the repository's own scripts):
 
@@ -143,6 +144,10 @@ def frog(mirror: Path, out: Path) -> None:
     extents = {"desk": (-20.0, 580.0, -60.0, 420.0), "wall": (-20.0, 580.0, -60.0, 360.0)}
     score = score_scan("frog", scan, camera, extents, FROG_OUTLINE, [FROG_SHADOW], other_faces=FROG_OTHER_FACES)
     print("\n".join(score.lines()), flush=True)
+    if score.false_mask is not None:  # where the false points are, in red on the first frame
+        first = cv2.imread(sorted(glob.glob(str(frames / "*.jpg")))[0])
+        first[score.false_mask] = (0, 0, 255)
+        cv2.imwrite(str(folder / "false_points.png"), first)
 
 
 def phone_camera(mirror: Path, out: Path) -> Path:

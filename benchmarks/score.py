@@ -86,6 +86,8 @@ class CaptureScore:
     # of false_points, those also farther than 5 of their own predicted σ from every surface (None: no sigma.npy)
     false_beyond_5_sigma: int | None = None
     notes: list[str] = field(default_factory=list)
+    # (H, W) bool: the false points (for drawing where they are); None until scored
+    false_mask: np.ndarray | None = None
 
     def lines(self) -> list[str]:
         out = [f"{self.name}"]
@@ -239,6 +241,7 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
     result.on_faces = int((off & on_face).sum())
     false = off & ~on_face
     result.false_points = int(false.sum())
+    result.false_mask = false.copy()
     beyond = None
     if (scan_dir / "sigma.npy").exists():
         sigma = np.load(scan_dir / "sigma.npy")

@@ -207,3 +207,87 @@ def test_predicted_times_ignore_lines_off_the_sweep() -> None:
     normals = np.stack([-direction[found][:, 1], direction[found][:, 0]], axis=1)
     kept = found[monotone_sweep(found, centres, normals)]
     assert 1 not in kept and 2 not in kept and 30 not in kept and len(kept) == 40
+
+
+def _fast_sweep_with_a_fold(fold_deg: float) -> dict:
+    """A wall z = 1000 mm (camera frame) whose last 30 rows are folded towards the camera by ``fold_deg``
+    about a horizontal hinge (like the frog capture's wall board, folded at its edge), swept by the shadow
+    edge of a lamp at (−600, 0, 0) mm: on the wall the edge is the line x = c − 0.1·y across the rows,
+    so each frame's line runs over the bare wall and then the fold; c moves 10 mm per frame (8 px per
+    frame at f = 800 px: a fast sweep). The tracker's times are modelled exactly: each pixel's irradiance
+    in frame k is its lit share under a penumbra 1 px wide on the wall, its time the threshold crossing
+    interpolated between the two frames around it, so most pixels get k + 0.5 (a staircase, ±0.5 frame).
+    Returns the times of both edges (the trailing edge 60 mm behind), the wall, the camera, the fold's
+    pixels and how far each pixel's surface is in front of the wall (mm)."""
+    from gnomon.camera import OpenCVCamera
+    from gnomon.reference_lines import PlaneInCamera
+
+    w, h, f = 200, 120, 800.0
+    camera = OpenCVCamera(w, h, f, f, w / 2, h / 2)
+    hinge_v = h - 30
+    y_hinge = (hinge_v - h / 2) / f * 1000.0
+    vv, uu = np.mgrid[0:h, 0:w].astype(np.float64)
+    x_ray, y_ray = (uu - w / 2) / f, (vv - h / 2) / f
+    tan = np.tan(np.radians(fold_deg))
+    # The fold: z = 1000 − (y − y_hinge)·tan for y ≥ y_hinge; the ray's point s·(x_ray, y_ray, 1) on it.
+    s = np.where(vv >= hinge_v, (1000.0 + y_hinge * tan) / (1.0 + y_ray * tan), 1000.0)
+    px, py, pz = x_ray * s, y_ray * s, s
+    lamp_x, slant = -600.0, 0.1
+    # The shadow plane through the lamp and the wall's line x = c − slant·y passes the point when
+    # c = lamp_x + 1000·(px − lamp_x + slant·py)/pz (for a point on the wall: c = px + slant·py).
+    c_point = lamp_x + 1000.0 * (px - lamp_x + slant * py) / pz
+    speed, start, n_frames = 10.0, -200.0, 60
+    footprint = 1000.0 / f  # mm per pixel on the wall
+
+    def tracker_times(behind_mm: float) -> np.ndarray:
+        edge = (start + speed * np.arange(n_frames) - behind_mm)[:, None, None]
+        lit = np.clip(0.5 - (edge - c_point[None]) / footprint, 0.0, 1.0)  # 1 ahead of the edge, 0 behind
+        fall = (lit[:-1] >= 0.5) & (lit[1:] < 0.5)
+        k = np.argmax(fall, axis=0)
+        a = np.take_along_axis(lit, k[None], 0)[0]
+        b = np.take_along_axis(lit, k[None] + 1, 0)[0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(fall.any(axis=0), k + (a - 0.5) / (a - b), np.nan)
+
+    wall = PlaneInCamera(np.array([0.0, 0.0, 1.0]), 1000.0, np.array([0.0, 0.0, 1000.0]),
+                         np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    seed = np.zeros((h, w), dtype=bool)
+    seed[20:100, 40:160] = True
+    return {"maps": [tracker_times(0.0), tracker_times(60.0)], "n_frames": n_frames, "plane": wall,
+            "camera": camera, "seed": seed, "fold": vv >= hinge_v, "depth_off": 1000.0 - pz}
+
+
+def test_regions_on_retimed_times_leave_out_a_fold() -> None:
+    """A fold 20° off the wall over its last 30 rows (up to 13 mm in front) bends the isochrones by up to
+    0.75 frame, which the staircase of a fast sweep (±0.5 frame per pixel) hides: on the tracker's own
+    times the proposed wall takes nearly all of the fold. On the times re-timed between the isochrones (as
+    the scan, and so `gnomon regions`, uses them: gnomon.pipeline.edge_time_maps) the residuals on the bare
+    wall are a few hundredths of a frame, the tolerance is its 0.25-frame floor, and the region stops
+    where the fold leaves the wall by more than that: a time off by 0.25 frame is 2.5 mm along the wall,
+    which a point δ in front of it makes as δ·600/1000 (the lamp 600 mm aside, the wall 1000 mm away),
+    so what it keeps of the fold is within 4.2 mm of the wall (but at the image's sides, where a frame's
+    line is mostly on the fold). The bare wall is kept whole but for the columns the sweep's first and
+    last lines do not bracket."""
+    from gnomon.regions import propose_regions
+    from gnomon.retiming import retime_between_isochrones
+
+    scene = _fast_sweep_with_a_fold(20.0)
+    fold, bare = scene["fold"], ~scene["fold"]
+
+    def propose(maps: list[np.ndarray]):
+        return propose_regions(maps, scene["n_frames"], [scene["plane"]], ["wall"], [scene["seed"]],
+                               scene["camera"], margin_px=0, min_area_px=50)[0]
+
+    raw = propose(scene["maps"])
+    assert raw.mask[fold].mean() > 0.9  # the staircase hides the fold
+    region = propose([retime_between_isochrones(m, scene["n_frames"]).times for m in scene["maps"]])
+    assert region.tolerance == pytest.approx(0.25)
+    inner = bare.copy()
+    inner[:, :12] = inner[:, -12:] = False
+    assert region.mask[inner].mean() > 0.98
+    kept_fold = region.mask & fold
+    assert kept_fold.sum() < 0.4 * fold.sum()
+    # Away from the image's first and last 20 columns, where the sweep's first and last lines are mostly on
+    # the fold (their part on the bare wall is out of the image) and so follow it.
+    kept_fold[:, :20] = kept_fold[:, -20:] = False
+    assert scene["depth_off"][kept_fold].max() < 4.2 * 1.1  # 10 % for the line fit and the hinge's pixel

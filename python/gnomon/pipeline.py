@@ -85,7 +85,7 @@ MAX_PLANE_GAP = 3.0
 RETIME_UNDERSAMPLED_SHARE = 0.5
 
 __all__ = ["OUTPUT_FILES", "EdgeResult", "RecordingWorker", "ScanOptions", "ScanResult", "Surface", "build_surface",
-           "reconstruct", "run_scan", "scan", "staged_outputs", "write_scan", "write_surface"]
+           "edge_time_maps", "reconstruct", "run_scan", "scan", "staged_outputs", "write_scan", "write_surface"]
 
 @dataclass
 class ScanOptions:
@@ -244,6 +244,23 @@ def _edge_times(tracked: TrackedSequence, levels: _Levels | None = None) -> tupl
     t, levels = tracked.times, levels or _Levels(tracked)
     return (_edge_time("enter", t.enter, t.enter_slope, tracked, levels),
             _edge_time("leave", t.leave, t.leave_slope, tracked, levels))
+
+
+def edge_time_maps(tracked: TrackedSequence, edge: str = "both") -> list[np.ndarray]:
+    """The shadow-time maps (H, W, frames, NaN = none) the scan measures its lines and depths on.
+
+    The tracker's entering and leaving times after the same corrections as the
+    scan's: a compressed video's block times interpolated (:mod:`gnomon.deblock`)
+    and a fast sweep's times re-timed between the isochrones
+    (:mod:`gnomon.retiming`). ``edge``: ``"both"`` (entering, leaving),
+    ``"enter"`` or ``"leave"``. ``gnomon regions`` judges its regions on these,
+    so that a staircase of under-sampled times (±0.5 frame) does not hide an
+    isochrone that bends off the plane.
+    """
+    enter, leave = _edge_times(tracked)
+    if edge == "both":
+        return [enter.times, leave.times]
+    return [enter.times if edge == "enter" else leave.times]
 
 
 def _with_typical_sigma(depth: np.ndarray, sigma: np.ndarray) -> np.ndarray:

@@ -378,8 +378,11 @@ def propose_regions(
     """Each plane's bare, swept pixels, consistent with its own shadow lines.
 
     ``time_maps``: the (H, W) shadow-time maps of the edges used (frames, NaN
-    = none); ``planes`` in the camera frame; ``seeds`` (H, W) bool, where to
-    fit the first lines. A pixel is a candidate of the plane its ray meets
+    = none), as the scan uses them (:func:`gnomon.pipeline.edge_time_maps`: a
+    fast sweep's staircase re-timed, so that the tolerance is not the
+    staircase's ±0.5 frame and an isochrone bending off the plane shows);
+    ``planes`` in the camera frame; ``seeds`` (H, W) bool, where to fit the
+    first lines. A pixel is a candidate of the plane its ray meets
     first (:func:`nearest_plane`). Lines are RANSAC lines (the seed and the
     candidates hold objects too); each iteration refits them over the last
     proposal plus the candidates the last lines did not reach (so the region

@@ -68,9 +68,9 @@ def draw_regions(first: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
 
 def run(args: argparse.Namespace) -> int:
     from gnomon import atomic, validate
-    from gnomon.deblock import block_grid, deblock_times
     from gnomon.errors import FieldLogError
     from gnomon.fieldlog import load_field_log
+    from gnomon.pipeline import edge_time_maps
     from gnomon.publish import check_output_folder
     from gnomon.reference_lines import PlaneInCamera
     from gnomon.regions import hull_mask, propose_regions
@@ -101,11 +101,9 @@ def run(args: argparse.Namespace) -> int:
                                 "a chessboard or rough regions")
     tracked = track_source(source, tracker_settings(log), shape, progress=not args.quiet,
                            where=f"{log.path}: [camera]")
-    times = tracked.times
-    maps = [times.enter, times.leave] if log.scan.edge == "both" else [
-        times.enter if log.scan.edge == "enter" else times.leave]
-    # Compressed video: times constant over the codec's blocks, interpolated between their centres as the scan does.
-    maps = [deblock_times(m, grid) if (grid := block_grid(m)) is not None else m for m in maps]
+    # The scan's own times: a compressed video's block times interpolated between their centres, a fast
+    # sweep's staircase re-timed between its isochrones (gnomon.pipeline.edge_time_maps).
+    maps = edge_time_maps(tracked, log.scan.edge)
     planes = [PlaneInCamera.from_world(p.point, p.normal, log.pose) for p in log.planes]
     names = [p.name for p in log.planes]
     proposals = propose_regions(maps, tracked.n_frames, planes, names, seeds, log.camera,
