@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import argparse
 import glob
+import json
 import os
 import sys
 import time
@@ -212,6 +213,29 @@ def focal_evidence(camera: Path, pixels: np.ndarray) -> tuple[float, float, floa
     return rms(cam["fx"]), float(fs[np.argmin(r)]), float(r.min())
 
 
+def refit_focal(name: str, log_path: Path, folder: Path) -> None:
+    """The focal length fitted to the capture's crosses (gnomon.scan_setup.fit_focal, printed as evidence);
+    when it differs from the camera's by more than 3 of its σ, the capture was filmed at another focal
+    length than the stills' calibration: ``gnomon calibrate focal`` writes the camera file with it and the
+    field log uses that, saying so."""
+    from gnomon.fieldlog import load_field_log
+    from gnomon.scan_setup import fit_focal, frame_source, marked_points
+
+    log = load_field_log(log_path)
+    fit = fit_focal(log.camera, marked_points(log, frame_source(log)))
+    print("\n".join(f"{name}: {line}" for line in fit.lines()))
+    if abs(fit.factor - 1.0) <= 3.0 * fit.sigma_factor:
+        print(f"{name}: the camera's focal length fits the crosses (× {fit.factor:.3f} ± {fit.sigma_factor:.3f}): kept")
+        return
+    camera = folder / "camera_focal_fitted.toml"
+    run(["calibrate", "focal", str(log_path), "--out", str(camera)])
+    table = toml_io.load(log_path)
+    table["camera"] = {"file": camera.name}
+    toml_io.dump(table, log_path)
+    print(f"{name}: the crosses want the focal length × {fit.factor:.3f} ± {fit.sigma_factor:.3f} "
+          f"({abs(fit.factor - 1.0) / fit.sigma_factor:.0f} σ from the stills' camera): scanned with {camera.name}")
+
+
 def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
     seq = Path(min(glob.glob(str(mirror / "custom-data-dump" / name / "seq-*"))))
     folder = out / name
@@ -254,14 +278,20 @@ def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
            "planes": planes, "light": {"kind": "two-plane"}, "scan": {"normalize_illumination": True}}
     log_path = folder / "field_log.toml"
     toml_io.dump(log, log_path)
+    refit_focal(name, log_path, folder)
     scan = regions_preview_scan(log_path)
-    import json
 
     rep = json.loads((scan / "report.json").read_text())
     for p in rep["reference_planes"]:
         extra = f", {p['angle_to_first_deg']:.2f}° to the desk" if "angle_to_first_deg" in p else ""
         print(f"{name} {p['plane']}: crosses reprojection RMS {p['rms_px']:.2f} px{extra}, "
               f"{p['offset_cam']:.0f} mm from the camera")
+    for edge in ("enter", "leave"):
+        a = rep["edges"].get(edge, {}).get("ray_plane_angle_deg")
+        if a:
+            print(f"{name} {edge} edge: rays meet their shadow planes at {a['p10']:.1f} / {a['p50']:.1f} / "
+                  f"{a['p90']:.1f}° (10th / 50th / 90th percentile): a plane's or a time's error is magnified "
+                  f"{1 / np.sin(np.radians(a['p50'])):.0f}× in depth at the median (docs/method.md §4)")
     masks = {p: cv2.imread(str(folder / "regions" / f"{p}_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
              for p in ("desk", "wall")}
     score = score_scan(name, scan, camera, None, region_masks=masks)

@@ -117,6 +117,28 @@ class EdgeResult:
     measured: bool = True  # planes measured per frame from the reference lines (else computed by the light)
     rejected: dict[str, int] = field(default_factory=dict)  # points refused, by reason
     notes: list[str] = field(default_factory=list)  # warnings about this edge
+    # 10th, 50th and 90th percentiles over the triangulated pixels of the angle (degrees) between a pixel's
+    # ray and its shadow plane: a depth moves by an error of the plane (or of the time, times the shadow's
+    # speed) over the sine of this angle (docs/method.md §4)
+    ray_plane_angle_deg: tuple[float, float, float] | None = None
+
+
+def ray_plane_angles(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray,
+                     where: np.ndarray) -> np.ndarray:
+    """Angle (degrees) between each pixel's ray and the shadow plane it was triangulated on, at ``where``.
+
+    ``times``: (H, W) in rows of ``planes`` (N, 4) (the plane interpolated at the pixel's time, as the
+    kernel does); ``ray_map``: (H, W, 3) camera-frame rays. Returns the angles of the pixels of ``where``
+    (row-major), NaN where a plane is missing."""
+    t = times[where].astype(np.float64)
+    i = np.clip(np.floor(t).astype(np.int64), 0, len(planes) - 1)
+    j = np.minimum(i + 1, len(planes) - 1)
+    f = (t - i)[:, None]
+    n = (1.0 - f) * planes[i, :3] + f * planes[j, :3]
+    r = ray_map[where].astype(np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sine = np.abs(np.sum(n * r, axis=1)) / (np.linalg.norm(n, axis=1) * np.linalg.norm(r, axis=1))
+    return np.degrees(np.arcsin(np.clip(sine, 0.0, 1.0)))
 
 
 @dataclass
@@ -288,9 +310,15 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
         tri.depth[~screening.keep] = np.nan
     unc = depth_sigma(ray_map, scaled, planes.planes, tri.depth, edge.sigma_t * planes.time_scale,
                       planes.sigma_t_line)
+    angles = ray_plane_angles(ray_map, scaled, planes.planes, np.isfinite(tri.depth))
+    angles = angles[np.isfinite(angles)]
+    spread = None
+    if angles.size:
+        p10, p50, p90 = (float(a) for a in np.percentile(angles, [10, 50, 90]))
+        spread = (p10, p50, p90)
     return EdgeResult(edge.name, edge.times, planes.lines, planes.planes, tri.depth,
                       _with_typical_sigma(tri.depth, unc.sigma_z), planes.degenerate, edge.slope, planes.measured,
-                      screening.rejected, screening.notes)
+                      screening.rejected, screening.notes, spread)
 
 
 def _relative_depth(tracked: TrackedSequence, hi: np.ndarray, lo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1004,6 +1032,8 @@ def _edges_report(edges: list[EdgeResult], keep: np.ndarray) -> dict[str, Any]:
             "degenerate_frames": e.degenerate,
             "rejected": e.rejected,
             "triangulated": int(np.isfinite(e.depth).sum()),
+            "ray_plane_angle_deg": (None if e.ray_plane_angle_deg is None
+                                    else dict(zip(("p10", "p50", "p90"), e.ray_plane_angle_deg, strict=True))),
             "reference_lines": [
                 {"plane": ln.plane_name, "frames_with_line": int(ln.found.sum()),
                  "extrapolated": int(ln.extrapolated.sum()),

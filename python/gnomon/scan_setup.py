@@ -27,7 +27,8 @@ from gnomon.markers import PlanePose, fit_plane_pose, plane_pose_from_chessboard
 from gnomon.reference_lines import PlaneInCamera, ReferencePlane
 from gnomon.tracking import TrackerSettings, decoding_lut
 
-__all__ = ["ScanInputs", "ScanSetup", "crop_of", "first_frame", "focal_diagnosis", "frame_source",
+__all__ = ["FocalFit", "ScanInputs", "ScanSetup", "crop_of", "first_frame", "fit_focal", "focal_diagnosis",
+           "frame_source", "marked_points",
            "resolve_reference_planes", "resolve_scan", "tracker_settings"]
 
 
@@ -230,6 +231,104 @@ def focal_diagnosis(camera: Any, points: np.ndarray, pixels: np.ndarray, limit_r
                 "the points are not where their plane coordinates put them (marks placed by hand, a surface "
                 "that is not flat, a wrong id)")
     return ""
+
+
+@dataclass(frozen=True)
+class FocalFit:
+    """The focal length that best fits the planes' marked points (:func:`fit_focal`).
+
+    ``factor`` scales the camera's ``fx`` and ``fy`` (principal point,
+    aspect and distortion kept); ``sigma_factor`` is its 1-σ from the
+    curvature of the χ² at the points' σ (NaN when flat). Per plane, in
+    ``planes`` order: the residuals (px rms) at the camera's focal length and
+    at the fitted one, and the factor that fits that plane alone best (of
+    :data:`FOCAL_FACTORS`), so a plane whose points no focal length fits
+    shows as such rather than moving the estimate silently.
+    """
+
+    factor: float
+    sigma_factor: float
+    focal_px: float  # the camera's fx times factor
+    camera_focal_px: float
+    planes: tuple[str, ...]
+    rms_camera_px: tuple[float, ...]
+    rms_fit_px: tuple[float, ...]
+    alone_factor: tuple[float, ...]
+    alone_rms_px: tuple[float, ...]
+
+    def lines(self) -> list[str]:
+        out = [f"focal length {self.focal_px:.0f} px = × {self.factor:.3f} ± {self.sigma_factor:.3f} (1 σ) the "
+               f"camera's {self.camera_focal_px:.0f} px (principal point, aspect and distortion kept)"]
+        for k, name in enumerate(self.planes):
+            out.append(f"  {name}: marks fit to {self.rms_camera_px[k]:.2f} px rms at the camera's focal length, "
+                       f"{self.rms_fit_px[k]:.2f} px at the fitted one; alone, best × {self.alone_factor[k]:.2f} "
+                       f"({self.alone_rms_px[k]:.2f} px)")
+        return out
+
+
+def _pose_chi2(camera: OpenCVCamera, factor: float, points: np.ndarray, pixels: np.ndarray,
+               sigma_px: np.ndarray) -> tuple[float, float]:
+    """(χ², rms px) of one plane's points fitted with the focal length scaled by ``factor`` (inf: no pose)."""
+    scaled = dataclasses.replace(camera, fx=camera.fx * factor, fy=camera.fy * factor)
+    try:
+        pp = fit_plane_pose(scaled, points, pixels)
+    except (GnomonError, ValueError):
+        return np.inf, np.inf
+    lengths = np.linalg.norm(pp.residuals_px, axis=1)
+    return float(np.sum((lengths / sigma_px) ** 2)), float(pp.rms_px)
+
+
+def fit_focal(camera: OpenCVCamera, planes: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]) -> FocalFit:
+    """The focal length that best explains several planes' marked points, each plane with its own pose.
+
+    ``planes``: (name, points (N, 2) plane or (N, 3) coplanar world
+    coordinates, pixels (N, 2), σ px (N,)) with N ≥ 4. Each plane's points
+    fix its pose and, beyond it, constrain the focal length (Zhang's two
+    constraints per plane view; here with the principal point, the aspect
+    and the distortion of ``camera`` held, so one unknown): the factor
+    minimising the summed χ² over the planes is searched on
+    :data:`FOCAL_FACTORS` then refined (bounded scalar search in log scale).
+    For a camera whose zoom, focus or crop changed since its calibration
+    (:func:`focal_diagnosis` says so); the fit reports each plane alone so
+    that inconsistent marks are seen, not averaged in.
+    """
+    from scipy.optimize import minimize_scalar
+
+    if not planes:
+        raise ValueError("fit_focal needs at least one plane")
+
+    def chi2(factor: float) -> float:
+        return float(sum(_pose_chi2(camera, factor, pts, pix, sig)[0] for _, pts, pix, sig in planes))
+
+    grid = np.array([chi2(k) for k in FOCAL_FACTORS])
+    if not np.isfinite(grid).any():
+        raise GnomonError("no focal length between × 0.5 and × 2 gives a pose for these planes' points")
+    best = int(np.argmin(grid))
+    lo = np.log(FOCAL_FACTORS[max(best - 1, 0)])
+    hi = np.log(FOCAL_FACTORS[min(best + 1, len(FOCAL_FACTORS) - 1)])
+    found = minimize_scalar(lambda x: chi2(float(np.exp(x))), bounds=(lo, hi), method="bounded",
+                            options={"xatol": 1e-6})
+    factor = float(np.exp(found.x)) if found.fun <= grid[best] else float(FOCAL_FACTORS[best])
+    h = 1e-3 * factor
+    curvature = (chi2(factor + h) - 2.0 * chi2(factor) + chi2(factor - h)) / h**2
+    sigma = float(np.sqrt(2.0 / curvature)) if curvature > 0 else float("nan")
+    at_camera, at_fit, alone, alone_rms = [], [], [], []
+    for _, pts, pix, sig in planes:
+        at_camera.append(_pose_chi2(camera, 1.0, pts, pix, sig)[1])
+        at_fit.append(_pose_chi2(camera, factor, pts, pix, sig)[1])
+        own = np.array([_pose_chi2(camera, k, pts, pix, sig)[0] for k in FOCAL_FACTORS])
+        j = int(np.argmin(own))
+        alone.append(float(FOCAL_FACTORS[j]))
+        alone_rms.append(_pose_chi2(camera, float(FOCAL_FACTORS[j]), pts, pix, sig)[1])
+    return FocalFit(factor, sigma, camera.fx * factor, camera.fx, tuple(p[0] for p in planes), tuple(at_camera),
+                    tuple(at_fit), tuple(alone), tuple(alone_rms))
+
+
+def marked_points(log: FieldLog, source: FrameSource) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+    """Every plane with markers: (name, its markers' world coordinates (N, 3), their pixels as found or
+    given (N, 2), their σ px (N,)), measured on the plane's image or the first frame, not checked."""
+    return [(plane.name, plane.marker_world(), pp.pixels, _marker_sigmas(plane, len(pp.pixels)))
+            for plane, pp in _measure_planes(log, source) if plane.markers]
 
 
 def _marker_sigmas(plane: PlaneSpec, n: int) -> np.ndarray:

@@ -95,6 +95,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      help="camera file to write (default: camera.toml)")
     pts.set_defaults(func=run_points)
 
+    focal = sub.add_parser(
+        "focal",
+        help="a field log's marked planes → its camera file with the focal length that fits them",
+        description=(
+            "When the marks on the reference planes fit their plane coordinates far better at another focal "
+            "length than the camera file's (a zoom, a refocus, another crop since the calibration; gnomon "
+            "regions, preview and scan say so), fit that focal length to the marks of all the field log's "
+            "marked planes (or --planes), holding the principal point, aspect and distortion, print the "
+            "evidence per plane and write a camera file with it, for [camera] file = ... ."
+        ),
+    )
+    focal.add_argument("field_log", type=Path, metavar="FIELD_LOG",
+                       help="field log with a camera and marked planes")
+    focal.add_argument("--planes", metavar="NAMES", help="comma-separated planes to fit (default: every marked plane)")
+    focal.add_argument("--out", "-o", required=True, type=Path, metavar="FILE", help="camera file to write")
+    focal.set_defaults(func=run_focal)
+
     lamp = sub.add_parser(
         "lamp",
         help="pencil photos → lamp position ± uncertainty",
@@ -308,3 +325,36 @@ def run_lamp(args: argparse.Namespace) -> int:
         raise GnomonError("calibrate lamp: not available in this build "
                           "(gnomon.light has no calibrate_lamp_cli)") from None
     return int(calibrate_lamp_cli(args) or 0)
+
+
+def run_focal(args: argparse.Namespace) -> int:
+    from gnomon import toml_io
+    from gnomon.calibration import camera_to_table
+    from gnomon.camera import OpenCVCamera
+    from gnomon.fieldlog import load_field_log
+    from gnomon.scan_setup import fit_focal, frame_source, marked_points
+
+    log = load_field_log(args.field_log)
+    if not isinstance(log.camera, OpenCVCamera):
+        raise GnomonError(f"{args.field_log}: [camera]: calibrate focal needs an OpenCV camera (fx, fy, cx, cy)")
+    planes = marked_points(log, frame_source(log))
+    if args.planes:
+        wanted = [n.strip() for n in args.planes.split(",") if n.strip()]
+        missing = [n for n in wanted if n not in {p[0] for p in planes}]
+        if missing:
+            raise GnomonError(f"{args.field_log}: --planes: no marked plane named {', '.join(missing)} "
+                              f"(marked: {', '.join(p[0] for p in planes) or 'none'})")
+        planes = [p for p in planes if p[0] in wanted]
+    if not planes:
+        raise GnomonError(f"{args.field_log}: [[planes]]: no plane with markers to fit a focal length to")
+    fit = fit_focal(log.camera, planes)
+    for line in fit.lines():
+        print(line)
+    table = camera_to_table(log.camera)
+    table["fx"], table["fy"] = log.camera.fx * fit.factor, log.camera.fy * fit.factor
+    source = log.camera_file.name if log.camera_file is not None else f"{args.field_log.name} [camera]"
+    header = "\n".join([f"{source} with its focal length fitted to the marks of {args.field_log.name} "
+                         f"(gnomon calibrate focal, planes {', '.join(fit.planes)}):", *fit.lines()])
+    toml_io.dump(table, args.out, header=header)
+    print(f"wrote {args.out}")
+    return 0
