@@ -1,9 +1,11 @@
-"""Frame readers: image folders and video files, decoded on a background thread.
+"""Frame readers: image folders and video files, decoded on background threads.
 
-Frames are delivered one at a time as grey images (uint8 or uint16, as
-encoded), so a scan never holds the whole sequence in memory. Decoding runs on
-a reader thread ahead of the consumer (OpenCV releases the GIL while decoding),
-through a small bounded queue.
+Frames are delivered one at a time, in order, as grey images (uint8 or uint16,
+as encoded), so a scan never holds the whole sequence in memory. Decoding runs
+ahead of the consumer (OpenCV releases the GIL while decoding), at most
+``FRAMES_IN_FLIGHT`` frames ahead: image files on ``decode_workers()`` threads
+at once (each file is independent), a video on one reader thread (its frames
+depend on each other) through a bounded queue.
 
 Problems with the input raise :class:`FrameError` naming the frame: a file that
 cannot be decoded or is truncated (the decoder only warns about those), a frame whose size
@@ -20,10 +22,13 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
 import queue
 import re
 import threading
+from collections import deque
 from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -33,8 +38,19 @@ import numpy as np
 
 from gnomon.errors import FrameError
 
-_QUEUE_DEPTH = 8
+FRAMES_IN_FLIGHT = 8
+"""Frames decoded ahead of the consumer, at most (image files: submitted to the decoding threads and
+not yet taken; a video: in the reader's queue)."""
 _DONE = object()
+
+
+def decode_workers() -> int:
+    """Threads decoding image files at once: the cores this process may run on, at most 4."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, 4))
 
 
 def sha256_file(path: Path, chunk: int = 1 << 20) -> str:
@@ -296,12 +312,8 @@ class FrameSource:
             out.put(exc)
 
     def _check_size(self, index: int, name: str, image: np.ndarray, first: np.ndarray | None) -> None:
-        if first is not None and image.shape[:2] != first.shape[:2]:
-            h, w = image.shape[:2]
-            h0, w0 = first.shape[:2]
-            raise FrameError(f"frame {index} ({name}): size {w}x{h} differs from the first frame's {w0}x{h0}")
-        if first is not None and image.dtype != first.dtype:
-            raise FrameError(f"frame {index} ({name}): {image.dtype} samples, the first frame has {first.dtype}")
+        if first is not None:
+            _check_like(index, name, image.shape, image.dtype, first.shape, first.dtype)
 
     def _decode(self) -> Iterator[Frame]:
         first: np.ndarray | None = None
@@ -337,9 +349,51 @@ class FrameSource:
         finally:
             cap.release()
 
+    def _decode_parallel(self) -> Iterator[Frame]:
+        """The image files' frames in order, decoded on ``decode_workers()`` threads at once.
+
+        At most ``FRAMES_IN_FLIGHT`` frames are submitted and not yet taken. A file that
+        fails to decode raises (its :class:`FrameError`) when its turn comes, after the
+        frames before it; leaving early (an error, a peek at the first frame) cancels the
+        frames not started and waits for those being decoded (no thread outlives the pass).
+        """
+        colour = self.color_frames
+        digest = hashlib.sha256()
+        first: tuple[tuple[int, ...], np.dtype] | None = None
+        pending: deque[Future[_Decoded]] = deque()
+        files = enumerate(self.image_files)
+        workers = decode_workers()
+        with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gnomon-frame-decode") as pool:
+            try:
+                # Start with one frame per thread (a peek decodes little more than the first),
+                # then keep FRAMES_IN_FLIGHT ahead.
+                for i, path in files:
+                    pending.append(pool.submit(_decode_file, i, path, i in colour))
+                    if len(pending) >= workers:
+                        break
+                while pending:
+                    decoded = pending.popleft().result()
+                    for i, path in files:
+                        pending.append(pool.submit(_decode_file, i, path, i in colour))
+                        if len(pending) >= FRAMES_IN_FLIGHT:
+                            break
+                    digest.update(decoded.raw)
+                    if first is None:
+                        first = (decoded.shape, decoded.dtype)
+                    else:
+                        _check_like(decoded.index, decoded.name, decoded.shape, decoded.dtype, *first)
+                    yield Frame(decoded.index, decoded.grey, decoded.color, decoded.name)
+            finally:
+                for job in pending:
+                    job.cancel()
+        self._digest = digest.hexdigest()
+
     def __iter__(self) -> Iterator[Frame]:
-        """Frames in order, decoded on a background thread."""
-        out: queue.Queue[object] = queue.Queue(maxsize=_QUEUE_DEPTH)
+        """Frames in order, decoded on background threads."""
+        if self.video is None and self.image_files and type(self)._decode is FrameSource._decode:
+            yield from self._decode_parallel()
+            return
+        out: queue.Queue[object] = queue.Queue(maxsize=FRAMES_IN_FLIGHT)
         stop = threading.Event()
         worker = threading.Thread(target=self._produce, args=(out, stop), name="gnomon-frame-reader", daemon=True)
         worker.start()
@@ -354,3 +408,33 @@ class FrameSource:
         finally:
             stop.set()
             worker.join(timeout=5)
+
+
+@dataclass
+class _Decoded:
+    """One image file decoded on a decoding thread (its checks against the first frame are the consumer's)."""
+
+    index: int
+    name: str
+    grey: np.ndarray
+    color: np.ndarray | None
+    shape: tuple[int, ...]  # the decoded image's (H, W[, C])
+    dtype: np.dtype
+    raw: bytes  # the file's bytes, for the input digest
+
+
+def _decode_file(index: int, path: Path, keep_colour: bool) -> _Decoded:
+    image, raw = decode_image_file(path)
+    color = image[:, :, :3] if (keep_colour and image.ndim == 3) else None
+    return _Decoded(index, path.name, to_grey(image), color, image.shape, image.dtype, raw)
+
+
+def _check_like(index: int, name: str, shape: tuple[int, ...], dtype: np.dtype,
+                first_shape: tuple[int, ...], first_dtype: np.dtype) -> None:
+    """A frame's size and sample type must be the first frame's."""
+    if shape[:2] != first_shape[:2]:
+        h, w = shape[:2]
+        h0, w0 = first_shape[:2]
+        raise FrameError(f"frame {index} ({name}): size {w}x{h} differs from the first frame's {w0}x{h0}")
+    if dtype != first_dtype:
+        raise FrameError(f"frame {index} ({name}): {dtype} samples, the first frame has {first_dtype}")

@@ -1,0 +1,133 @@
+"""Image files are decoded on several threads at once, delivered in order, with the frames in flight bounded,
+and a failing file stops the pass cleanly (its error names it, no thread is left behind, nothing hangs)."""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from gnomon.errors import FrameError
+from gnomon.frames import FRAMES_IN_FLIGHT, FrameSource, decode_workers
+
+
+def write_frames(folder: Path, n: int, size: tuple[int, int] = (96, 64)) -> list[Path]:
+    """n PNG frames, each a different ramp (frame i's top-left sample is i), so order is visible."""
+    folder.mkdir(parents=True, exist_ok=True)
+    w, h = size
+    paths = []
+    for i in range(n):
+        image = ((np.arange(w)[None, :] + 3 * np.arange(h)[:, None] + i) % 256).astype(np.uint8)
+        image[0, 0] = i
+        path = folder / f"frame_{i:03d}.png"
+        cv2.imwrite(str(path), image)
+        paths.append(path)
+    return paths
+
+
+def decoding_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name.startswith("gnomon-frame-decode")]
+
+
+def test_frames_arrive_in_order_equal_to_a_sequential_decode(tmp_path: Path) -> None:
+    paths = write_frames(tmp_path / "frames", 40)
+    source = FrameSource(tuple(paths))
+    frames = list(source)
+    assert [f.index for f in frames] == list(range(40))
+    assert [f.name for f in frames] == [p.name for p in paths]
+    for f, p in zip(frames, paths, strict=True):
+        assert np.array_equal(f.grey, cv2.imread(str(p), cv2.IMREAD_UNCHANGED))
+    h = hashlib.sha256()
+    for p in paths:
+        h.update(p.read_bytes())
+    assert source.frames_digest() == h.hexdigest()
+    assert not decoding_threads()
+
+
+def test_the_frames_in_flight_are_bounded(tmp_path: Path) -> None:
+    """A consumer that holds a frame lets the decoders run ahead by at most FRAMES_IN_FLIGHT frames: the
+    others are not read."""
+    paths = write_frames(tmp_path / "frames", 60)
+    reads: list[str] = []
+
+    class CountingPath(type(tmp_path)):  # type: ignore[misc]  # the concrete Path class of this platform
+        def read_bytes(self) -> bytes:
+            reads.append(self.name)
+            return super().read_bytes()
+
+    frames = iter(FrameSource(tuple(CountingPath(p) for p in paths)))
+    first = next(frames)
+    assert first.index == 0
+    time.sleep(0.3)  # the decoders would go on if nothing bounded them
+    assert decode_workers() <= len(reads) <= 1 + FRAMES_IN_FLIGHT
+    second = next(frames)
+    assert second.index == 1
+    time.sleep(0.3)
+    assert len(reads) <= 2 + FRAMES_IN_FLIGHT
+    frames.close()  # leaving early: the frames not started are cancelled, the running ones awaited
+    assert not decoding_threads()
+    assert len(reads) <= 2 + FRAMES_IN_FLIGHT
+
+
+@pytest.mark.parametrize("fault", ["truncated", "not an image", "other size", "missing"])
+def test_a_bad_file_is_an_error_naming_it_after_the_frames_before_it(tmp_path: Path, fault: str) -> None:
+    paths = write_frames(tmp_path / "frames", 30)
+    bad = paths[17]
+    if fault == "truncated":
+        bad.write_bytes(bad.read_bytes()[:200])
+    elif fault == "not an image":
+        bad.write_bytes(b"not an image at all" * 10)
+    elif fault == "other size":
+        cv2.imwrite(str(bad), np.zeros((10, 10), np.uint8))
+    else:
+        bad.unlink()
+    taken: list[int] = []
+    outcome: list[BaseException] = []
+
+    def consume() -> None:
+        try:
+            for frame in FrameSource(tuple(paths)):
+                taken.append(frame.index)
+        except BaseException as exc:  # noqa: BLE001 - the test inspects it
+            outcome.append(exc)
+
+    consumer = threading.Thread(target=consume)
+    consumer.start()
+    consumer.join(timeout=30)
+    assert not consumer.is_alive(), "the pass hung after a decoding thread failed"
+    assert taken == list(range(17))
+    assert len(outcome) == 1 and isinstance(outcome[0], FrameError)
+    assert "frame_017.png" in str(outcome[0])
+    assert not decoding_threads()
+
+
+def test_a_peek_leaves_no_thread_and_the_next_pass_is_whole(tmp_path: Path) -> None:
+    paths = write_frames(tmp_path / "frames", 25)
+    source = FrameSource(tuple(paths))
+    for frame in source:
+        assert frame.index == 0
+        break
+    assert not decoding_threads()
+    assert [f.index for f in source] == list(range(25))
+
+
+def test_the_colour_frames_asked_for_come_with_their_colour(tmp_path: Path) -> None:
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    paths = []
+    for i in range(12):
+        bgr = np.zeros((20, 30, 3), np.uint8)
+        bgr[..., 0], bgr[..., 1], bgr[..., 2] = 10 * i, 100, 200 - 10 * i
+        paths.append(folder / f"f_{i:02d}.png")
+        cv2.imwrite(str(paths[-1]), bgr)
+    source = FrameSource(tuple(paths))
+    source.color_frames = frozenset({0, 5, 9})
+    frames = list(source)
+    assert [i for i, f in enumerate(frames) if f.color is not None] == [0, 5, 9]
+    assert np.array_equal(frames[5].color, cv2.imread(str(paths[5]), cv2.IMREAD_COLOR))
+    assert np.array_equal(frames[7].grey, cv2.cvtColor(cv2.imread(str(paths[7])), cv2.COLOR_BGR2GRAY))
