@@ -16,7 +16,7 @@ import pytest
 from conftest import write_tiny_capture
 from gnomon.accuracy import FALSE_SIGMAS, GROSS_FRACTION, depth_accuracy
 from gnomon.cli import main
-from gnomon.uncertainty import image_noise_dn
+from gnomon.uncertainty import _median_of_integers, image_noise_dn
 
 
 def noisy_pair(sigma_dn: float, seed: int, gain: float = 1.0, moved_rows: int = 0):
@@ -53,6 +53,32 @@ def test_noise_ignores_saturated_pixels() -> None:
     a[:150] = 255
     b[:150] = 255  # half the image clipped: no noise visible there
     assert image_noise_dn(a, b) == pytest.approx(np.sqrt(1.5**2 + 1 / 12), rel=0.03)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("seed", range(6))
+def test_integer_frames_give_exactly_the_float_definition(dtype, seed: int) -> None:
+    """uint8/uint16 frames take a faster path (samples selected on the integers, medians from histograms):
+    it must give the float32 definition's value to the last bit (the frames here have no clipped sample,
+    which only the integer types can tell)."""
+    rng = np.random.default_rng(seed)
+    top = np.iinfo(dtype).max
+    scale = 1.0 if dtype == np.uint8 else 180.0
+    scene = rng.uniform(20.0, 230.0, (int(rng.integers(40, 200)), int(rng.integers(40, 200)))) * scale
+    sigma = rng.uniform(0.5, 3.0) * scale
+    a = np.clip(np.rint(scene + sigma * rng.standard_normal(scene.shape)), 1, top - 1).astype(dtype)
+    b = np.clip(np.rint(rng.uniform(0.97, 1.03) * scene + sigma * rng.standard_normal(scene.shape)), 1,
+                top - 1).astype(dtype)
+    b[: seed * 5] = 3  # a shadow arrived in some rows
+    assert image_noise_dn(a, b) == image_noise_dn(a.astype(np.float32), b.astype(np.float32))
+
+
+def test_the_histogram_median_is_numpys() -> None:
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 3, 10, 11, 1000, 1001):
+        for spread in (1, 5, 300, 70000):
+            values = rng.integers(-spread, spread + 1, n).astype(np.int32)
+            assert _median_of_integers(values) == float(np.median(values))
 
 
 def _jpeg_capture(folder: Path) -> Path:

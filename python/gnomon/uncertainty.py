@@ -58,30 +58,45 @@ def image_noise_dn(frame_a: np.ndarray, frame_b: np.ndarray, *, clip_sigmas: flo
     if a.shape != b.shape:
         raise ValueError(f"frames differ in shape: {a.shape} vs {b.shape}")
     top = np.iinfo(a.dtype).max if np.issubdtype(a.dtype, np.integer) else np.inf
-    a = a.astype(np.float32).ravel()
-    b = b.astype(np.float32).ravel()
+    # uint8/uint16 frames (a scan's): the samples are selected on the integers and the starting medians
+    # taken from histograms, giving exactly what the float32 path gives, in less time.
+    integers = a.dtype == b.dtype and a.dtype in (np.uint8, np.uint16)
+    if integers:
+        a, b = a.ravel(), b.ravel()
+    else:
+        a = a.astype(np.float32).ravel()
+        b = b.astype(np.float32).ravel()
     inside = (a > 0) & (b > 0) & (a < top) & (b < top)
     floor = 1.0 / np.sqrt(12.0)
-    if inside.sum() < 16:
+    if np.count_nonzero(inside) < 16:
         return float(floor)
     a, b = a[inside], b[inside]
+    if integers:
+        whole = a.astype(np.int32) - b.astype(np.int32)
+        a, b = a.astype(np.float32), b.astype(np.float32)
     diff = a - b
     level = 0.5 * (a + b)
     level = level - float(level.mean())
     # Starting scale: the MAD (integer on 8-bit data, only a start), at least one quantisation step.
-    med = float(np.median(diff))
-    scale = max(1.4826 * float(np.median(np.abs(diff - med))), 1.0)
+    if integers:
+        med = _median_of_integers(whole)
+        mad = _median_of_integers(np.abs(2 * whole - round(2 * med))) / 2  # |diff − med|, counted in half DN
+    else:
+        med = float(np.median(diff))
+        mad = float(np.median(np.abs(diff - med)))
+    scale = max(1.4826 * mad, 1.0)
     offset, gain = med, 0.0
-    keep = np.ones(diff.size, dtype=bool)
     for _ in range(iterations):
         resid = diff - offset - gain * level
         keep = np.abs(resid) <= clip_sigmas * scale
-        if keep.sum() < 16:
+        if np.count_nonzero(keep) < 16:
             break
         x, y = level[keep], diff[keep]
-        var_x = float(np.mean((x - x.mean()) ** 2))
-        gain = float(np.mean((x - x.mean()) * (y - y.mean())) / var_x) if var_x > 0 else 0.0
-        offset = float(y.mean() - gain * x.mean())
+        x_mean, y_mean = x.mean(), y.mean()
+        dx = x - x_mean
+        var_x = float(np.mean(dx**2))
+        gain = float(np.mean(dx * (y - y_mean)) / var_x) if var_x > 0 else 0.0
+        offset = float(y_mean - gain * x_mean)
         resid = y - offset - gain * x
         new_scale = float(np.sqrt(np.mean(resid**2)))
         # A Gaussian clipped at k·σ has a std smaller by this factor.
@@ -92,6 +107,17 @@ def image_noise_dn(frame_a: np.ndarray, frame_b: np.ndarray, *, clip_sigmas: flo
         if converged:
             break
     return float(max(scale / np.sqrt(2.0), floor))
+
+
+def _median_of_integers(values: np.ndarray) -> float:
+    """``np.median`` of an integer array (its middle value, or the mean of the two middle ones), from
+    its histogram: the same value, in time linear in its size."""
+    low = int(values.min())
+    cumulative = np.cumsum(np.bincount(values - low))
+    n = values.size
+    below = int(np.searchsorted(cumulative, (n - 1) // 2, side="right"))  # sorted element (n − 1) // 2
+    above = int(np.searchsorted(cumulative, n // 2, side="right"))  # sorted element n // 2
+    return (below + above) / 2 + low
 
 
 def _clipped_std_factor(k: float) -> float:
