@@ -234,6 +234,9 @@ class ScanBench:
     """CPU seconds during the stages that report it (the process's threads; the recording: its own thread)."""
     mesh_formats: list[str] = field(default_factory=list)
     """The mesh's files the scan wrote (gnomon.fieldlog.MESH_FORMATS)."""
+    decode_threads: int = 1
+    """Threads that decoded the frames, alone and in the scan (image files: one per core, at most 4;
+    a video: one)."""
 
     @property
     def ratio(self) -> float:
@@ -254,11 +257,11 @@ class ScanBench:
 
 def run_scan_bench(field_log: str, out_dir: str, mesh_formats: tuple[str, ...] | None = None) -> ScanBench:
     """Time decoding the frames of ``field_log``'s capture alone (the scan's own
-    reader: background thread, grey conversion), then the whole default scan
+    reader: its decoding threads, grey conversion), then the whole default scan
     into ``out_dir`` (outputs and recording included; ``mesh_formats`` the mesh's
     files, default the field log's)."""
     from gnomon.fieldlog import load_field_log
-    from gnomon.frames import FrameSource
+    from gnomon.frames import FrameSource, decode_workers
     from gnomon.pipeline import ScanOptions, run_scan
 
     log = load_field_log(field_log)
@@ -274,7 +277,8 @@ def run_scan_bench(field_log: str, out_dir: str, mesh_formats: tuple[str, ...] |
     stages = {k: float(v) for k, v in result.report.get("timings_s", {}).items()}
     stages_cpu = {k: float(v) for k, v in result.report.get("cpu_timings_s", {}).items()}
     return ScanBench(str(field_log), count, int(shape[1]), int(shape[0]), decode, scan_s, scan_cpu,
-                     stages, _load_average(), stages_cpu, list(result.setup.mesh_formats))
+                     stages, _load_average(), stages_cpu, list(result.setup.mesh_formats),
+                     decode_workers() if source.video is None else 1)
 
 
 def format_scan_table(r: ScanBench) -> str:
@@ -282,7 +286,7 @@ def format_scan_table(r: ScanBench) -> str:
         (f"gnomon bench --scan {r.field_log}: {r.frames} frames {r.width}x{r.height}, "
          f"kernel SIMD path {_kernel.simd_path()}, load average {r.load_average:.1f}"),
         (f"  decode alone  {r.decode.seconds:8.2f} s wall {r.decode.cpu_seconds:8.2f} s CPU "
-         f"({r.decode.fps:.0f} frames/s)"),
+         f"({r.decode.fps:.0f} frames/s, {r.decode_threads} decoding thread{'s' if r.decode_threads > 1 else ''})"),
         (f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
          f"{r.ratio:.2f}x the decode-alone wall time, {r.cpu_ratio:.2f}x its CPU time"
          + (f" (mesh formats {', '.join(r.mesh_formats)})" if r.mesh_formats else "")),
