@@ -158,10 +158,14 @@ class TemporalTracker:
         normalise: bool = False,
         second_dips: bool = False,
     ) -> None: ...
-    def update(self, frame: npt.NDArray[np.uint8] | npt.NDArray[np.uint16], gain: float | None = None) -> None:
+    def update(self, frame: npt.NDArray[np.uint8] | npt.NDArray[np.uint16], gain: float | None = None,
+               levels: npt.NDArray[np.float32] | None = None) -> None:
         """Add the next frame: a (height, width) array of the tracker's dtype, as decoded
         from its file (DN); with a normalised tracker, ``gain`` (> 0): the frame's light
-        relative to the first frame's (required), otherwise None."""
+        relative to the first frame's (required), otherwise None; ``levels`` (normalised
+        tracker only): (height, width) float32 per-pixel factors (finite, > 0) on top of the
+        gain, a sample stored as ``L(DN)/(gain·level)`` (a cloud frame levelled pixel by pixel,
+        :mod:`gnomon.cloud_levels`); a sample at the input's largest DN stays clipped."""
     def finish(self, min_contrast: float) -> ShadowTimes:
         """Per-pixel results for the frames seen so far (see :class:`ShadowTimes`); the tracker is unchanged.
 

@@ -197,6 +197,38 @@ impl Intensity {
         Ok(table)
     }
 
+    /// The input's decoding table `L` (normalised mode; the samples' table otherwise).
+    pub(crate) fn input_table(&self) -> &[f32] {
+        match self {
+            Intensity::Dn { decode } => decode,
+            Intensity::Normalised { input, .. } => input,
+        }
+    }
+
+    /// Remember the gain of a frame stored with per-pixel levels (normalised
+    /// mode): its clipped samples are stored as the largest code, which is
+    /// then its full scale.
+    pub(crate) fn encoder_levelled(&mut self, gain: f64) -> Result<(), KernelError> {
+        let Intensity::Normalised {
+            gains, full_scale, ..
+        } = self
+        else {
+            return Err(KernelError::parameter(
+                "gain",
+                "only a normalised tracker takes a gain with each frame",
+            ));
+        };
+        if !(gain.is_finite() && gain > 0.0) {
+            return Err(KernelError::parameter(
+                "gain",
+                format!("must be a positive number, got {gain}"),
+            ));
+        }
+        gains.push(gain);
+        full_scale.push(u16::MAX);
+        Ok(())
+    }
+
     /// Whether the sample `v` of frame `frame` is clipped (0 or the input's
     /// maximum, or the end of the code range).
     #[inline]

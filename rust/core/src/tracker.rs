@@ -1312,6 +1312,67 @@ impl TemporalTracker<u16> {
         self.stored();
         Ok(())
     }
+
+    /// Add the next frame of a normalised tracker whose light is not one gain
+    /// for every pixel (a cloud frame: the direct sun dims, the sky
+    /// brightens, so each pixel's level changes by its own factor): `gain`
+    /// (> 0) is the frame's light as in
+    /// [`update_with_gain`](Self::update_with_gain) and `levels` (one per
+    /// pixel, row-major, finite and > 0) each pixel's own factor on top of it,
+    /// so a sample is stored as `L(DN) · S / (gain · level)`. A sample at the
+    /// input's largest DN is stored as the largest code (so it stays flagged
+    /// as clipped, whatever its level). The per-pixel factors are not kept:
+    /// a dip is reported in the light `gain` (the frame's light levelled).
+    pub fn update_with_levels<I: Sample>(
+        &mut self,
+        frame: &[I],
+        gain: f64,
+        levels: &[f32],
+    ) -> Result<(), KernelError> {
+        self.check_frame(frame)?;
+        if levels.len() != frame.len() {
+            return Err(KernelError::LengthMismatch {
+                what: "levels",
+                expected: frame.len(),
+                got: levels.len(),
+            });
+        }
+        if let Some(i) = levels.iter().position(|l| !(l.is_finite() && *l > 0.0)) {
+            return Err(KernelError::parameter(
+                "levels",
+                format!("must be finite and > 0, got {} at pixel {i}", levels[i]),
+            ));
+        }
+        if !self.intensity.is_normalised() || self.intensity.input_len() != I::LUT_LEN {
+            return Err(KernelError::parameter(
+                "levels",
+                "only a normalised tracker, with frames of its table's type, takes per-pixel levels",
+            ));
+        }
+        let decode = self.intensity.input_table().to_vec();
+        // (the frame's code table is only used for its gain and clipping code here)
+        self.intensity.encoder_levelled(gain)?;
+        let factor = (f64::from(crate::intensity::NORMALISED_SCALE) / gain) as f32;
+        let top = I::LUT_LEN - 1;
+        self.ring
+            .slot_mut(self.frames_seen)
+            .par_chunks_mut(STORE_PIECE)
+            .zip(frame.par_chunks(STORE_PIECE))
+            .zip(levels.par_chunks(STORE_PIECE))
+            .for_each(|((dst, src), lev)| {
+                for ((d, s), l) in dst.iter_mut().zip(src).zip(lev) {
+                    let i = s.index();
+                    *d = if i >= top {
+                        u16::MAX
+                    } else {
+                        // (≥ 0: clamped, then truncated towards zero)
+                        (decode[i] * factor / l).clamp(0.0, f32::from(u16::MAX - 1)) as u16
+                    };
+                }
+            });
+        self.stored();
+        Ok(())
+    }
 }
 
 /// What turning a row's state into results needs besides the state.

@@ -889,3 +889,47 @@ fn finish_second_is_refused_without_second_dips() {
     let t = tracker.finish(0.0).unwrap();
     assert_eq!(t.rival[0], 145.0);
 }
+
+#[test]
+fn per_pixel_levels_divide_each_pixel_by_its_own_factor() {
+    // Pixel 0 dips in frames 20-22 in a light that halves during them; pixel 1 the same but its
+    // frames 18-24 are also darkened by its own factor 0.6 (a cloud that dims it more). With
+    // per-pixel levels (1 for pixel 0, 0.6 for pixel 1 in those frames) both dips come back to
+    // the times of the same dip seen in a steady light.
+    let table: Vec<f32> = (0..256).map(|v| (v as f32 / 255.0).powf(2.2)).collect();
+    let dn = |x: f32| ((x.powf(1.0 / 2.2) * 255.0).round()) as u8;
+    let mut steady = TemporalTracker::normalised(1, 2, params(4, 16), &table).unwrap();
+    let mut cloudy = TemporalTracker::normalised(1, 2, params(4, 16), &table).unwrap();
+    for k in 0..48usize {
+        let shadow = if (20..=22).contains(&k) { 0.3 } else { 1.0 };
+        let lit = 0.5 * shadow;
+        steady.update_with_gain(&[dn(lit), dn(lit)], 1.0).unwrap();
+        if (18..=24).contains(&k) {
+            let frame = [dn(lit), dn(lit * 0.6)];
+            cloudy
+                .update_with_levels(&frame, 1.0, &[1.0, 0.6])
+                .unwrap();
+        } else {
+            cloudy.update_with_gain(&[dn(lit), dn(lit)], 1.0).unwrap();
+        }
+    }
+    let a = steady.finish(1.0).unwrap();
+    let b = cloudy.finish(1.0).unwrap();
+    for p in 0..2 {
+        assert!(a.enter[p].is_finite() && a.leave[p].is_finite());
+        // (pixel 1's samples are rounded to DN at 0.6 of the level: a fraction of a frame's noise)
+        assert!((a.enter[p] - b.enter[p]).abs() < 0.05, "{p}: {} {}", a.enter[p], b.enter[p]);
+        assert!((a.leave[p] - b.leave[p]).abs() < 0.05, "{p}: {} {}", a.leave[p], b.leave[p]);
+    }
+    // errors: the levels' length, a level that is not > 0, a plain tracker, a frame of another type
+    assert!(matches!(
+        cloudy.update_with_levels(&[0u8; 2], 1.0, &[1.0]),
+        Err(KernelError::LengthMismatch { what: "levels", .. })
+    ));
+    assert!(cloudy.update_with_levels(&[0u8; 2], 1.0, &[1.0, 0.0]).is_err());
+    assert!(cloudy.update_with_levels(&[0u8; 2], 1.0, &[1.0, f32::NAN]).is_err());
+    assert!(cloudy.update_with_levels(&[0u16; 2], 1.0, &[1.0, 1.0]).is_err());
+    assert!(cloudy.update_with_levels(&[0u8; 2], 0.0, &[1.0, 1.0]).is_err());
+    let mut plain = TemporalTracker::<u16>::new(1, 2, params(4, 16)).unwrap();
+    assert!(plain.update_with_levels(&[0u16; 2], 1.0, &[1.0, 1.0]).is_err());
+}

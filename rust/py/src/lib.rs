@@ -399,6 +399,29 @@ fn update_normalised<I: Sample + Element>(
         .map_err(kernel_error)
 }
 
+fn update_levelled<I: Sample + Element>(
+    py: Python<'_>,
+    tracker: &mut Tracker<u16>,
+    frame: &Bound<'_, PyAny>,
+    gain: f64,
+    levels: &Bound<'_, PyAny>,
+) -> PyResult<()> {
+    let shape = [
+        Extent::Exactly(tracker.height()),
+        Extent::Exactly(tracker.width()),
+    ];
+    let frame = borrow_array::<I, Ix2>(frame, "frame", I::DTYPE, &shape)?;
+    let levels = borrow_array::<f32, Ix2>(levels, "levels", "float32", &shape)?;
+    let view = frame.as_array();
+    let lview = levels.as_array();
+    py.detach(|| {
+        with_slice(&view, |data| {
+            with_slice(&lview, |lev| tracker.update_with_levels(data, gain, lev))
+        })
+    })
+    .map_err(kernel_error)
+}
+
 fn update_any<T: Sample + Element>(
     py: Python<'_>,
     tracker: &mut Tracker<T>,
@@ -466,13 +489,25 @@ impl TemporalTracker {
 
     /// Add the next frame: a 2-D array of the tracker's dtype and shape, and
     /// with a normalised tracker its gain (> 0).
-    #[pyo3(signature = (frame, gain = None))]
+    #[pyo3(signature = (frame, gain = None, levels = None))]
     fn update(
         &mut self,
         py: Python<'_>,
         frame: &Bound<'_, PyAny>,
         gain: Option<f64>,
+        levels: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
+        if let Some(levels) = levels {
+            return match (&mut self.inner, gain) {
+                (AnyTracker::U16(t), Some(gain)) if t.is_normalised() => match self.dtype {
+                    "uint8" => update_levelled::<u8>(py, t, frame, gain, levels),
+                    _ => update_levelled::<u16>(py, t, frame, gain, levels),
+                },
+                _ => Err(KernelParameterError::new_err(
+                    "levels: only a normalised tracker takes per-pixel levels, with the frame's gain",
+                )),
+            };
+        }
         match (&mut self.inner, gain) {
             (AnyTracker::U16(t), Some(gain)) if t.is_normalised() => match self.dtype {
                 "uint8" => update_normalised::<u8>(py, t, frame, gain),
