@@ -56,9 +56,9 @@ def test_refusals_are_never_silent(day) -> None:
     _, _, result, _ = day
     rejected = result.report["edges"]["centre"]["rejected"]
     print(rejected)
-    # the clouds' frames are skipped, the dips that are not the pole's refused, and warnings say so
-    # with numbers
-    assert any("skipped as cloud dips" in w for w in result.warnings), result.warnings
+    # the clouds' frames are levelled pixel by pixel and tracked, the dips that are not the pole's
+    # refused, and warnings say so with numbers
+    assert any("levelled pixel by pixel" in w for w in result.warnings), result.warnings
     assert sum(rejected.values()) > 0
     assert any("refused" in w and "%" in w for w in result.warnings), result.warnings
 
@@ -79,18 +79,28 @@ def test_gross_errors_are_rare(day) -> None:
 @pytest.mark.slow
 def test_coverage_of_the_cloud_free_passages(day) -> None:
     """Where the pole's shadow passed in clear frames, the pole's dip is measured although the lamp
-    post's shadow crosses most of those pixels too (measured: 67.7 % of the swept pixels, of 69.5 %
-    passed in clear frames; 32.5 % with one dip per pixel)."""
-    _, truth, _, acc = day
-    clear = truth["cloud_free_passage"].sum() / truth["swept"].sum()
-    assert acc.coverage >= 0.9 * clear, (acc, clear)
+    post's shadow crosses most of those pixels too (measured: 85.0 % of the 69.5 % of the swept
+    pixels passed in clear frames; 32.5 % overall with one dip per pixel)."""
+    _, truth, result, _ = day
+    clear = truth["cloud_free_passage"]
+    assert np.isfinite(result.depth)[clear].mean() >= 0.8
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="30 % of the swept pixels (9,256 of 30,349) see the pole's shadow pass "
-                   "during the clouds' frames, which the illumination normaliser skips, so the tracker never sees "
-                   "those dips: coverage 67.7 % (the clear passages are 69.5 %); tracking through the cloud frames "
-                   "(normalised instead of skipped) is not done")
+def test_coverage_of_the_cloud_passages(day) -> None:
+    """30 % of the swept pixels (9,256 of 30,349) see the pole's shadow pass while a cloud dims the
+    sun; their frames are levelled pixel by pixel (gnomon.cloud_levels) instead of skipped, so
+    their dips are found (measured: 79 % of them; none when the cloud frames were skipped)."""
+    _, truth, result, _ = day
+    cloudy = truth["swept"] & ~truth["cloud_free_passage"]
+    assert np.isfinite(result.depth)[cloudy].mean() >= 0.7
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="coverage 83.5 %: the grazing ground's pole dips shorter than a frame "
+                   "interval that no sample sees (7 % of the swept pixels), the balconies (3.4 %: no reference plane "
+                   "supports their surface while the lamp post's shadow is about) and dips under a cloud refused as "
+                   "shallower than their neighbours (the levels restore the lit level, not the shadowed one)")
 def test_coverage_of_the_day(day) -> None:
     _, _, _, acc = day
     assert acc.coverage >= 0.85, acc

@@ -305,7 +305,8 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
         screening = Screening()  # the default keeps every point: its inputs are not computed
     else:
         screening = setup.light.screen(edge, points_from_depth(ray_map, tri.depth), tracked.times,
-                                       tracked.n_frames, *(levels or _Levels(tracked)).relative_depth)
+                                       tracked.n_frames, *(levels or _Levels(tracked)).relative_depth,
+                                       levelled=tracked.levelled_frames)
     if screening.keep is not None:
         tri.depth[~screening.keep] = np.nan
     unc = depth_sigma(ray_map, scaled, planes.planes, tri.depth, edge.sigma_t * planes.time_scale,
@@ -578,6 +579,10 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
             ray_map = rays.result()
     _check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
+    if tracked.levelled:
+        more = " …" if len(tracked.levelled) > 8 else ""
+        warnings.append(f"{len(tracked.levelled)} frames of sudden illumination dips (clouds) levelled pixel by "
+                        f"pixel and tracked (frames {tracked.levelled[:8]}{more})")
     warnings += setup.light.choose_dips(tracked, ray_map, setup.planes, setup.max_depth_jump,
                                         _min_contrast_dn(setup.tracker.min_contrast, tracked.noise_dn))
     # The colours need only the tracked times (final from here on): combined on a thread meanwhile.
@@ -986,6 +991,8 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
             "camera_file_sha256": sha256_file(inputs.camera_file) if inputs.camera_file else None,
             "frames": tracked.n_frames,
             "image_size": [cam.width, cam.height],
+            # capture frames of sudden illumination dips (clouds) tracked levelled pixel by pixel
+            "levelled_frames": [int(i) for i in tracked.levelled],
         },
         "camera": {**camera_to_table(cam), "pose": {"rvec": pose.rvec.tolist(), "tvec": pose.t.tolist()}},
         "calibration": inputs.calibration,

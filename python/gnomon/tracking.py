@@ -59,6 +59,7 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from gnomon import _kernel
+from gnomon.cloud_levels import HeldFrame, cloud_levels
 from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, KernelLutError, KernelParameterError
 from gnomon.frames import Frame, FrameSource
 from gnomon.progress import Progress
@@ -359,16 +360,59 @@ class ShadowTracker:
                                                 ambiguity=settings.ambiguity, lut=self.lut,
                                                 normalise=self.normalizer is not None,
                                                 second_dips=settings.second_dips)
+        self.fed: list[int] = []  # capture index of every frame the kernel saw, in order
+        self.refused: list[int] = []  # capture index of every frame it did not see (illumination dips)
+        self.levelled: list[int] = []  # capture index of every frame fed levelled pixel by pixel (a cloud's)
+        self._given = 0
+        self._held: list[tuple[int, HeldFrame]] = []  # a dip's frames waiting for its end
+        self._clear: tuple[np.ndarray, float] | None = None  # the last frame fed with one gain, and its gain
 
-    def update(self, grey: np.ndarray) -> bool:
-        """Feed one frame (DN); False when it was skipped as an illumination dip."""
-        gain = None
-        if self.normalizer is not None:
-            gain = self.normalizer.gain(grey)
-            if gain is None:
-                return False
-        self._tracker.update(grey if self.crop is None else np.ascontiguousarray(grey[self.crop]), gain)
+    def update(self, grey: np.ndarray, index: int | None = None) -> bool:
+        """Feed one frame (DN; ``index``: its capture index, default the count of frames given);
+        False when nothing reached the kernel now: the frame is held as part of an illumination
+        dip (a cloud), to be levelled pixel by pixel (:mod:`gnomon.cloud_levels`) and fed once the
+        dip is over, before the frame that ends it. :attr:`fed` and :attr:`refused` say, after
+        :meth:`flush`, which frames the kernel saw (in order) and which it did not."""
+        index = self._given if index is None else int(index)
+        self._given += 1
+        if self.normalizer is None:
+            self._feed(grey, None, None)
+            self.fed.append(index)
+            return True
+        gain = self.normalizer.gain(grey)
+        if gain is None:
+            if self._clear is None or len(self._held) >= self.settings.max_width:
+                self.refused.append(index)
+            else:
+                self._held.append((index, HeldFrame(grey, self.normalizer.gains[-1])))
+            return False
+        if self._held and self._clear is not None:
+            before, gain_before = self._clear
+            held = [h for _, h in self._held]
+            for (i, _), (clear_gain, levels), h in zip(self._held, cloud_levels(self.lut, before, gain_before, grey,
+                                                                                gain, held), held, strict=True):
+                self._feed(h.grey, clear_gain, levels)
+                self.fed.append(i)
+                self.levelled.append(i)
+            self._held = []
+        self._feed(grey, gain, None)
+        self.fed.append(index)
+        self._clear = (grey, gain)
         return True
+
+    def _feed(self, grey: np.ndarray, gain: float | None, levels: np.ndarray | None) -> None:
+        if self.crop is not None:
+            grey = np.ascontiguousarray(grey[self.crop])
+            levels = None if levels is None else np.ascontiguousarray(levels[self.crop])
+        if levels is None:
+            self._tracker.update(grey, gain)
+        else:
+            self._tracker.update(grey, gain, levels)
+
+    def flush(self) -> None:
+        """The frames still held at the end (a dip the capture ends in) are refused."""
+        self.refused += [i for i, _ in self._held]
+        self._held = []
 
     def watch(self, min_contrast: float, recover: int = 3) -> None:
         """Start the kernel's live watch (:meth:`gnomon._kernel.TemporalTracker.watch`) from the next frame.
@@ -422,11 +466,17 @@ class TrackedSequence:
     lut: np.ndarray
     info: dict = field(default_factory=dict)
     second: SecondDips | None = None  # the second candidate dips, when the pass kept them
+    levelled: list[int] = field(default_factory=list)  # capture frames of illumination dips levelled per pixel
 
     @property
     def n_frames(self) -> int:
         """Frames fed to the tracker."""
         return len(self.used)
+
+    @property
+    def levelled_frames(self) -> np.ndarray:
+        """The tracker frames (indices into ``used``) that were levelled pixel by pixel (int64)."""
+        return np.flatnonzero(np.isin(self.used, self.levelled)).astype(np.int64)
 
 
 def track_source(
@@ -458,8 +508,6 @@ def track_source(
     first: Frame | None = None
     previous: np.ndarray | None = None
     noise: list[Future[float]] = []
-    used: list[int] = []
-    dips: list[int] = []
     seen = 0
     # The noise estimate (first frame pairs) runs on a worker thread while the tracker goes on.
     with Progress("tracking", source.count, enabled=progress) as bar, \
@@ -481,14 +529,12 @@ def track_source(
             if skip is not None and skip[frame.index]:
                 continue
             assert tracker is not None
-            if tracker.update(frame.grey):
-                used.append(frame.index)
-                if on_update is not None:
-                    on_update(frame, tracker)
-            else:
-                dips.append(frame.index)
+            if tracker.update(frame.grey, frame.index) and on_update is not None:
+                on_update(frame, tracker)
     if tracker is None or first is None:
         raise FrameError(f"{source.name}: no frames")
+    tracker.flush()
+    used, dips = tracker.fed, sorted(tracker.refused)
     if source.expected_count is not None and seen < source.expected_count:
         raise FrameError(f"{source.name}: only {seen} frames, expected {source.expected_count}")
     if len(used) < 2:
@@ -496,7 +542,8 @@ def track_source(
     noise_dn = float(np.median([n.result() for n in noise])) if noise else 1.0
     times = tracker.finish(noise_dn)
     return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, tracker.lut,
-                           second=tracker.second_dips() if settings.second_dips else None)
+                           second=tracker.second_dips() if settings.second_dips else None,
+                           levelled=list(tracker.levelled))
 
 
 def _check_first(frame: Frame, shape: tuple[int, int], where: str) -> None:

@@ -34,6 +34,7 @@ __all__ = [
     "LightEstimate",
     "MIN_LAMP_CONDITIONING",
     "global_event_frames",
+    "dip_in_frames",
     "contrast_like_neighbours",
     "fully_lit_like_neighbours",
     "occluded_fraction",
@@ -105,6 +106,19 @@ def not_in_global_event(times: np.ndarray, frames: np.ndarray, margin: float = 1
         with np.errstate(invalid="ignore"):
             ok &= ~((times >= f - margin) & (times < f + 1 + margin))
     return ok
+
+
+def dip_in_frames(enter: np.ndarray, leave: np.ndarray, frames: np.ndarray | None, n_frames: int) -> np.ndarray:
+    """(H, W) bool: pixels whose dip (from the frame before ``enter`` to the frame after ``leave``,
+    tracker frames) includes one of ``frames`` (NaN times: False)."""
+    marked = np.zeros(n_frames + 1, dtype=np.int64)
+    if frames is not None and len(frames):
+        marked[np.asarray(frames, dtype=np.int64) + 1] = 1
+    count = np.cumsum(marked)  # count[i]: marked frames before frame i
+    ok = np.isfinite(enter) & np.isfinite(leave)
+    first = np.clip(np.floor(np.where(ok, enter, 0)), 0, n_frames - 1).astype(np.int64)
+    last = np.clip(np.ceil(np.where(ok, leave, 0)), 0, n_frames - 1).astype(np.int64)
+    return ok & (count[last + 1] - count[first] > 0)
 
 
 def contrast_like_neighbours(contrast: np.ndarray, candidates: np.ndarray, *, size: int = 9,

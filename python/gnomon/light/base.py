@@ -164,10 +164,12 @@ class LightModel:
 
     def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int,
                relative_depth: np.ndarray | None = None,
-               relative_depth_sigma: np.ndarray | None = None) -> Screening:
+               relative_depth_sigma: np.ndarray | None = None,
+               levelled: np.ndarray | None = None) -> Screening:
         """The triangulated points (H, W, 3, camera frame) this light's shadow can explain; all by default.
         ``relative_depth`` (H, W): each dip's ``(Imax − Imin)/Imax`` in linear irradiance, and its 1σ
-        from the image noise."""
+        from the image noise; ``levelled``: the tracker frames of illumination dips it saw levelled
+        pixel by pixel (:attr:`gnomon.tracking.TrackedSequence.levelled_frames`)."""
         return Screening()
 
     def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:

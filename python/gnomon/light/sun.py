@@ -50,6 +50,7 @@ from gnomon.uncertainty import MIN_FRAMES_PER_TRANSITION, linear_noise_at_thresh
 from gnomon.validity import (
     contrast_above_noise,
     contrast_like_neighbours,
+    dip_in_frames,
     event_order,
     fully_lit_like_neighbours,
     global_event_frames,
@@ -368,7 +369,8 @@ class SunWithPole(SunLight):
 
     def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int,
                relative_depth: np.ndarray | None = None,
-               relative_depth_sigma: np.ndarray | None = None) -> Screening:
+               relative_depth_sigma: np.ndarray | None = None,
+               levelled: np.ndarray | None = None) -> Screening:
         """Only points where the pole's shadow can fall, lasting as long as it lasts there, and (given
         the dips' relative depths) no deeper than it can be there, nor in another object's penumbra."""
         c, pose = self.clock, self.pose
@@ -396,13 +398,28 @@ class SunWithPole(SunLight):
                 too_deep = relative_depth - DEPTH_SIGMAS * sigma > check.occlusion
             rejected["dip_deeper_than_the_pole_makes_there"] = int((had & sound & too_deep).sum())
             sound &= ~too_deep
-        deep = contrast_like_neighbours(times.contrast, sound)
-        if relative_depth is not None:
-            # Where the shadow lasts MIN_FRAMES_PER_TRANSITION frames or more, the darkest sample sees
-            # its full depth and the half-disc test applies; a shorter dip is sampled at a random
-            # phase (its darkest sample may sit on a flank), and only the loose contrast test does.
-            resolved = sound & (check.predicted_frames >= MIN_FRAMES_PER_TRANSITION)
-            deep = np.where(resolved, fully_lit_like_neighbours(relative_depth, check.occlusion, resolved), deep)
+        # A dip seen in frames levelled pixel by pixel (a cloud's) is shallower than in clear frames, the
+        # more so the deeper the cloud in its frame: the levels bring the lit samples back to their clear
+        # level, not the shadowed ones (sky light only, brighter under the cloud). Such a dip is compared
+        # with the dips centred in the same frame; the others with each other.
+        cloudy = dip_in_frames(times.enter, times.leave, levelled, n_frames)
+        deep = np.zeros_like(sound)
+        for under, group in ((True, sound & cloudy), (False, sound & ~cloudy)):
+            if under:
+                part = np.zeros_like(group)
+                with np.errstate(invalid="ignore"):
+                    frame = np.round((times.enter + times.leave) / 2)
+                for f in np.unique(frame[group]):
+                    part |= contrast_like_neighbours(times.contrast, group & (frame == f))
+            else:
+                part = contrast_like_neighbours(times.contrast, group)
+            if relative_depth is not None:
+                # Where the shadow lasts MIN_FRAMES_PER_TRANSITION frames or more, the darkest sample sees
+                # its full depth and the half-disc test applies; a shorter dip is sampled at a random
+                # phase (its darkest sample may sit on a flank), and only the loose contrast test does.
+                resolved = group & (check.predicted_frames >= MIN_FRAMES_PER_TRANSITION)
+                part = np.where(resolved, fully_lit_like_neighbours(relative_depth, check.occlusion, resolved), part)
+            deep |= part
         rejected["dip_shallower_than_its_neighbours"] = int((had & sound & ~deep).sum())
         sound &= deep
         notes = []
