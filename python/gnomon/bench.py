@@ -237,6 +237,9 @@ class ScanBench:
     decode_threads: int = 1
     """Threads that decoded the frames, alone and in the scan (image files: one per core, at most 4;
     a video: one)."""
+    decode_one_thread: Throughput | None = None
+    """Decoding the image files alone on one thread (as the scan's reader did before it decoded on
+    several), when ``decode_threads`` > 1: for comparison with figures taken then."""
 
     @property
     def ratio(self) -> float:
@@ -266,19 +269,29 @@ def run_scan_bench(field_log: str, out_dir: str, mesh_formats: tuple[str, ...] |
 
     log = load_field_log(field_log)
     source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
-    t0, c0 = time.perf_counter(), time.process_time()
-    count, shape = 0, (0, 0)
-    for frame in source:
-        count, shape = count + 1, frame.grey.shape
-    decode = Throughput(count, time.perf_counter() - t0, time.process_time() - c0)
+    threads = decode_workers() if source.video is None else 1
+    one_thread = None
+    if threads > 1:
+        source.decode_threads = 1
+        one_thread = _decode_pass(source)[0]
+        source.decode_threads = None
+    decode, shape = _decode_pass(source)
     t0, c0 = time.perf_counter(), time.process_time()
     result = run_scan(field_log, out_dir, ScanOptions(mesh_formats=mesh_formats))
     scan_s, scan_cpu = time.perf_counter() - t0, time.process_time() - c0
     stages = {k: float(v) for k, v in result.report.get("timings_s", {}).items()}
     stages_cpu = {k: float(v) for k, v in result.report.get("cpu_timings_s", {}).items()}
-    return ScanBench(str(field_log), count, int(shape[1]), int(shape[0]), decode, scan_s, scan_cpu,
-                     stages, _load_average(), stages_cpu, list(result.setup.mesh_formats),
-                     decode_workers() if source.video is None else 1)
+    return ScanBench(str(field_log), decode.frames, int(shape[1]), int(shape[0]), decode, scan_s, scan_cpu,
+                     stages, _load_average(), stages_cpu, list(result.setup.mesh_formats), threads, one_thread)
+
+
+def _decode_pass(source) -> tuple[Throughput, tuple[int, int]]:
+    """Time one pass over ``source``'s frames (a FrameSource); returns it and the frames' (H, W)."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    count, shape = 0, (0, 0)
+    for frame in source:
+        count, shape = count + 1, frame.grey.shape
+    return Throughput(count, time.perf_counter() - t0, time.process_time() - c0), shape
 
 
 def format_scan_table(r: ScanBench) -> str:
@@ -287,6 +300,9 @@ def format_scan_table(r: ScanBench) -> str:
          f"kernel SIMD path {_kernel.simd_path()}, load average {r.load_average:.1f}"),
         (f"  decode alone  {r.decode.seconds:8.2f} s wall {r.decode.cpu_seconds:8.2f} s CPU "
          f"({r.decode.fps:.0f} frames/s, {r.decode_threads} decoding thread{'s' if r.decode_threads > 1 else ''})"),
+        *([f"  (on 1 thread  {r.decode_one_thread.seconds:8.2f} s wall {r.decode_one_thread.cpu_seconds:8.2f} s CPU: "
+           f"the whole scan is {r.scan_seconds / r.decode_one_thread.seconds:.2f}x that wall time)"]
+          if r.decode_one_thread is not None and r.decode_one_thread.seconds > 0 else []),
         (f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
          f"{r.ratio:.2f}x the decode-alone wall time, {r.cpu_ratio:.2f}x its CPU time"
          + (f" (mesh formats {', '.join(r.mesh_formats)})" if r.mesh_formats else "")),

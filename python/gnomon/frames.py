@@ -259,6 +259,8 @@ class FrameSource:
         # Frames delivered with their colour image too (besides grey): the first, and those a scan's
         # colours are taken from (gnomon.texture.LitColour).
         self.color_frames: frozenset[int] = frozenset({0})
+        # Threads decoding image files at once (None: decode_workers()).
+        self.decode_threads: int | None = None
         # sha256 of every frame file's bytes, set when a pass has decoded them all (videos: see frames_digest).
         self._digest: str | None = None
         if video is not None:
@@ -362,7 +364,7 @@ class FrameSource:
         first: tuple[tuple[int, ...], np.dtype] | None = None
         pending: deque[Future[_Decoded]] = deque()
         files = enumerate(self.image_files)
-        workers = decode_workers()
+        workers = self.decode_threads or decode_workers()
         with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gnomon-frame-decode") as pool:
             try:
                 # Start with one frame per thread (a peek decodes little more than the first),
