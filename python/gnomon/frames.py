@@ -3,9 +3,10 @@
 Frames are delivered one at a time, in order, as grey images (uint8 or uint16,
 as encoded), so a scan never holds the whole sequence in memory. Decoding runs
 ahead of the consumer (OpenCV releases the GIL while decoding), at most
-``FRAMES_IN_FLIGHT`` frames ahead: image files on ``decode_workers()`` threads
-at once (each file is independent), a video on one reader thread (its frames
-depend on each other) through a bounded queue.
+``FRAMES_IN_FLIGHT`` frames ahead: image files on several threads at once
+(``decode_workers()``: one per core, at most 4; each file is independent), a
+video on one reader thread (its frames depend on each other) through a bounded
+queue.
 
 Problems with the input raise :class:`FrameError` naming the frame: a file that
 cannot be decoded or is truncated (the decoder only warns about those), a frame whose size
@@ -352,7 +353,8 @@ class FrameSource:
             cap.release()
 
     def _decode_parallel(self) -> Iterator[Frame]:
-        """The image files' frames in order, decoded on ``decode_workers()`` threads at once.
+        """The image files' frames in order, decoded on ``decode_threads`` threads at once (by default
+        ``decode_workers()``).
 
         At most ``FRAMES_IN_FLIGHT`` frames are submitted and not yet taken. A file that
         fails to decode raises (its :class:`FrameError`) when its turn comes, after the
