@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from gnomon.errors import GnomonError
 from gnomon.meshing import grid_mesh, non_manifold_vertex_count
 from gnomon.triangulation import supported_by_neighbours
 
@@ -160,6 +162,30 @@ def test_kernel_grid_normals_equal_a_per_pixel_computation() -> None:
         # every case occurs: central, one-sided and no tangent (isolated pixels face the camera)
         lengths = np.linalg.norm(fast[valid], axis=1)
         np.testing.assert_allclose(lengths, 1.0, atol=1e-6)
+
+
+def test_kernel_world_points_equal_the_camera_points_moved_to_the_world() -> None:
+    """build_surface's world points (the kernel, per pixel) are points_from_depth then Pose.camera_to_world."""
+    from gnomon import _kernel
+    from gnomon.camera import Pose
+    from gnomon.pipeline import points_from_depth
+
+    rng = np.random.default_rng(3)
+    h, w = 17, 29
+    rays = rng.normal(0, 0.3, (h, w, 3)) + np.array([0.0, 0.0, 1.0])
+    rays /= np.linalg.norm(rays, axis=2, keepdims=True)
+    depth = rng.uniform(300, 700, (h, w)).astype(np.float32)
+    valid = rng.random((h, w)) < 0.8
+    depth[~valid & (rng.random((h, w)) < 0.5)] = np.nan
+    pose = Pose.from_rvec_tvec(np.array([2.4, 0.06, -0.04]), np.array([-3.0, 5.0, 650.0]))
+    fast = _kernel.world_points(rays, depth, valid.astype(np.uint8), pose.R, pose.t)
+    assert fast.dtype == np.float32 and fast.shape == (h, w, 3)
+    slow = pose.camera_to_world(points_from_depth(rays, depth)[valid].astype(np.float64)).astype(np.float32)
+    # the same f64 arithmetic (the sum over the rotation in another order), rounded to float32 once
+    np.testing.assert_allclose(fast[valid], slow, rtol=2e-7, atol=1e-5)
+    assert np.isnan(fast[~valid]).all()
+    with pytest.raises(GnomonError):
+        _kernel.world_points(rays[:, :-1], depth, valid.astype(np.uint8), pose.R, pose.t)
 
 
 def test_kernel_stl_records_equal_a_per_face_computation(tmp_path) -> None:

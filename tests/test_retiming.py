@@ -164,3 +164,24 @@ def test_kernel_retiming_equals_a_per_pixel_computation_and_the_numpy_definition
             b = _retime_numpy(mm, 30, where=mask)
             for name in ("times", "retimed", "pixel", "left", "right", "phase", "rise", "gap", "f"):
                 np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_kernel_retiming_with_sigma_equals_the_definition() -> None:
+    """retime_with_sigma (one kernel pass) gives retime_between_isochrones' times and RetimedTimes.sigma's σ,
+    in every orientation and with a mask."""
+    from gnomon.retiming import retime_with_sigma
+
+    for seed in range(3):
+        m = _ragged_sweep(seed)
+        rng = np.random.default_rng(seed)
+        sigma = rng.uniform(0.02, 0.3, m.shape).astype(np.float32)
+        where = rng.random(m.shape) < 0.7
+        for mm, ss, mask in ((m, sigma, None), (m[:, ::-1], sigma[:, ::-1], None), (m.T, sigma.T, None),
+                             (m.T[::-1], sigma.T[::-1], where.T[::-1]), (m, sigma, where)):
+            ref = retime_between_isochrones(mm, 30, where=mask)
+            times, s = retime_with_sigma(mm, 30, ss, where=mask)
+            assert ref.pixel.size > 100 and times.dtype == s.dtype == np.float32
+            np.testing.assert_array_equal(times, ref.times)
+            # the same f64 arithmetic, rounded to float32 once
+            np.testing.assert_allclose(s, ref.sigma(ss), rtol=2e-7, atol=0)
+            np.testing.assert_array_equal(s[~ref.retimed], ss[~ref.retimed])

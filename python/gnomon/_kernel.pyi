@@ -276,6 +276,18 @@ def grid_normals(
     """Unit normals (H, W, 3) of the surface on the pixel grid, towards the camera, NaN off it:
     :func:`gnomon.meshing.grid_normals` (its numpy definition), rows in parallel, f64 arithmetic."""
 
+def world_points(
+    rays: npt.NDArray[np.float64],
+    depth: npt.NDArray[np.float32],
+    valid: npt.NDArray[np.uint8],
+    rotation: tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]
+    | npt.NDArray[np.float64],
+    translation: tuple[float, float, float] | npt.NDArray[np.float64],
+) -> npt.NDArray[np.float32]:
+    """World-frame points (H, W, 3) of a camera depth map (H, W), NaN off ``valid``: each pixel's ray
+    ``r`` at ``p = r·Z/r_z`` (rounded to float32), then ``Rᵀ·(p − t)`` (pose world → camera), as
+    :func:`gnomon.pipeline.build_surface` defines them; rows in parallel."""
+
 def stl_records(vertices: npt.NDArray[np.float32], faces: npt.NDArray[np.int32]) -> npt.NDArray[np.uint8]:
     """The (F·50,) bytes of a binary STL file's records (normal, corners, attribute 0; little-endian),
     as :func:`gnomon.meshing.write_stl` writes them."""
@@ -295,3 +307,17 @@ def retime_rows(
     between its isochrones, as :func:`gnomon.retiming.retime_between_isochrones` defines it: the
     times, the re-timed mask, and per re-timed pixel (row-major) its ``index`` value, the crossings'
     pixels (left, right), phases and rises, their gap and the pixel's fraction of it."""
+
+def retime_rows_sigma(
+    times: npt.NDArray[np.float64],
+    index: npt.NDArray[np.int64],
+    wanted: npt.NDArray[np.uint8],
+    sigma: npt.NDArray[np.float64],
+    n_frames: int,
+    max_gap: float,
+    min_gap: float,
+    backstep: float,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_], npt.NDArray[np.float32]]:
+    """:func:`retime_rows` and each pixel's time σ (``sigma``: every pixel's own σ in the caller's image,
+    flat, indexed by ``index``'s values), as :meth:`gnomon.retiming.RetimedTimes.sigma` defines it:
+    the times, the re-timed mask and the σ, each (H, W) and oriented as given."""

@@ -32,7 +32,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from gnomon import __version__, atomic, ply
+from gnomon import __version__, _kernel, atomic, ply
 from gnomon.calibration import camera_to_table
 from gnomon.camera import Pose
 from gnomon.crop import crop_mask
@@ -56,7 +56,7 @@ from gnomon.preview import coverage_map, write_preview
 from gnomon.publish import OUTPUT_FILES, staged_outputs
 from gnomon.recording import ScanRecording, playable_video, warm_rerun_import
 from gnomon.reference_lines import ReferenceLines
-from gnomon.retiming import retime_between_isochrones
+from gnomon.retiming import retime_with_sigma
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
 from gnomon.texture import LitColour, sample_indices
 from gnomon.tracking import ShadowTimes, TrackedSequence, contrast_floor, linear, track_source
@@ -84,8 +84,9 @@ MAX_PLANE_GAP = 3.0
 # simulated captures, whose sweeps are slower, re-timing the few fast pixels is not better.
 RETIME_UNDERSAMPLED_SHARE = 0.5
 
-__all__ = ["OUTPUT_FILES", "EdgeResult", "RecordingWorker", "ScanOptions", "ScanResult", "Surface", "build_surface",
-           "edge_time_maps", "reconstruct", "run_scan", "scan", "staged_outputs", "write_scan", "write_surface"]
+__all__ = ["OUTPUT_FILES", "EdgeResult", "PointsReady", "RecordingWorker", "ScanOptions", "ScanResult", "Surface",
+           "SurfacePoints", "build_surface", "edge_time_maps", "mesh_surface", "reconstruct", "run_scan", "scan",
+           "staged_outputs", "surface_points", "write_scan", "write_surface"]
 
 @dataclass
 class ScanOptions:
@@ -257,8 +258,8 @@ def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: Tracked
     fast = undersampled(slope, levels.imax, levels.imin)
     timed = np.isfinite(times)
     if timed.any() and fast[timed].mean() > RETIME_UNDERSAMPLED_SHARE:
-        retimed = retime_between_isochrones(times, tracked.n_frames)
-        return EdgeTimes(name, retimed.times, slope, retimed.sigma(sigma))
+        retimed, retimed_sigma = retime_with_sigma(times, tracked.n_frames, sigma)
+        return EdgeTimes(name, retimed, slope, retimed_sigma)
     return EdgeTimes(name, times, slope, sigma)
 
 
@@ -551,14 +552,17 @@ def scan(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | Record
 
 def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording | RecordingWorker | None = None, *,
                 progress: bool = False, frame_stride: int = 10,
-                track: Callable[..., TrackedSequence] = track_source
+                track: Callable[..., TrackedSequence] = track_source,
+                on_points: Callable[[PointsReady], None] | None = None,
                 ) -> tuple[ScanResult, Callable[[ScanRecording], None] | None]:
     """:func:`scan` without its last step: the result, and the call that logs it to a recorder
     (None without ``recorder``), so that a caller can record while it writes the outputs.
 
     The frames are recorded as they stream by (on the :class:`RecordingWorker`'s thread when
     ``recorder`` is one); the ray map is computed on a worker thread while the frames are tracked
-    (OpenCV releases the GIL).
+    (OpenCV releases the GIL). ``on_points``: called with the surface's points and maps as soon as
+    they are final, before the mesh is built (:class:`PointsReady`: e.g. to start writing them);
+    the returned call then logs only what its ``record`` did not.
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
@@ -594,10 +598,16 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
         with _timed(timings, "fusion_and_mesh_s", cpu):
             fused = _fuse(edges, tracked, setup.max_depth_jump, levels)
             cropped = _crop(fused, setup, ray_map)
-            surface = build_surface(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, colours.result(),
+            points = surface_points(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, colours.result(),
                                     setup.max_depth_jump)
-    coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
-                            ambiguous=tracked.times.ambiguous, conflict=fused.conflict, unsupported=fused.unsupported)
+            coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
+                                    ambiguous=tracked.times.ambiguous, conflict=fused.conflict,
+                                    unsupported=fused.unsupported)
+            if on_points is not None:
+                on_points(PointsReady(points, fused.shadow_time, fused.undersampled, coverage, None if recorder is None
+                                      else _record_points_part(timings, setup, edges, points, fused, frame_stride,
+                                                               tracked.used, coverage)))
+            surface = mesh_surface(points, setup.max_depth_jump)
     warnings += _fusion_warnings(fused)
     timings["total_s"] = time.perf_counter() - t0
     report = _report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
@@ -609,10 +619,37 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
 
     def record(recorder: ScanRecording) -> None:
         with _timed(timings, "recording_s", cpu, time.thread_time):  # this thread's CPU
-            _record(recorder, setup, edges, surface, fused.shadow_time, warnings, report, frame_stride,
-                    tracked.used, coverage)
+            if on_points is None:
+                _record(recorder, setup, edges, surface, fused.shadow_time, warnings, report, frame_stride,
+                        tracked.used, coverage)
+            else:  # the points' part was logged when they were ready
+                record_mesh_part(recorder, surface, warnings,
+                                 {"coverage": report["coverage"], "noise": report["noise"]})
 
     return result, record
+
+
+@dataclass
+class PointsReady:
+    """What :func:`reconstruct` hands ``on_points`` before it builds the mesh: the final points and maps,
+    and (with a recorder) the call that logs their part of the recording."""
+
+    points: SurfacePoints
+    shadow_time: np.ndarray  # (H, W) capture frames, NaN = none
+    undersampled: np.ndarray  # (H, W) bool
+    coverage: np.ndarray  # (H, W) uint8 classes
+    record: Callable[[ScanRecording], None] | None
+
+
+def _record_points_part(timings: dict[str, float], setup: ScanSetup, edges: list[EdgeResult], points: SurfacePoints,
+                        fused: _Fused, stride: int, used: np.ndarray, coverage: np.ndarray
+                        ) -> Callable[[ScanRecording], None]:
+    """The recording's part that needs no mesh (its time in ``timings["recording_points_s"]``)."""
+    def record(recorder: ScanRecording) -> None:
+        with _timed(timings, "recording_points_s"):
+            _record_scene(recorder, setup, edges, points.points_world, stride, used)
+            record_points_part(recorder, points, fused.shadow_time, coverage)
+    return record
 
 
 def _report_outputs(report: dict[str, Any], setup: ScanSetup, cropped: np.ndarray, cpu: dict[str, float],
@@ -641,17 +678,31 @@ def write_scan(folder: Path, result: ScanResult, started: float | None = None,
     setup, surface = result.setup, result.surface
     with _Writers() as writers:
         write_surface(folder, surface, setup.units, writers, setup.mesh_formats)
-        writers.add(atomic.save_npy, folder / "undersampled.npy", result.undersampled)
-        if result.coverage is not None:
-            writers.add(atomic.save_npy, folder / "coverage.npy", result.coverage)
-        writers.add(atomic.save_npy, folder / "shadow_time.npy", result.shadow_time.astype(np.float32))
-        writers.add(write_depth_npz, folder / "depth.npz", surface.depth, surface.sigma, result.report["camera"],
-                    setup.units)
-        if result.coverage is not None:
-            writers.add(write_preview, folder / "preview.png", surface.rgb, surface.depth, surface.sigma,
-                        result.coverage, units=setup.units)
-        if "site" in result.report:
-            writers.add(write_enu_points, folder / "points_enu.ply", surface, result.report["site"])
+        _write_maps(folder, surface, result.shadow_time, result.undersampled, result.coverage, result.report["camera"],
+                    result.report.get("site"), setup.units, writers)
+    _write_report(folder, result, t, c, started, before_report)
+
+
+def _write_maps(folder: Path, surface: Surface | SurfacePoints, shadow_time: np.ndarray, undersampled: np.ndarray,
+                coverage: np.ndarray | None, camera: dict[str, Any], site: dict[str, Any] | None, units: str,
+                writers: _Writers) -> None:
+    """undersampled.npy, coverage.npy, shadow_time.npy, depth.npz, preview.png, points_enu.ply (with a site)."""
+    writers.add(atomic.save_npy, folder / "undersampled.npy", undersampled)
+    if coverage is not None:
+        writers.add(atomic.save_npy, folder / "coverage.npy", coverage)
+    writers.add(atomic.save_npy, folder / "shadow_time.npy", shadow_time.astype(np.float32))
+    writers.add(write_depth_npz, folder / "depth.npz", surface.depth, surface.sigma, camera, units)
+    if coverage is not None:
+        writers.add(write_preview, folder / "preview.png", surface.rgb, surface.depth, surface.sigma, coverage,
+                    units=units)
+    if site is not None:
+        writers.add(write_enu_points, folder / "points_enu.ply", surface, site)
+
+
+def _write_report(folder: Path, result: ScanResult, t: float, c: float, started: float | None,
+                  before_report: Callable[[], None] | None) -> None:
+    """report.json, once the output files (whose wait since ``t``, CPU clock ``c``, it gives) and, with
+    ``before_report``, the recording are done."""
     timings, cpu = result.report["timings_s"], result.report.setdefault("cpu_timings_s", {})
     timings["outputs_s"] = time.perf_counter() - t
     cpu["outputs_s"] = time.process_time() - c
@@ -679,21 +730,51 @@ class Surface:
     rgb: np.ndarray  # (H, W, 3) uint8 colour image (the mesh's texture)
 
 
+@dataclass
+class SurfacePoints:
+    """A surface's points on the pixel grid before its mesh (:func:`surface_points`): :class:`Surface`'s
+    fields but the mesh's, and the grids the mesh is built from."""
+
+    depth: np.ndarray  # (H, W) camera Z, NaN = none
+    sigma: np.ndarray  # (H, W) σZ, NaN = none
+    valid: np.ndarray  # (H, W)
+    points_world: np.ndarray  # (N, 3) float32, row-major over valid pixels
+    colors: np.ndarray  # (N, 3) uint8
+    uv: np.ndarray  # (N, 2) float32 pixel of each point
+    normals: np.ndarray  # (N, 3) float32 unit normals (world frame, towards the camera)
+    rgb: np.ndarray  # (H, W, 3) uint8 colour image
+    world_grid: np.ndarray  # (H, W, 3) float32 world points, NaN off the surface
+    normal_grid: np.ndarray  # (H, W, 3) float32 unit normals, NaN off the surface
+
+
+def surface_points(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np.ndarray, valid: np.ndarray,
+                   rgb: np.ndarray, max_relative_jump: float) -> SurfacePoints:
+    """Points (world frame), colours and normals of the valid pixels (the mesh: :func:`mesh_surface`);
+    a neighbour beyond ``max_relative_jump`` of a pixel's depth takes no part in its normal."""
+    depth = np.where(valid, depth, np.nan).astype(np.float32)
+    sigma = np.where(valid, sigma, np.nan).astype(np.float32)
+    # points_from_depth, then pose.camera_to_world, per pixel in the kernel (rows in parallel)
+    world_grid = _kernel.world_points(np.ascontiguousarray(ray_map, dtype=np.float64), depth,
+                                      np.ascontiguousarray(valid, dtype=np.uint8), pose.R, pose.t)
+    normals = grid_normals(world_grid, depth, valid, pose.camera_centre_world, max_relative_jump)
+    v, u = np.nonzero(valid)
+    uv = np.stack([u, v], axis=1).astype(np.float32)
+    return SurfacePoints(depth, sigma, valid, world_grid[valid], rgb[valid], uv, normals[valid], rgb, world_grid,
+                         normals)
+
+
+def mesh_surface(points: SurfacePoints, max_relative_jump: float) -> Surface:
+    """The cut grid mesh of a surface's points (:func:`gnomon.meshing.grid_mesh`, small pieces removed)."""
+    mesh = remove_small_components(grid_mesh(points.world_grid, points.depth, points.valid, max_relative_jump,
+                                             sigma=points.sigma, normals=points.normal_grid))
+    return Surface(points.depth, points.sigma, points.valid, points.points_world, points.colors, points.uv, mesh,
+                   points.rgb.reshape(-1, 3)[mesh.pixel_index], points.normals, points.rgb)
+
+
 def build_surface(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np.ndarray, valid: np.ndarray,
                   rgb: np.ndarray, max_relative_jump: float) -> Surface:
     """Points (world frame), colours and the cut grid mesh of the valid pixels."""
-    depth = np.where(valid, depth, np.nan).astype(np.float32)
-    sigma = np.where(valid, sigma, np.nan).astype(np.float32)
-    points_cam = points_from_depth(ray_map, depth)
-    world_grid = np.full(points_cam.shape, np.nan, dtype=np.float32)
-    world_grid[valid] = pose.camera_to_world(points_cam[valid].astype(np.float64))
-    normals = grid_normals(world_grid, depth, valid, pose.camera_centre_world, max_relative_jump)
-    mesh = remove_small_components(grid_mesh(world_grid, depth, valid, max_relative_jump, sigma=sigma,
-                                             normals=normals))
-    v, u = np.nonzero(valid)
-    uv = np.stack([u, v], axis=1).astype(np.float32)
-    return Surface(depth, sigma, valid, world_grid[valid], rgb[valid], uv, mesh,
-                   rgb.reshape(-1, 3)[mesh.pixel_index], normals[valid], rgb)
+    return mesh_surface(surface_points(ray_map, pose, depth, sigma, valid, rgb, max_relative_jump), max_relative_jump)
 
 
 class _Writers:
@@ -722,34 +803,46 @@ class _Writers:
 
 def write_surface(folder: Path, surface: Surface, units: str, writers: _Writers | None = None,
                   mesh_formats: tuple[str, ...] = DEFAULT_MESH_FORMATS) -> None:
-    """points.ply, mesh.ply, depth.npy, sigma.npy and, in ``mesh_formats``, mesh.obj (+ .mtl, .png
-    texture) and mesh.stl (each atomically).
+    """points.ply, mesh.ply, mesh.png (the colour image), depth.npy, sigma.npy and, in ``mesh_formats``,
+    mesh.obj (+ .mtl) and mesh.stl (each atomically).
 
     ``writers``: write on its threads (waited for by its owner), else here, concurrently."""
     if writers is None:
         with _Writers() as own:
             write_surface(folder, surface, units, own, mesh_formats)
         return
+    _write_mesh_files(folder, surface, units, writers, mesh_formats)  # the longest first
+    _write_point_files(folder, surface, units, writers, texture="obj" not in mesh_formats)
+
+
+def _write_point_files(folder: Path, points: Surface | SurfacePoints, units: str, writers: _Writers, *,
+                       texture: bool) -> None:
+    """points.ply, depth.npy, sigma.npy and, with ``texture``, mesh.png (else write_obj writes it)."""
+    comments = [f"gnomon {__version__}", ply.units_comment(units), "frame world"]
+    if texture:  # the colour image alone (load_scan's and merge's colours)
+        writers.add(write_texture, folder / "mesh.png", points.rgb)
+    writers.add(ply.write_points_ply, folder / "points.ply", points.points_world, points.colors,
+                points.sigma[points.valid], points.uv, comments=comments, normals=points.normals)
+    writers.add(atomic.save_npy, folder / "depth.npy", points.depth)
+    writers.add(atomic.save_npy, folder / "sigma.npy", points.sigma)
+
+
+def _write_mesh_files(folder: Path, surface: Surface, units: str, writers: _Writers,
+                      mesh_formats: tuple[str, ...]) -> None:
+    """mesh.ply and, in ``mesh_formats``, mesh.obj (+ .mtl, .png) and mesh.stl."""
     comments = [f"gnomon {__version__}", ply.units_comment(units), "frame world"]
     mesh = surface.mesh
     h, w = surface.valid.shape
-    # the longest first
     if "obj" in mesh_formats:
         tex_uv = (mesh.pixel_uv(w) + 0.5) / np.array([w, h], dtype=np.float32)
         tex_uv[:, 1] = 1.0 - tex_uv[:, 1]  # OBJ: v up from the image's bottom
         writers.add(write_obj, folder / "mesh.obj", mesh.vertices, mesh.faces, normals=mesh.normals, uv=tex_uv,
                     texture=surface.rgb, comment=f"gnomon {__version__}, units {units}, frame world")
-    else:  # the colour image alone (load_scan's and merge's colours)
-        writers.add(write_texture, folder / "mesh.png", surface.rgb)
     if "stl" in mesh_formats:
         writers.add(write_stl, folder / "mesh.stl", mesh.vertices, mesh.faces,
                     header=f"gnomon {__version__} mesh, units {units}")
-    writers.add(ply.write_points_ply, folder / "points.ply", surface.points_world, surface.colors,
-                surface.sigma[surface.valid], surface.uv, comments=comments, normals=surface.normals)
     writers.add(ply.write_mesh_ply, folder / "mesh.ply", mesh.vertices, mesh.faces, surface.vertex_rgb,
                 comments=comments, normals=mesh.normals)
-    writers.add(atomic.save_npy, folder / "depth.npy", surface.depth)
-    writers.add(atomic.save_npy, folder / "sigma.npy", surface.sigma)
 
 
 def write_depth_npz(path: Path, depth: np.ndarray, sigma: np.ndarray, camera: dict[str, Any], units: str) -> None:
@@ -776,7 +869,7 @@ def write_depth_npz(path: Path, depth: np.ndarray, sigma: np.ndarray, camera: di
                      camera_toml=np.array(json.dumps(camera, default=_json_default)))
 
 
-def write_enu_points(path: Path, surface: Surface, site: dict[str, Any]) -> None:
+def write_enu_points(path: Path, surface: Surface | SurfacePoints, site: dict[str, Any]) -> None:
     """points_enu.ply: the cloud in East-North-Up metres from the site (report.json's ``site``)."""
     m = np.asarray(site["world_to_enu"], dtype=np.float64)
     enu = surface.points_world.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
@@ -791,13 +884,25 @@ def write_enu_points(path: Path, surface: Surface, site: dict[str, Any]) -> None
 
 def record_surface(recorder, surface: Surface, shadow_time: np.ndarray | None, warnings: list[str],
                    metrics: dict, coverage: np.ndarray | None = None) -> None:
+    """A surface's entities in a recording: :func:`record_points_part` then :func:`record_mesh_part`."""
+    record_points_part(recorder, surface, shadow_time, coverage)
+    record_mesh_part(recorder, surface, warnings, metrics)
+
+
+def record_points_part(recorder, surface: Surface | SurfacePoints, shadow_time: np.ndarray | None,
+                       coverage: np.ndarray | None = None) -> None:
+    """The depth under the camera, the coverage, the points and the maps."""
     recorder.log_camera_depth(surface.depth)
     if coverage is not None:
         recorder.log_coverage(coverage)
     recorder.log_points(surface.points_world, surface.colors, surface.sigma[surface.valid], uv=surface.uv)
-    recorder.log_mesh(surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb)
     recorder.log_maps(shadow_time if shadow_time is not None else np.full(surface.depth.shape, np.nan, np.float32),
                       surface.depth, surface.sigma)
+
+
+def record_mesh_part(recorder, surface: Surface, warnings: list[str], metrics: dict) -> None:
+    """The mesh, the warnings and the metrics."""
+    recorder.log_mesh(surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb)
     for w in warnings:
         recorder.log_warning(w)
     recorder.log_metrics(metrics)
@@ -834,13 +939,31 @@ def run_scan(field_log: str | Path, out_dir: str | Path, options: ScanOptions | 
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
         full = source.video is not None and (opts.rrd or opts.view) and playable_video(source.video)
         with _recording(staging, opts, f"scan {log.path.name}", image_scale=1.0 if full else 0.5) as recorder:
-            result, record = reconstruct(setup, source, recorder, progress=opts.progress,
-                                         frame_stride=opts.frame_stride, track=opts.track or track_source)
-            if recorder is not None and record is not None:
-                recorder.submit(record)
-            write_scan(staging, result, t0, before_report=None if recorder is None else recorder.finish)
+            # The points' files and recording start as soon as the points are final, while the mesh is built.
+            with _Writers() as writers:
+                result, record = reconstruct(setup, source, recorder, progress=opts.progress,
+                                             frame_stride=opts.frame_stride, track=opts.track or track_source,
+                                             on_points=_point_outputs(staging, setup, writers, recorder))
+                if recorder is not None and record is not None:
+                    recorder.submit(record)
+                t, c = time.perf_counter(), time.process_time()
+                _write_mesh_files(staging, result.surface, setup.units, writers, setup.mesh_formats)
+            _write_report(staging, result, t, c, t0, None if recorder is None else recorder.finish)
     result.out_dir = Path(out_dir)
     return result
+
+
+def _point_outputs(folder: Path, setup: ScanSetup, writers: _Writers,
+                   recorder: RecordingWorker | None) -> Callable[[PointsReady], None]:
+    """reconstruct's ``on_points`` for run_scan: the points' part of the recording queued, the files
+    that need no mesh (all but mesh.ply/.obj/.stl and report.json) handed to ``writers``."""
+    def start(ready: PointsReady) -> None:
+        if recorder is not None and ready.record is not None:
+            recorder.submit(ready.record)
+        _write_point_files(folder, ready.points, setup.units, writers, texture="obj" not in setup.mesh_formats)
+        _write_maps(folder, ready.points, ready.shadow_time, ready.undersampled, ready.coverage, _camera_report(setup),
+                    setup.light.georeference(setup.units), setup.units, writers)
+    return start
 
 
 class RecordingWorker:
@@ -979,7 +1102,7 @@ def _frame_logger(recorder: ScanRecording | RecordingWorker, setup: ScanSetup, s
 
 def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edges: list[EdgeResult],
             fused: _Fused, mesh: GridMesh, timings: dict[str, float], warnings: list[str]) -> dict[str, Any]:
-    cam, pose, inputs, tr = setup.camera, setup.pose, setup.inputs, setup.tracker
+    cam, inputs, tr = setup.camera, setup.inputs, setup.tracker
     times, keep, sigma = tracked.times, fused.keep, fused.sigma
     return {
         "gnomon_version": __version__,
@@ -994,7 +1117,7 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
             # capture frames of sudden illumination dips (clouds) tracked levelled pixel by pixel
             "levelled_frames": [int(i) for i in tracked.levelled],
         },
-        "camera": {**camera_to_table(cam), "pose": {"rvec": pose.rvec.tolist(), "tvec": pose.t.tolist()}},
+        "camera": _camera_report(setup),
         "calibration": inputs.calibration,
         **setup.light.report([e.planes for e in edges], warnings),
         "settings": {
@@ -1029,6 +1152,12 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
         "reference_planes": inputs.reference_planes,
         **({"tracking": tracked.info} if tracked.info else {}),
     }
+
+
+def _camera_report(setup: ScanSetup) -> dict[str, Any]:
+    """report.json's camera: the camera table and its pose (world → camera)."""
+    pose = setup.pose
+    return {**camera_to_table(setup.camera), "pose": {"rvec": pose.rvec.tolist(), "tvec": pose.t.tolist()}}
 
 
 def _edges_report(edges: list[EdgeResult], keep: np.ndarray) -> dict[str, Any]:
@@ -1071,6 +1200,14 @@ def _edges_report(edges: list[EdgeResult], keep: np.ndarray) -> dict[str, Any]:
 def _record(recorder: ScanRecording, setup: ScanSetup, edges: list[EdgeResult], surface: Surface,
             shadow_time: np.ndarray, warnings: list[str], report: dict[str, Any], stride: int,
             used: np.ndarray, coverage: np.ndarray | None = None) -> None:
+    _record_scene(recorder, setup, edges, surface.points_world, stride, used)
+    record_surface(recorder, surface, shadow_time, warnings, {"coverage": report["coverage"], "noise": report["noise"]},
+                   coverage)
+
+
+def _record_scene(recorder: ScanRecording, setup: ScanSetup, edges: list[EdgeResult], points_world: np.ndarray,
+                  stride: int, used: np.ndarray) -> None:
+    """The reference planes, the shadow's lines and planes every ``stride`` frames, the light's entities."""
     pose, camera, light = setup.pose, setup.camera, setup.light
     for ref in setup.planes:
         for i, (u0, v0, u1, v1) in enumerate(ref.regions):
@@ -1092,9 +1229,7 @@ def _record(recorder: ScanRecording, setup: ScanSetup, edges: list[EdgeResult], 
         polygon = light.shadow_plane_polygon(ends)
         if polygon is not None:
             recorder.log_shadow_plane(frame, polygon, when)
-    light.record(recorder, surface.points_world, stride)
-    record_surface(recorder, surface, shadow_time, warnings, {"coverage": report["coverage"], "noise": report["noise"]},
-                   coverage)
+    light.record(recorder, points_world, stride)
 
 
 def _json_default(o):

@@ -38,7 +38,7 @@ import numpy as np
 
 from gnomon import _kernel
 
-__all__ = ["MAX_GAP_PX", "RetimedTimes", "retime_between_isochrones"]
+__all__ = ["MAX_GAP_PX", "RetimedTimes", "retime_between_isochrones", "retime_with_sigma"]
 
 # Crossings of consecutive frames farther apart than this (pixels) are not interpolated between.
 MAX_GAP_PX = 40.0
@@ -157,6 +157,37 @@ def retime_between_isochrones(times: np.ndarray, n_frames: int, max_gap: float =
         new, done = new.T, done.T
     return RetimedTimes(np.ascontiguousarray(new), np.ascontiguousarray(done), pixel, left, right, phase, rise,
                         gap, f)
+
+
+def retime_with_sigma(times: np.ndarray, n_frames: int, sigma_t: np.ndarray, max_gap: float = MAX_GAP_PX,
+                      where: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(times, σ)`` (H, W) float32: ``retime_between_isochrones(...).times`` and
+    ``.sigma(sigma_t)`` in one kernel pass (``_kernel.retime_rows_sigma``, rows in parallel), without
+    the per-pixel details of the crossings. ``sigma_t`` (H, W) the σ (frames) of every pixel's own time.
+    """
+    t = np.asarray(times, dtype=np.float64)
+    s = np.asarray(sigma_t, dtype=np.float64)
+    if t.ndim != 2 or t.size == 0:
+        return t.astype(np.float32), s.astype(np.float32)
+    if s.shape != t.shape:
+        raise ValueError(f"sigma_t has shape {s.shape}, the times {t.shape}")
+    along_rows, sense = _sweep_axis(t)
+    if sense == 0 or (t.shape[1] if along_rows else t.shape[0]) < 2:
+        return t.astype(np.float32), s.astype(np.float32)
+    index = np.arange(t.size).reshape(t.shape)
+    wanted = np.ones(t.shape, dtype=np.uint8) if where is None else np.asarray(where, dtype=np.uint8)
+
+    def orient(a: np.ndarray) -> np.ndarray:
+        a = a if along_rows else a.T
+        return np.ascontiguousarray(a[:, ::-1] if sense < 0 else a)
+
+    def back(a: np.ndarray) -> np.ndarray:
+        a = a[:, ::-1] if sense < 0 else a
+        return np.ascontiguousarray(a if along_rows else a.T)
+
+    new, _, sigma = _kernel.retime_rows_sigma(orient(t), orient(index), orient(wanted), s.ravel(), int(n_frames),
+                                              float(max_gap), MIN_GAP_PX, BACKSTEP)
+    return back(new), back(sigma)
 
 
 def _retime_numpy(times: np.ndarray, n_frames: int, max_gap: float = MAX_GAP_PX,

@@ -7,8 +7,9 @@
 //!   shadow has passed, with provisional times, as soon as it has passed;
 //! * [`triangulate`]: camera rays ∩ interpolated shadow planes;
 //! * [`grid_faces`], [`clean_faces`], [`obj_text`]: the mesh on the pixel grid, its clean-up, its OBJ text;
-//! * [`retime_rows`]: a fast sweep's shadow times between the isochrones;
-//! * [`grid_normals`], [`stl_records`]: the surface's normals on the pixel grid, a mesh's binary STL records;
+//! * [`retime_rows`], [`retime_rows_sigma`]: a fast sweep's shadow times between the isochrones (and their σ);
+//! * [`world_points`], [`grid_normals`], [`stl_records`]: the surface's world points and normals on the
+//!   pixel grid, a mesh's binary STL records;
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
 //! Pure Rust, no Python types; every function on user data returns
@@ -31,10 +32,10 @@ pub use geometry::{Plane, Ray};
 pub use intensity::NORMALISED_SCALE;
 pub use live::{FinishedPixel, WatchParams};
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
-pub use retime::{retime_rows, RetimeParams, Retimed};
+pub use retime::{retime_rows, retime_rows_sigma, RetimeParams, Retimed, RetimedSigma};
 pub use sample::Sample;
 pub use simd::SimdPath;
-pub use surface::{grid_normals, stl_records, STL_RECORD_BYTES};
+pub use surface::{grid_normals, stl_records, world_points, STL_RECORD_BYTES};
 pub use tracker::{
     find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,
 };

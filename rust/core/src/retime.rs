@@ -108,6 +108,105 @@ pub fn retime_rows(
     Ok(out)
 }
 
+/// The re-timed map, its mask and every pixel's time σ (frames), oriented as given.
+#[derive(Default)]
+pub struct RetimedSigma {
+    /// `H·W` times (f32, the input's where not re-timed).
+    pub times: Vec<f32>,
+    /// `H·W`, 1 = re-timed.
+    pub done: Vec<u8>,
+    /// `H·W` σ of each time (f32): the pixel's own where not re-timed.
+    pub sigma: Vec<f32>,
+}
+
+/// [`retime_rows`] and the σ of each pixel's time in one pass, as
+/// `gnomon.retiming.RetimedTimes.sigma` defines it from the crossings' details
+/// (which are not kept): a crossing at phase φ between pixels a and b whose
+/// times rise by g per pixel is off by `((1 − φ)·σa + φ·σb)/g` pixels; the
+/// re-timed pixel at fraction f of the gap D between its two crossings takes
+/// `(1 − f)/D` and `f/D` of their errors, added linearly, and in quadrature
+/// the part `(1 − 1/g)/√12` of a pixel each crossing is blind to. All in f64,
+/// rounded to f32 at the end.
+///
+/// `sigma`: the σ (frames) of every pixel's own time in the caller's image,
+/// indexed by the values of `index` (each must lie in `0..sigma.len()`).
+/// Rows are processed in parallel; each row's outputs depend on that row only.
+pub fn retime_rows_sigma(
+    times: &[f64],
+    index: &[i64],
+    wanted: &[u8],
+    sigma: &[f64],
+    width: usize,
+    params: RetimeParams,
+) -> Result<RetimedSigma, KernelError> {
+    let n = times.len();
+    KernelError::check_image(
+        n,
+        width,
+        &[
+            ("index (one per pixel)", n, index.len()),
+            ("wanted (one per pixel)", n, wanted.len()),
+        ],
+    )?;
+    if params.n_frames < 0 {
+        return Err(KernelError::parameter("n_frames", "must be ≥ 0"));
+    }
+    if index.iter().any(|&i| i < 0 || i as usize >= sigma.len()) {
+        return Err(KernelError::parameter(
+            "index",
+            format!("values must index sigma's {} pixels", sigma.len()),
+        ));
+    }
+    let mut out = RetimedSigma {
+        times: vec![0.0; n],
+        done: vec![0; n],
+        sigma: vec![0.0; n],
+    };
+    out.times
+        .par_chunks_mut(width)
+        .zip(out.done.par_chunks_mut(width))
+        .zip(out.sigma.par_chunks_mut(width))
+        .zip(times.par_chunks(width))
+        .zip(index.par_chunks(width))
+        .zip(wanted.par_chunks(width))
+        .for_each(|(((((t_out, d_out), s_out), t), idx), want)| {
+            let row = retime_row(t, idx, want, params);
+            t_out.copy_from_slice(&row.times);
+            d_out.copy_from_slice(&row.done);
+            // the row's re-timed pixels, in row order, are its entries in order
+            let mut k = 0;
+            for j in 0..t.len() {
+                let own = sigma[idx[j] as usize];
+                s_out[j] = if row.done[j] == 0 {
+                    own as f32
+                } else {
+                    k += 1;
+                    retimed_sigma(&row, k - 1, sigma) as f32
+                };
+            }
+        });
+    Ok(out)
+}
+
+/// The σ of a row's `k`-th re-timed pixel (see [`retime_rows_sigma`]).
+fn retimed_sigma(row: &Retimed, k: usize, sigma: &[f64]) -> f64 {
+    let (w0, w1) = ((1.0 - row.f[k]) / row.gap[k], row.f[k] / row.gap[k]);
+    let crossing = |c: usize| {
+        let (sa, sb) = (
+            sigma[row.left[k][c] as usize],
+            sigma[row.right[k][c] as usize],
+        );
+        let (phase, rise) = (row.phase[k][c], row.rise[k][c]);
+        let error = ((1.0 - phase) * sa + phase * sb) / rise;
+        let blind = (1.0 - 1.0 / rise).clamp(0.0, 1.0) / 12f64.sqrt();
+        (error, blind)
+    };
+    let ((e0, b0), (e1, b1)) = (crossing(0), crossing(1));
+    let (q0, q1) = (w0 * b0, w1 * b1);
+    let quantised = (q0 * q0 + q1 * q1).sqrt();
+    (w0 * e0 + w1 * e1).hypot(quantised)
+}
+
 fn retime_row(t: &[f64], idx: &[i64], want: &[u8], p: RetimeParams) -> Retimed {
     let w = t.len();
     let clip = |k: i64| k.clamp(-1, p.n_frames);
@@ -213,6 +312,31 @@ mod tests {
         let r = retime_rows(&t, &idx, &[1, 1, 0, 1, 1, 1, 1, 1], 8, P).unwrap();
         assert_eq!(r.pixel, vec![1, 3, 4, 5]);
         assert_eq!(r.times[2], 2.5);
+    }
+
+    #[test]
+    fn sigma_of_a_ramp_from_its_crossings() {
+        // The staircase of staircase_becomes_a_ramp: crossings at u = 0.5 (frame 2, between pixels 0
+        // and 1) and u = 5.5 (frame 3, between 5 and 6), each rising by 1 frame per pixel (not blind).
+        let t = [1.5, 2.5, 2.5, 2.5, 2.5, 2.5, 3.5, 3.5];
+        let idx: Vec<i64> = (0..8).collect();
+        let sigma: Vec<f64> = (0..8).map(|i| 0.1 + 0.01 * f64::from(i)).collect();
+        let r = retime_rows_sigma(&t, &idx, &[1; 8], &sigma, 8, P).unwrap();
+        let plain = retime_rows(&t, &idx, &[1; 8], 8, P).unwrap();
+        assert_eq!(r.times, plain.times);
+        assert_eq!(r.done, plain.done);
+        // crossing errors (pixels): the mean of the pair's σ over a rise of 1
+        let (e0, e1) = (0.5 * (sigma[0] + sigma[1]), 0.5 * (sigma[5] + sigma[6]));
+        for px in 1..6 {
+            let f = (px as f64 - 0.5) / 5.0;
+            let want = ((1.0 - f) * e0 + f * e1) / 5.0;
+            assert!((f64::from(r.sigma[px]) - want).abs() < 1e-7, "pixel {px}");
+        }
+        for px in [0, 6, 7] {
+            assert_eq!(r.sigma[px], sigma[px] as f32);
+        }
+        // index values must address sigma
+        assert!(retime_rows_sigma(&t, &idx, &[1; 8], &sigma[..7], 8, P).is_err());
     }
 
     #[test]

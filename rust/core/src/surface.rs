@@ -1,6 +1,7 @@
 //! Per-pixel work on a scan's surface after fusion, as the numpy definitions
-//! in `gnomon.meshing` state them (the tests compare both): the grid's unit
-//! normals ([`grid_normals`]) and the binary STL records of a mesh
+//! in `gnomon.meshing` and `gnomon.pipeline` state them (the tests compare
+//! both): the world-frame points of a depth map ([`world_points`]), the grid's
+//! unit normals ([`grid_normals`]) and the binary STL records of a mesh
 //! ([`stl_records`]).
 //!
 //! Invariants: maps are row-major `H·W` (points `H·W·3`); a pixel is on the
@@ -35,6 +36,60 @@ fn dot(a: V3, b: V3) -> f64 {
 
 fn finite(a: V3) -> bool {
     a.iter().all(|x| x.is_finite())
+}
+
+/// World-frame points `H·W·3` (f32) of a camera depth map, NaN off the surface.
+///
+/// * `rays`: `H·W·3` camera-frame ray directions of the pixels (any length, `r_z ≠ 0`);
+/// * `depth`: `H·W` camera Z (world units); `valid`: `H·W`, non-zero = a surface pixel;
+/// * `rotation`, `translation`: the pose, world → camera (`X_cam = R·X_world + t`).
+///
+/// As `gnomon.pipeline.build_surface` defines it: the camera-frame point
+/// `p = r·(Z/r_z)` rounded to f32 (`points_from_depth`), then
+/// `X_world = Rᵀ·(p − t)` in f64 (`Pose.camera_to_world`), rounded to f32.
+/// Rows in parallel; each output depends on its own pixel only.
+pub fn world_points(
+    rays: &[f64],
+    depth: &[f32],
+    valid: &[u8],
+    width: usize,
+    rotation: [[f64; 3]; 3],
+    translation: [f64; 3],
+) -> Result<Vec<f32>, KernelError> {
+    let n = depth.len();
+    KernelError::check_image(
+        n,
+        width,
+        &[
+            ("rays (3 per pixel)", 3 * n, rays.len()),
+            ("valid (one per pixel)", n, valid.len()),
+        ],
+    )?;
+    let mut out = vec![f32::NAN; 3 * n];
+    let rows = ROWS_PER_TASK * 4;
+    out.par_chunks_mut(3 * width * rows)
+        .zip(rays.par_chunks(3 * width * rows))
+        .zip(depth.par_chunks(width * rows))
+        .zip(valid.par_chunks(width * rows))
+        .for_each(|(((out, rays), depth), valid)| {
+            for (((o, r), &z), &ok) in out
+                .chunks_exact_mut(3)
+                .zip(rays.chunks_exact(3))
+                .zip(depth)
+                .zip(valid)
+            {
+                if ok == 0 {
+                    continue;
+                }
+                let scale = f64::from(z) / r[2];
+                let p = [0, 1, 2].map(|k| f64::from((r[k] * scale) as f32) - translation[k]);
+                for (j, o) in o.iter_mut().enumerate() {
+                    *o = (p[0] * rotation[0][j] + p[1] * rotation[1][j] + p[2] * rotation[2][j])
+                        as f32;
+                }
+            }
+        });
+    Ok(out)
 }
 
 /// Unit surface normals `H·W·3` (f32) from the pixel grid, oriented towards the camera.
@@ -206,6 +261,27 @@ pub fn stl_records(vertices: &[f32], faces: &[i32]) -> Result<Vec<u8>, KernelErr
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn world_points_on_the_rays_at_their_depth() {
+        // A camera at world (1, 2, 3) turned 90° about z: X_cam = R·X_world + t with t = −R·c.
+        let rotation = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+        let c = [1.0, 2.0, 3.0];
+        let t = [2.0, -1.0, -3.0]; // −R·c
+        let rays = [0.0, 0.0, 1.0, 0.6, 0.0, 0.8, 0.0, 0.6, 0.8, 1.0, 1.0, 1.0];
+        let depth = [4.0f32, 8.0, 8.0, f32::NAN];
+        let got = world_points(&rays, &depth, &[1, 1, 0, 1], 2, rotation, t).unwrap();
+        // camera points (0, 0, 4) and (6, 0, 8): world = Rᵀ·p + c
+        let want = [[1.0, 2.0, 7.0], [1.0, -4.0, 11.0]];
+        for (i, w) in want.iter().enumerate() {
+            for k in 0..3 {
+                assert!((f64::from(got[3 * i + k]) - w[k]).abs() < 1e-6, "{i} {k}");
+            }
+        }
+        assert!(got[6..].iter().all(|x| x.is_nan())); // not valid, and no depth
+        assert!(world_points(&rays[..9], &depth, &[1; 4], 2, rotation, t).is_err());
+        assert!(world_points(&rays, &depth, &[1; 4], 3, rotation, t).is_err());
+    }
 
     fn plane_grid(h: usize, w: usize) -> (Vec<f32>, Vec<f32>) {
         // The plane z = 10 + 0.1 x seen from the origin: points (u, v, z).

@@ -944,6 +944,125 @@ fn retime_rows<'py>(
     )
 }
 
+/// `retime_rows` and the σ of every pixel's time, without the crossings' details (see
+/// `gnomon_core::retime_rows_sigma`): (times float32, re-timed bool, σ float32), each (H, W).
+#[pyfunction]
+#[pyo3(signature = (times, index, wanted, sigma, n_frames, max_gap, min_gap, backstep))]
+#[allow(clippy::too_many_arguments)]
+fn retime_rows_sigma<'py>(
+    py: Python<'py>,
+    times: &Bound<'py, PyAny>,
+    index: &Bound<'py, PyAny>,
+    wanted: &Bound<'py, PyAny>,
+    sigma: &Bound<'py, PyAny>,
+    n_frames: i64,
+    max_gap: f64,
+    min_gap: f64,
+    backstep: f64,
+) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    let times = borrow_array::<f64, Ix2>(
+        times,
+        "times",
+        "float64",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (times.shape()[0], times.shape()[1]);
+    let grid = [Extent::Exactly(h), Extent::Exactly(w)];
+    let index = borrow_array::<i64, Ix2>(index, "index", "int64", &grid)?;
+    let wanted = borrow_array::<u8, Ix2>(wanted, "wanted", "uint8", &grid)?;
+    let sigma = borrow_array::<f64, Ix1>(sigma, "sigma", "float64", &[Extent::Any("N")])?;
+    let (times, index, wanted, sigma) = (
+        times.as_array(),
+        index.as_array(),
+        wanted.as_array(),
+        sigma.as_array(),
+    );
+    let params = gnomon_core::RetimeParams {
+        n_frames,
+        max_gap,
+        min_gap,
+        backstep,
+    };
+    let r = py
+        .detach(|| {
+            with_slice(&times, |t| {
+                with_slice(&index, |i| {
+                    with_slice(&wanted, |m| {
+                        with_slice(&sigma, |s| {
+                            gnomon_core::retime_rows_sigma(t, i, m, s, w.max(1), params)
+                        })
+                    })
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    let done: Vec<bool> = r.done.iter().map(|&d| d != 0).collect();
+    pyo3::types::PyTuple::new(
+        py,
+        [
+            image(py, r.times, h, w)?.into_any(),
+            image(py, done, h, w)?.into_any(),
+            image(py, r.sigma, h, w)?.into_any(),
+        ],
+    )
+}
+
+/// World-frame points (H, W, 3) float32 of a depth map, NaN off the surface (see
+/// `gnomon_core::world_points`).
+#[pyfunction]
+#[pyo3(signature = (rays, depth, valid, rotation, translation))]
+fn world_points<'py>(
+    py: Python<'py>,
+    rays: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
+    valid: &Bound<'py, PyAny>,
+    rotation: [[f64; 3]; 3],
+    translation: [f64; 3],
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let depth = borrow_array::<f32, Ix2>(
+        depth,
+        "depth",
+        "float32",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (depth.shape()[0], depth.shape()[1]);
+    let valid = borrow_array::<u8, Ix2>(
+        valid,
+        "valid",
+        "uint8",
+        &[Extent::Exactly(h), Extent::Exactly(w)],
+    )?;
+    let rays = borrow_array::<f64, Ix3>(
+        rays,
+        "rays",
+        "float64",
+        &[Extent::Exactly(h), Extent::Exactly(w), Extent::Exactly(3)],
+    )?;
+    let (depth, valid, rays) = (depth.as_array(), valid.as_array(), rays.as_array());
+    let points = py
+        .detach(|| {
+            with_slice(&rays, |rays| {
+                with_slice(&depth, |depth| {
+                    with_slice(&valid, |valid| {
+                        gnomon_core::world_points(
+                            rays,
+                            depth,
+                            valid,
+                            w.max(1),
+                            rotation,
+                            translation,
+                        )
+                    })
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    let points = Array3::from_shape_vec((h, w, 3), points).map_err(|err| {
+        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
+    })?;
+    Ok(points.into_pyarray(py))
+}
+
 /// Unit normals (H, W, 3) float32 of the surface on the pixel grid (see `gnomon_core::grid_normals`).
 #[pyfunction]
 #[pyo3(signature = (points, depth, valid, camera_centre, max_relative_jump))]
@@ -1059,6 +1178,8 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(grid_normals, m)?)?;
     m.add_function(wrap_pyfunction!(stl_records, m)?)?;
     m.add_function(wrap_pyfunction!(retime_rows, m)?)?;
+    m.add_function(wrap_pyfunction!(retime_rows_sigma, m)?)?;
+    m.add_function(wrap_pyfunction!(world_points, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
