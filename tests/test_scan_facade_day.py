@@ -67,7 +67,7 @@ def test_refusals_are_never_silent(day) -> None:
 def test_gross_errors_are_rare(day) -> None:
     """The lamp post's dip, triangulated on the pole's plane at its time, lands 7-10 m off and passes
     every per-pixel check of the pole; the tracker's second candidate dip and the surfaces the two
-    candidates make against the reference planes tell them apart (measured: 0.57 % gross)."""
+    candidates make against the reference planes tell them apart (measured: 0.45 % gross)."""
     _, _, result, acc = day
     assert acc.gross_rate <= 0.01, acc
     assert any("pole's dip chosen by geometry" in w and "took their second dip" in w for w in result.warnings)
@@ -79,7 +79,7 @@ def test_gross_errors_are_rare(day) -> None:
 @pytest.mark.slow
 def test_coverage_of_the_cloud_free_passages(day) -> None:
     """Where the pole's shadow passed in clear frames, the pole's dip is measured although the lamp
-    post's shadow crosses most of those pixels too (measured: 85.0 % of the 69.5 % of the swept
+    post's shadow crosses most of those pixels too (measured: 86.9 % of the 69.5 % of the swept
     pixels passed in clear frames; 32.5 % overall with one dip per pixel)."""
     _, truth, result, _ = day
     clear = truth["cloud_free_passage"]
@@ -90,17 +90,16 @@ def test_coverage_of_the_cloud_free_passages(day) -> None:
 def test_coverage_of_the_cloud_passages(day) -> None:
     """30 % of the swept pixels (9,256 of 30,349) see the pole's shadow pass while a cloud dims the
     sun; their frames are levelled pixel by pixel (gnomon.cloud_levels) instead of skipped, so
-    their dips are found (measured: 79 % of them; none when the cloud frames were skipped)."""
+    their dips are found (measured: 82.8 % of them; 29 % when the cloud frames were skipped)."""
     _, truth, result, _ = day
     cloudy = truth["swept"] & ~truth["cloud_free_passage"]
     assert np.isfinite(result.depth)[cloudy].mean() >= 0.7
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="coverage 83.5 %: the grazing ground's pole dips shorter than a frame "
-                   "interval that no sample sees (7 % of the swept pixels), the balconies (3.4 %: no reference plane "
-                   "supports their surface while the lamp post's shadow is about) and dips under a cloud refused as "
-                   "shallower than their neighbours (the levels restore the lit level, not the shadowed one)")
 def test_coverage_of_the_day(day) -> None:
+    """Measured 85.7 % (seed 4; 84.2 % with seed 5). What is left: the grazing ground's pole dips
+    shorter than a frame interval that no sample sees (8 % of the swept pixels), the balconies (3.4 %:
+    no reference plane supports their surface while the lamp post's shadow is about)."""
     _, _, _, acc = day
     assert acc.coverage >= 0.85, acc

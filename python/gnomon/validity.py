@@ -122,7 +122,7 @@ def dip_in_frames(enter: np.ndarray, leave: np.ndarray, frames: np.ndarray | Non
 
 
 def contrast_like_neighbours(contrast: np.ndarray, candidates: np.ndarray, *, size: int = 9,
-                             min_ratio: float = 0.55) -> np.ndarray:
+                             min_ratio: float | np.ndarray = 0.55) -> np.ndarray:
     """Candidates whose dip is at least ``min_ratio`` as deep as the mean of the candidates around them.
 
     One occluder's shadow darkens a surface by an amount that varies slowly
@@ -130,7 +130,8 @@ def contrast_like_neighbours(contrast: np.ndarray, candidates: np.ndarray, *, si
     than its neighbours' saw the shadow only in part — its light was already
     partly blocked by something else (a building's penumbra, an overhang),
     or its footprint straddles a lit and an unlit surface — and its shadow
-    time is biased. ``size``: the square neighbourhood's side (pixels).
+    time is biased. ``size``: the square neighbourhood's side (pixels);
+    ``min_ratio``: a number, or one per pixel (H, W).
     """
     from scipy.ndimage import uniform_filter
 

@@ -262,6 +262,9 @@ class SunWithLines(SunLight):
         return sun_shadow_planes(lines, sun_directions_camera(self._timeline(), c.site, c.heading_deg, self.pose))
 
 
+MIN_CONTRAST_RATIO = 0.55
+
+
 class SunWithPole(SunLight):
     """Planes through a vertical pole's axis and the sun: one edge, the shadow's centre line.
 
@@ -403,6 +406,10 @@ class SunWithPole(SunLight):
         # level, not the shadowed ones (sky light only, brighter under the cloud). Such a dip is compared
         # with the dips centred in the same frame; the others with each other.
         cloudy = dip_in_frames(times.enter, times.leave, levelled, n_frames)
+        # A shadow that lasts w < 1 frame is seen by the pixel's samples only in part, at a random phase:
+        # its darkest sample catches about w of its depth at the least likely phases.
+        with np.errstate(invalid="ignore"):
+            ratio = MIN_CONTRAST_RATIO * np.clip(np.nan_to_num(check.predicted_frames, nan=1.0), 0.0, 1.0)
         deep = np.zeros_like(sound)
         for under, group in ((True, sound & cloudy), (False, sound & ~cloudy)):
             if under:
@@ -410,9 +417,9 @@ class SunWithPole(SunLight):
                 with np.errstate(invalid="ignore"):
                     frame = np.round((times.enter + times.leave) / 2)
                 for f in np.unique(frame[group]):
-                    part |= contrast_like_neighbours(times.contrast, group & (frame == f))
+                    part |= contrast_like_neighbours(times.contrast, group & (frame == f), min_ratio=ratio)
             else:
-                part = contrast_like_neighbours(times.contrast, group)
+                part = contrast_like_neighbours(times.contrast, group, min_ratio=ratio)
             if relative_depth is not None:
                 # Where the shadow lasts MIN_FRAMES_PER_TRANSITION frames or more, the darkest sample sees
                 # its full depth and the half-disc test applies; a shorter dip is sampled at a random
