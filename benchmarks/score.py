@@ -141,7 +141,8 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
                object_outline: list | None = None, shadow_outlines: list | None = None,
                keep_out_px: int = 12, marker_keep_out_px: int = 40, false_mm: float = 5.0,
                region_masks: dict[str, np.ndarray] | None = None,
-               other_faces: dict[str, list] | None = None, border_px: int = 60) -> CaptureScore:
+               other_faces: dict[str, list] | None = None, border_px: int = 60,
+               declared_planes: dict[str, tuple[np.ndarray, np.ndarray]] | None = None) -> CaptureScore:
     """Score one scan.
 
     ``extents``: per plane, (x0, x1, y0, y1) in the plane's own 2-D frame
@@ -153,6 +154,8 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
     The false points are also counted by place (``false_where``): in the faces'
     outlines, near the markers, in the cast shadows, within ``border_px`` of
     the image's left and right sides (where the frog's desk board curls), elsewhere.
+    ``declared_planes``: planes not measured from markers (absent from report.json's reference planes),
+    name → (origin, 3×3 axes with the normal last), camera frame.
     """
     report = json.loads((scan_dir / "report.json").read_text())
     depth = np.load(scan_dir / "depth.npy")
@@ -166,6 +169,7 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
     for p in planes:
         R = Pose.from_rvec_tvec(np.array(p["rvec"]), np.array(p["tvec"])).R
         frames[p["name"] if "name" in p else p["plane"]] = (np.array(p["tvec"]), R)
+    frames.update(declared_planes or {})
     hits = {}
     for pname, (t, R) in frames.items():
         n = R[:, 2]
