@@ -161,3 +161,29 @@ def test_cloud_frames_are_levelled_pixel_by_pixel() -> None:
     assert (times.valid & (np.abs(centre - truth) <= 0.1))[clear].mean() > 0.98
     # the strip under the overhang (sky only) brightens under the cloud: nothing like a dip there
     assert not (times.valid & shaded).any()
+
+
+def test_levelled_cloud_frames_in_a_tile_and_at_the_end() -> None:
+    """A tile's levels come from the whole frame (its times equal the same pixels' in an untiled
+    pass), and the frames of a dip the capture ends in are skipped and counted."""
+    from gnomon.tracking import ShadowTracker, TrackerSettings
+
+    clouds = {40: 0.8, 41: 0.55, 42: 0.35, 43: 0.3, 44: 0.4, 45: 0.6, 46: 0.85, 93: 0.5, 94: 0.4, 95: 0.4}
+    frames, _ = _cloudy_sweep(clouds)
+    settings = TrackerSettings(gamma=2.2, min_contrast=None, normalize_illumination=True)
+    crop = (slice(5, 30), slice(30, 70))
+    whole = ShadowTracker(settings, frames[0].shape, np.dtype(np.uint8))
+    tile = ShadowTracker(settings, frames[0].shape, np.dtype(np.uint8), crop)
+    for k, f in enumerate(frames):
+        whole.update(f, k)
+        tile.update(f, k)
+    for t in (whole, tile):
+        t.flush()
+        # the first cloud's deep frames levelled (its shallow flanks may pass with their gain), the
+        # last cloud's, which the capture ends in, refused
+        assert set(range(41, 45)) <= set(t.levelled) <= set(range(40, 47)), t.levelled
+        assert t.refused == [93, 94, 95], t.refused
+        assert t.fed == [k for k in range(len(frames)) if k not in (93, 94, 95)]
+    a, b = whole.finish(1.5), tile.finish(1.5)
+    np.testing.assert_array_equal(a.enter[crop], b.enter)
+    np.testing.assert_array_equal(a.leave[crop], b.leave)
