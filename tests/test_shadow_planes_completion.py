@@ -60,3 +60,65 @@ def test_one_line_frames_get_the_plane_through_the_light(line_light: bool) -> No
     for t in [*range(6), *range(n - 4, n)]:
         sign = np.sign(done[t, :3] @ truth[t, :3])
         assert np.allclose(sign * done[t], truth[t], atol=1e-6)
+
+
+def test_a_stick_tilting_a_little_completes_from_the_lamp_point() -> None:
+    """A point lamp and a stick swept across the scene while its tilt drifts by 3° (the CMU frog's hand-held
+    stick): every plane contains the lamp, and they nearly share one direction (the stick's), so the light
+    estimate is degenerate (a line). Completing the one-line frames with that line makes each plane
+    contain the stick's mean direction (the planes at the sweep's ends are off by a tenth of the drift or
+    more); the lamp point, though poorly located along the stick, gives the exact plane. The choice is
+    measured on the two-plane frames (each completed from one of its lines, the light located without it):
+    the point wins, and the completed frames are exact (1e-6)."""
+    from gnomon.shadow_planes import completion_light
+
+    desk = _plane([0.0, -0.9, -0.44], [0.0, 300.0, 1500.0])
+    wall = _plane([0.0, 0.2, -1.0], [0.0, 0.0, 2000.0])
+    lamp = np.array([600.0, -900.0, 1900.0])
+    n = 40
+    axis = np.array([0.1, 0.3, 1.0]) / np.linalg.norm([0.1, 0.3, 1.0])
+    side = np.cross(axis, [1.0, 0.0, 0.0])
+    side /= np.linalg.norm(side)
+    drift = np.radians(3.0)
+    normals = []
+    for k, a in enumerate(np.linspace(0.3, 1.2, n)):
+        stick = np.cos(drift * (k / (n - 1) - 0.5)) * axis + np.sin(drift * (k / (n - 1) - 0.5)) * side
+        m = np.cross(stick, [np.cos(a), np.sin(a), 0.0])
+        normals.append(m / np.linalg.norm(m))
+    truth = np.array([[*m, m @ lamp] for m in normals])
+    lines = [_lines(desk, truth, "desk"), _lines(wall, truth, "wall")]
+    measured = truth.copy()
+    measured[:6] = np.nan
+    lines[0].point[:6] = np.nan
+    measured[-4:] = np.nan
+    lines[1].point[-4:] = np.nan
+    assert light_point_or_line(measured).degenerate
+    light = completion_light(measured, lines)
+    assert light.model == "point" and light.direction is None
+    assert light.errors_deg["point"] < 1e-4 < light.errors_deg["line"]
+    done, added = complete_from_light(measured, lines, light.point, light.direction)
+    assert added == 10
+    est = light_point_or_line(measured)
+    by_line, _ = complete_from_light(measured, lines, est.point, est.direction)
+    for t in [*range(6), *range(n - 4, n)]:
+        sign = np.sign(done[t, :3] @ truth[t, :3])
+        assert np.allclose(sign * done[t], truth[t], atol=1e-6)
+    off = [np.degrees(np.arccos(min(1.0, abs(by_line[t, :3] @ truth[t, :3])))) for t in (0, n - 1)]
+    assert max(off) > 0.1 * np.degrees(drift)  # what the line model would have given: 0.29° and 0.42° here
+
+
+def test_a_stick_moved_parallel_to_itself_completes_from_the_line() -> None:
+    """The planes of a stick moved parallel to itself share its direction exactly: both models complete the
+    two-plane frames exactly (the least-squares point lies on the line), so the tie keeps the line."""
+    from gnomon.shadow_planes import completion_light
+
+    desk = _plane([0.0, -0.9, -0.44], [0.0, 300.0, 1500.0])
+    wall = _plane([0.0, 0.2, -1.0], [0.0, 0.0, 2000.0])
+    lamp = np.array([600.0, -900.0, 1900.0])
+    axis = np.array([0.1, 0.3, 1.0]) / np.linalg.norm([0.1, 0.3, 1.0])
+    normals = [np.cross(axis, [np.cos(a), np.sin(a), 0.0]) for a in np.linspace(0.3, 1.2, 30)]
+    truth = np.array([[*(m / np.linalg.norm(m)), (m / np.linalg.norm(m)) @ lamp] for m in normals])
+    lines = [_lines(desk, truth, "desk"), _lines(wall, truth, "wall")]
+    light = completion_light(truth, lines)
+    assert light.errors_deg["line"] < 1e-4 and light.errors_deg["point"] < 1e-4
+    assert light.model == "line" or light.errors_deg["point"] < light.errors_deg["line"]

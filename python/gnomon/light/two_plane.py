@@ -16,7 +16,7 @@ import numpy as np
 from gnomon.camera import Pose
 from gnomon.light.base import LightModel
 from gnomon.reference_lines import ReferenceLines
-from gnomon.shadow_planes import complete_from_light, two_plane_shadow_planes
+from gnomon.shadow_planes import complete_from_light, completion_light, two_plane_shadow_planes
 from gnomon.validity import MIN_LAMP_CONDITIONING, light_point_or_line
 
 __all__ = ["TwoPlaneLight"]
@@ -36,9 +36,10 @@ class TwoPlaneLight(LightModel):
     def planes_from_lines(self, lines: list[ReferenceLines]) -> tuple[np.ndarray, int]:
         planes, degenerate = two_plane_shadow_planes(lines)
         if np.isfinite(planes[:, 0]).sum() >= MIN_PLANES_FOR_LIGHT:
-            # Frames whose shadow crossed one plane only: their plane from the light the others located.
-            est = light_point_or_line(planes)
-            planes, _ = complete_from_light(planes, lines, est.point, est.direction)
+            # Frames whose shadow crossed one plane only: their plane from the light the others located
+            # (a point, or the line the planes nearly share: whichever completes the two-plane frames better).
+            light = completion_light(planes, lines)
+            planes, _ = complete_from_light(planes, lines, light.point, light.direction)
         return planes, degenerate
 
     def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:
