@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from gnomon.camera import OpenCVCamera
-from gnomon.pipeline import ray_plane_angles
+from gnomon.pipeline import _ray_plane_angles_numpy, ray_plane_angles
 
 
 def test_angles_follow_the_plane_interpolated_at_each_pixels_time() -> None:
@@ -30,3 +30,21 @@ def test_angles_follow_the_plane_interpolated_at_each_pixels_time() -> None:
     assert abs(got[31] - 12.5) < 1.0  # its ray is 0.6° off the axis, towards the plane
     planes[2] = np.nan
     assert np.isnan(ray_plane_angles(rays, times, planes, where)).all()
+
+
+def test_kernel_angles_equal_the_numpy_definition() -> None:
+    """The kernel's angles are the numpy definition's (random rays, times between and on the rows,
+    missing rows, a sparse selection)."""
+    rng = np.random.default_rng(4)
+    h, w, n = 19, 27, 9
+    rays = rng.normal(0, 0.4, (h, w, 3)) + np.array([0.0, 0.0, 1.0])
+    planes = np.c_[rng.normal(0, 1, (n, 3)), rng.normal(0, 100, n)]
+    planes[5] = np.nan
+    times = rng.uniform(-0.5, n - 0.5, (h, w))
+    times[::4, ::3] = np.floor(times[::4, ::3])
+    where = rng.random((h, w)) < 0.6
+    got = ray_plane_angles(rays, times, planes, where)
+    want = _ray_plane_angles_numpy(rays, times, planes, where)
+    assert got.shape == (int(where.sum()),) and np.isnan(want).any() and np.isfinite(want).sum() > 100
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))

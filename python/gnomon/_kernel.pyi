@@ -276,6 +276,16 @@ def grid_normals(
     """Unit normals (H, W, 3) of the surface on the pixel grid, towards the camera, NaN off it:
     :func:`gnomon.meshing.grid_normals` (its numpy definition), rows in parallel, f64 arithmetic."""
 
+def ray_plane_angles(
+    rays: npt.NDArray[np.float64],
+    times: npt.NDArray[np.float64],
+    planes: npt.NDArray[np.float64],
+    selected: npt.NDArray[np.uint8],
+) -> npt.NDArray[np.float64]:
+    """Angles (degrees) between the rays (H, W, 3) of the ``selected`` pixels (H, W) and their shadow
+    planes (rows of ``planes`` (N, 4) interpolated at ``times`` (H, W)), row-major, NaN where a plane
+    is missing: :func:`gnomon.pipeline.ray_plane_angles`; chunks of pixels in parallel."""
+
 def world_points(
     rays: npt.NDArray[np.float64],
     depth: npt.NDArray[np.float32],

@@ -130,7 +130,19 @@ def ray_plane_angles(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray,
 
     ``times``: (H, W) in rows of ``planes`` (N, 4) (the plane interpolated at the pixel's time, as the
     kernel does); ``ray_map``: (H, W, 3) camera-frame rays. Returns the angles of the pixels of ``where``
-    (row-major), NaN where a plane is missing."""
+    (row-major), NaN where a plane is missing. The kernel computes them (``_kernel.ray_plane_angles``, the
+    same f64 arithmetic); :func:`_ray_plane_angles_numpy` is the definition in numpy."""
+    if len(planes) == 0:
+        return _ray_plane_angles_numpy(ray_map, times, planes, where)
+    return _kernel.ray_plane_angles(np.ascontiguousarray(ray_map, dtype=np.float64),
+                                    np.ascontiguousarray(times, dtype=np.float64),
+                                    np.ascontiguousarray(planes, dtype=np.float64),
+                                    np.ascontiguousarray(where, dtype=np.uint8))
+
+
+def _ray_plane_angles_numpy(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray,
+                            where: np.ndarray) -> np.ndarray:
+    """:func:`ray_plane_angles` in numpy (the kernel's ``ray_plane_angles`` gives the same)."""
     t = times[where].astype(np.float64)
     i = np.clip(np.floor(t).astype(np.int64), 0, len(planes) - 1)
     j = np.minimum(i + 1, len(planes) - 1)

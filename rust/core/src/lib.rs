@@ -39,4 +39,4 @@ pub use surface::{grid_normals, stl_records, world_points, STL_RECORD_BYTES};
 pub use tracker::{
     find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,
 };
-pub use triangulate::{plane_at, triangulate};
+pub use triangulate::{plane_at, ray_plane_angles, triangulate};

@@ -104,6 +104,84 @@ pub fn triangulate(
     Ok((points, valid))
 }
 
+/// The angle (degrees) between each selected pixel's ray and the shadow plane at its time
+/// (`gnomon.pipeline.ray_plane_angles`): a depth moves by a plane's error over its sine.
+///
+/// * `rays`: `H·W·3` camera-frame ray directions (any length);
+/// * `times`: `H·W` times in rows of `planes`; the plane's normal is interpolated
+///   linearly between rows `i = clamp(⌊t⌋, 0, N−1)` and `min(i + 1, N−1)` at `t − i`;
+/// * `planes`: `N·4` rows `[nx, ny, nz, d]` (a NaN row gives a NaN angle);
+/// * `selected`: `H·W`, non-zero = wanted.
+///
+/// Returns the angles of the selected pixels in row-major order:
+/// `asin(|n·r| / (|n|·|r|))` in degrees (f64, the sine clamped to [0, 1]; NaN
+/// where it is undefined). Chunks of pixels in parallel, concatenated in order.
+pub fn ray_plane_angles(
+    rays: &[f64],
+    times: &[f64],
+    planes: &[f64],
+    selected: &[u8],
+) -> Result<Vec<f64>, KernelError> {
+    let n = times.len();
+    if rays.len() != 3 * n {
+        return Err(KernelError::LengthMismatch {
+            what: "rays (3 per time)",
+            expected: 3 * n,
+            got: rays.len(),
+        });
+    }
+    if selected.len() != n {
+        return Err(KernelError::LengthMismatch {
+            what: "selected (one per time)",
+            expected: n,
+            got: selected.len(),
+        });
+    }
+    if planes.is_empty() || planes.len() % 4 != 0 {
+        return Err(KernelError::parameter(
+            "planes",
+            format!(
+                "needs one or more rows of 4 values [nx, ny, nz, d], got {} values",
+                planes.len()
+            ),
+        ));
+    }
+    let last = planes.len() / 4 - 1;
+    let normal = |k: usize| [planes[4 * k], planes[4 * k + 1], planes[4 * k + 2]];
+    let angle = |t: f64, r: &[f64]| -> f64 {
+        if t.is_nan() {
+            return f64::NAN;
+        }
+        let i = (t.floor().max(0.0) as usize).min(last);
+        let j = (i + 1).min(last);
+        let f = t - i as f64;
+        let (a, b) = (normal(i), normal(j));
+        let m = [0, 1, 2].map(|k| (1.0 - f) * a[k] + f * b[k]);
+        let dot = m[0] * r[0] + m[1] * r[1] + m[2] * r[2];
+        let norm_m = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+        let norm_r = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        (dot.abs() / (norm_m * norm_r))
+            .clamp(0.0, 1.0)
+            .asin()
+            .to_degrees()
+    };
+    let parts: Vec<Vec<f64>> = times
+        .par_chunks(PIXELS_PER_TASK)
+        .zip(rays.par_chunks(3 * PIXELS_PER_TASK))
+        .zip(selected.par_chunks(PIXELS_PER_TASK))
+        .map(|((times, rays), selected)| {
+            times
+                .iter()
+                .zip(rays.chunks_exact(3))
+                .zip(selected)
+                .filter(|(_, &s)| s != 0)
+                .map(|((&t, r), _)| angle(t, r))
+                .collect()
+        })
+        .collect();
+    Ok(parts.concat())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -148,6 +226,24 @@ mod tests {
         assert_eq!(valid, vec![0, 0, 0, 0, 0, 0, 1]);
         assert!(points[..18].iter().all(|v| v.is_nan()));
         assert_eq!(&points[18..], &[0.0, 0.0, 2.0]);
+    }
+
+    #[test]
+    fn ray_plane_angles_of_interpolated_planes() {
+        // Row 0: z = 0 (normal along z), rows 1, 2: x = 0 (normal along x), row 3 missing; a ray along z.
+        let mut planes = vec![0.0, 0.0, 1.0, 0.0];
+        planes.extend([1.0, 0.0, 0.0, 0.0].repeat(2));
+        planes.extend([f64::NAN; 4]);
+        let rays = [0.0, 0.0, 2.0].repeat(5);
+        let times = [0.0, 0.5, 1.0, 2.5, 0.25];
+        let got = ray_plane_angles(&rays, &times, &planes, &[1, 1, 1, 1, 0]).unwrap();
+        assert_eq!(got.len(), 4);
+        assert!((got[0] - 90.0).abs() < 1e-12); // the ray crosses z = 0 square on
+        assert!((got[1] - 45.0).abs() < 1e-12); // halfway: normal (1, 0, 1)/√2
+        assert!(got[2].abs() < 1e-12); // the ray lies in x = 0
+        assert!(got[3].is_nan()); // row 3 is missing
+        assert!(ray_plane_angles(&rays[..14], &times, &planes, &[1; 5]).is_err());
+        assert!(ray_plane_angles(&rays, &times, &planes[..5], &[1; 5]).is_err());
     }
 
     #[test]

@@ -906,9 +906,7 @@ fn per_pixel_levels_divide_each_pixel_by_its_own_factor() {
         steady.update_with_gain(&[dn(lit), dn(lit)], 1.0).unwrap();
         if (18..=24).contains(&k) {
             let frame = [dn(lit), dn(lit * 0.6)];
-            cloudy
-                .update_with_levels(&frame, 1.0, &[1.0, 0.6])
-                .unwrap();
+            cloudy.update_with_levels(&frame, 1.0, &[1.0, 0.6]).unwrap();
         } else {
             cloudy.update_with_gain(&[dn(lit), dn(lit)], 1.0).unwrap();
         }
@@ -918,18 +916,38 @@ fn per_pixel_levels_divide_each_pixel_by_its_own_factor() {
     for p in 0..2 {
         assert!(a.enter[p].is_finite() && a.leave[p].is_finite());
         // (pixel 1's samples are rounded to DN at 0.6 of the level: a fraction of a frame's noise)
-        assert!((a.enter[p] - b.enter[p]).abs() < 0.05, "{p}: {} {}", a.enter[p], b.enter[p]);
-        assert!((a.leave[p] - b.leave[p]).abs() < 0.05, "{p}: {} {}", a.leave[p], b.leave[p]);
+        assert!(
+            (a.enter[p] - b.enter[p]).abs() < 0.05,
+            "{p}: {} {}",
+            a.enter[p],
+            b.enter[p]
+        );
+        assert!(
+            (a.leave[p] - b.leave[p]).abs() < 0.05,
+            "{p}: {} {}",
+            a.leave[p],
+            b.leave[p]
+        );
     }
     // errors: the levels' length, a level that is not > 0, a plain tracker, a frame of another type
     assert!(matches!(
         cloudy.update_with_levels(&[0u8; 2], 1.0, &[1.0]),
         Err(KernelError::LengthMismatch { what: "levels", .. })
     ));
-    assert!(cloudy.update_with_levels(&[0u8; 2], 1.0, &[1.0, 0.0]).is_err());
-    assert!(cloudy.update_with_levels(&[0u8; 2], 1.0, &[1.0, f32::NAN]).is_err());
-    assert!(cloudy.update_with_levels(&[0u16; 2], 1.0, &[1.0, 1.0]).is_err());
-    assert!(cloudy.update_with_levels(&[0u8; 2], 0.0, &[1.0, 1.0]).is_err());
+    assert!(cloudy
+        .update_with_levels(&[0u8; 2], 1.0, &[1.0, 0.0])
+        .is_err());
+    assert!(cloudy
+        .update_with_levels(&[0u8; 2], 1.0, &[1.0, f32::NAN])
+        .is_err());
+    assert!(cloudy
+        .update_with_levels(&[0u16; 2], 1.0, &[1.0, 1.0])
+        .is_err());
+    assert!(cloudy
+        .update_with_levels(&[0u8; 2], 0.0, &[1.0, 1.0])
+        .is_err());
     let mut plain = TemporalTracker::<u16>::new(1, 2, params(4, 16)).unwrap();
-    assert!(plain.update_with_levels(&[0u16; 2], 1.0, &[1.0, 1.0]).is_err());
+    assert!(plain
+        .update_with_levels(&[0u16; 2], 1.0, &[1.0, 1.0])
+        .is_err());
 }

@@ -716,6 +716,64 @@ fn triangulate<'py>(
     Ok((points.into_pyarray(py), mask(py, valid, h, w)?))
 }
 
+/// Angles (degrees) between the selected pixels' rays and their shadow planes (see
+/// `gnomon_core::ray_plane_angles`), row-major.
+#[pyfunction]
+#[pyo3(signature = (rays, times, planes, selected))]
+fn ray_plane_angles<'py>(
+    py: Python<'py>,
+    rays: &Bound<'py, PyAny>,
+    times: &Bound<'py, PyAny>,
+    planes: &Bound<'py, PyAny>,
+    selected: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let times = borrow_array::<f64, Ix2>(
+        times,
+        "times",
+        "float64",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (times.shape()[0], times.shape()[1]);
+    let rays = borrow_array::<f64, Ix3>(
+        rays,
+        "rays",
+        "float64",
+        &[Extent::Exactly(h), Extent::Exactly(w), Extent::Exactly(3)],
+    )?;
+    let planes = borrow_array::<f64, Ix2>(
+        planes,
+        "planes",
+        "float64",
+        &[Extent::Any("N"), Extent::Exactly(4)],
+    )?;
+    let selected = borrow_array::<u8, Ix2>(
+        selected,
+        "selected",
+        "uint8",
+        &[Extent::Exactly(h), Extent::Exactly(w)],
+    )?;
+    let (rays, times, planes, selected) = (
+        rays.as_array(),
+        times.as_array(),
+        planes.as_array(),
+        selected.as_array(),
+    );
+    let angles = py
+        .detach(|| {
+            with_slice(&rays, |rays| {
+                with_slice(&times, |times| {
+                    with_slice(&planes, |planes| {
+                        with_slice(&selected, |selected| {
+                            gnomon_core::ray_plane_angles(rays, times, planes, selected)
+                        })
+                    })
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    Ok(angles.into_pyarray(py))
+}
+
 /// Faces (F, 3) int32 of the grid mesh of the valid pixels (see `gnomon_core::grid_faces`).
 #[pyfunction]
 #[pyo3(signature = (valid, depth, sigma, max_relative_jump, sigma_factor = 5.0))]
@@ -1172,6 +1230,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySecondDips>()?;
     m.add_class::<PyFinishedPixels>()?;
     m.add_function(wrap_pyfunction!(triangulate, m)?)?;
+    m.add_function(wrap_pyfunction!(ray_plane_angles, m)?)?;
     m.add_function(wrap_pyfunction!(grid_faces, m)?)?;
     m.add_function(wrap_pyfunction!(clean_faces, m)?)?;
     m.add_function(wrap_pyfunction!(obj_text, m)?)?;
