@@ -335,6 +335,14 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
                       screening.rejected, screening.notes, spread)
 
 
+def _reconstruct_edge_checked(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, setup: ScanSetup,
+                              tracked: TrackedSequence, levels: _Levels) -> tuple[EdgeResult, list[Any]]:
+    """:func:`_reconstruct_edge` and its lines' residuals (:func:`_check_line_residuals` judges them), on the
+    edge's own thread."""
+    result = _reconstruct_edge(edge, planes, ray_map, setup, tracked, levels)
+    return result, [reference_line_residuals(lines, edge.sigma_t) for lines in result.lines]
+
+
 def _relative_depth(tracked: TrackedSequence, hi: np.ndarray, lo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(H, W) each dip's depth over its lit level, ``r = (Imax − Imin)/Imax`` in linear irradiance
     (``hi``, ``lo``: the levels Imax, Imin), and its 1σ from the image noise at both levels."""
@@ -410,15 +418,15 @@ def _check_plane_coverage(edges: list[EdgeResult], path: Path, warnings: list[st
             warnings.append(msg)
 
 
-def _check_line_residuals(edge: EdgeResult, sigma_t: np.ndarray, path: Path, warnings: list[str]) -> None:
+def _check_line_residuals(edge: EdgeResult, residuals: list[Any], path: Path, warnings: list[str]) -> None:
     """The shadow lines must fit their crossings about as well as the pixel times' noise allows.
 
-    Far worse (a region that is not bare or not flat, a wrong plane, several
+    ``residuals``: :func:`~gnomon.validity.reference_line_residuals` of each of ``edge.lines`` (with the
+    edge's time σ). Far worse (a region that is not bare or not flat, a wrong plane, several
     shadows on it) is a warning with the numbers; lines scattered by more than
     the shadow moves in a frame locate nothing, and the scan is an error.
     """
-    for lines in edge.lines:
-        r = reference_line_residuals(lines, sigma_t)
+    for r in residuals:
         if r is None:
             continue
         what = (f"{edge.name} edge: the shadow lines on [[planes]] '{r.plane}' fit their pixels with a median "
@@ -443,10 +451,11 @@ def _reconstruct_edges(setup: ScanSetup, tracked: TrackedSequence, ray_map: np.n
         enter = pool.submit(_edge_time, "enter", st.enter, st.enter_slope, tracked, levels)
         leave = pool.submit(_edge_time, "leave", st.leave, st.leave_slope, tracked, levels)
         times = setup.light.edges(enter.result(), leave.result(), setup.edge)
-        edges = list(pool.map(lambda e: _reconstruct_edge(e, setup.light.shadow_planes(e, geometry), ray_map, setup,
-                                                          tracked, levels), times))
-    for e, t in zip(edges, times, strict=True):
-        _check_line_residuals(e, t.sigma_t, setup.inputs.field_log, warnings)
+        done = list(pool.map(lambda e: _reconstruct_edge_checked(e, setup.light.shadow_planes(e, geometry), ray_map,
+                                                                 setup, tracked, levels), times))
+    edges = [e for e, _ in done]
+    for e, residuals in done:
+        _check_line_residuals(e, residuals, setup.inputs.field_log, warnings)
     for e in edges:
         if e.degenerate:
             warnings.append(f"{e.name} edge: {e.degenerate} frames dropped as degenerate shadow planes")
