@@ -103,3 +103,17 @@ def test_coverage_of_the_day(day) -> None:
     no reference plane supports their surface while the lamp post's shadow is about)."""
     _, _, _, acc = day
     assert acc.coverage >= 0.85, acc
+
+
+@pytest.mark.slow
+def test_false_points(day) -> None:
+    """False points: output points where the truth has no swept surface, or > 5 σ and > 1 % off.
+
+    Measured 2.15 % (826 of 38,394; seed 4). Most of them are right points on pixels whose passage
+    was lit only in part: the sun grazing the surface (n·d ≤ 0.05, 337: window reveals, ground) or
+    under half its disc seen past the building (323), plus ~100 gross points. The evening's
+    passages between 0° and 2° of elevation (1,414 points, median error 0.25 % of the distance, as
+    the swept pixels' at 5-6°) count as swept surface: the frames render the sun's dip there. The
+    bar is the measurement with room for the seed (seed 5: 2.11 %)."""
+    _, _, _, acc = day
+    assert acc.false_point_rate <= 0.03, acc

@@ -161,8 +161,10 @@ Ground truth (``ground_truth.npz``; arrays H × W unless noted)
   another normal or off the pixel's plane — ``desk_lamp``'s depth change
   > 1 % would flag the whole grazing ground), or fails (1);
 * ``swept_surface``: (2), and from a frame before ``enter_time`` to a frame
-  after ``leave_time`` lit (n·d > 0.05, at least half the sun's disc seen
-  past the building, no lamp post shadow), without (3): a surface the
+  after ``leave_time`` lit (the sun above the horizon — the frames render
+  its dip down to there, where ``sunlit`` of a full day wants 2° —, n·d >
+  0.05, at least half the sun's disc seen past the building, no lamp post
+  shadow), without (3): a surface the
   pole's shadow really crossed while it was lit, mixed pixels included (a
   scanner's point anywhere else measured nothing: it is a false point);
 * ``cloud_free_passage``: swept and no cloud frame within
@@ -938,10 +940,12 @@ class FacadeSunScene:
             lit &= lit_k
             passing = ~((k < first) | (k > last))
             if passing.any():
-                # Lit enough for the pole's dip to be there: n·d > 0.05 and at least half the sun's
-                # disc seen past the building (a building penumbra makes the dip shallower, not absent);
-                # the lamp post's shadow at the same time mixes two events: not a clean measurement.
-                up = self.elevation[k] >= MIN_LIT_ELEVATION_DEG or not self.config.full_day
+                # Lit enough for the pole's dip to be there: the sun rendered (above the horizon: the
+                # frames draw its dip down to there; MIN_LIT_ELEVATION_DEG is the strict mask's margin),
+                # n·d > 0.05 and at least half the sun's disc seen past the building (a building
+                # penumbra makes the dip shallower, not absent); the lamp post's shadow at the same
+                # time mixes two events: not a clean measurement.
+                up = self.sun_strength[k] > 0.0 or not self.config.full_day
                 seen_k = (up & (_dot(self._n0, self.sun_world[k]) > 0.05)
                           & (self.building_visibility(k) >= 0.5))[self.crop]
                 if self.post is not None:
