@@ -298,6 +298,21 @@ def world_points(
     ``r`` at ``p = r·Z/r_z`` (rounded to float32), then ``Rᵀ·(p − t)`` (pose world → camera), as
     :func:`gnomon.pipeline.build_surface` defines them; rows in parallel."""
 
+def ray_map(
+    width: int,
+    height: int,
+    intrinsics: tuple[float, float, float, float],
+    dist: tuple[float, float, float, float, float],
+    tol_px: float,
+    max_steps: int,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """Unit camera-frame rays (H, W, 3) of every pixel centre of OpenCV's pinhole camera with
+    distortion ``(k1, k2, p1, p2, k3)`` (``intrinsics`` = ``(fx, fy, cx, cy)`` in pixels), and the
+    (H, W) mask of the pixels solved: Newton's method from the pinhole point, a pixel solved once its
+    ray reprojects within ``tol_px`` pixels of it on the unfolded branch (det J > 0), NaN rays where
+    not within ``max_steps`` steps; rows in parallel, GIL released. As
+    :meth:`gnomon.camera.OpenCVCamera.ray_map` uses it."""
+
 def stl_records(vertices: npt.NDArray[np.float32], faces: npt.NDArray[np.int32]) -> npt.NDArray[np.uint8]:
     """The (F·50,) bytes of a binary STL file's records (normal, corners, attribute 0; little-endian),
     as :func:`gnomon.meshing.write_stl` writes them."""

@@ -10,11 +10,13 @@
 //! * [`retime_rows`], [`retime_rows_sigma`]: a fast sweep's shadow times between the isochrones (and their σ);
 //! * [`world_points`], [`grid_normals`], [`stl_records`]: the surface's world points and normals on the
 //!   pixel grid, a mesh's binary STL records;
+//! * [`ray_map`]: the unit ray of every pixel of OpenCV's 5-coefficient camera (Newton);
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
 //! Pure Rust, no Python types; every function on user data returns
 //! `Result<_, KernelError>`.
 
+pub mod camera;
 pub mod error;
 pub mod geometry;
 pub mod intensity;
@@ -27,6 +29,7 @@ pub mod surface;
 pub mod tracker;
 pub mod triangulate;
 
+pub use camera::ray_map;
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
 pub use intensity::NORMALISED_SCALE;

@@ -667,6 +667,7 @@ impl TemporalTracker {
 }
 
 /// `(points (H, W, 3) float32, valid (H, W) bool)`.
+type RaysAndMask<'py> = (Bound<'py, PyArray3<f64>>, Bound<'py, PyArray2<bool>>);
 type PointsAndMask<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<bool>>);
 
 /// Camera rays ∩ shadow planes interpolated at each pixel's shadow time.
@@ -1121,6 +1122,28 @@ fn world_points<'py>(
     Ok(points.into_pyarray(py))
 }
 
+/// Unit rays (H, W, 3) float64 of every pixel of OpenCV's 5-coefficient camera and their
+/// solved mask (see `gnomon_core::ray_map`).
+#[pyfunction]
+#[pyo3(signature = (width, height, intrinsics, dist, tol_px, max_steps))]
+fn ray_map<'py>(
+    py: Python<'py>,
+    width: usize,
+    height: usize,
+    intrinsics: [f64; 4],
+    dist: [f64; 5],
+    tol_px: f64,
+    max_steps: u32,
+) -> PyResult<RaysAndMask<'py>> {
+    let (rays, solved) = py
+        .detach(|| gnomon_core::ray_map(width, height, intrinsics, dist, tol_px, max_steps))
+        .map_err(kernel_error)?;
+    let rays = Array3::from_shape_vec((height, width, 3), rays).map_err(|err| {
+        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
+    })?;
+    Ok((rays.into_pyarray(py), mask(py, solved, height, width)?))
+}
+
 /// Unit normals (H, W, 3) float32 of the surface on the pixel grid (see `gnomon_core::grid_normals`).
 #[pyfunction]
 #[pyo3(signature = (points, depth, valid, camera_centre, max_relative_jump))]
@@ -1239,6 +1262,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(retime_rows, m)?)?;
     m.add_function(wrap_pyfunction!(retime_rows_sigma, m)?)?;
     m.add_function(wrap_pyfunction!(world_points, m)?)?;
+    m.add_function(wrap_pyfunction!(ray_map, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
