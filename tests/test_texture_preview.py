@@ -41,6 +41,28 @@ def test_colour_is_the_median_of_the_frames_a_pixel_is_lit_in() -> None:
     np.testing.assert_array_equal(out[:, 11], albedo[:, 11] // 5)  # never lit: all frames
 
 
+def test_kernel_medians_equal_the_numpy_definition() -> None:
+    """finish's kernel medians are the numpy definition's: random frames, lit or shadowed at random
+    (some pixels in no kept frame), odd and even counts of lit samples."""
+    rng = np.random.default_rng(5)
+    h, w = 31, 47
+    for kept in (2, 5, 6):
+        picks = np.arange(kept) * 7
+        colour = LitColour(picks)
+        for k in picks:
+            colour.add(int(k), rng.integers(0, 256, (h, w, 3)).astype(np.uint8))
+        start = rng.uniform(-5, 7 * kept, (h, w))
+        end = start + rng.uniform(0, 20, (h, w))
+        start[rng.random((h, w)) < 0.1] = np.nan
+        end[rng.random((h, w)) < 0.1] = np.nan
+        start[0, :5] = -100.0  # shadowed in every kept frame
+        end[0, :5] = 1000.0
+        fast = colour.finish(start, end)
+        slow = colour.finish(start, end, kernel=False)
+        assert fast.dtype == np.uint8 and fast.shape == (h, w, 3)
+        np.testing.assert_array_equal(fast, slow)
+
+
 def test_grey_and_16_bit_frames_and_no_shadow_times() -> None:
     lit = LitColour(np.array([0, 2]))
     lit.add(0, np.full((2, 3), 1000 << 4, np.uint16))

@@ -286,6 +286,11 @@ def ray_plane_angles(
     planes (rows of ``planes`` (N, 4) interpolated at ``times`` (H, W)), row-major, NaN where a plane
     is missing: :func:`gnomon.pipeline.ray_plane_angles`; chunks of pixels in parallel."""
 
+def lit_median(stack: npt.NDArray[np.uint8], lit: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+    """(H, W, 3): per pixel and channel the median of the ``stack`` (K, H, W, 3) samples it is ``lit`` (K, H, W)
+    in (all K where it is lit in none), ``(s[(n−1)//2] + s[n//2] + 1) // 2`` of the n sorted samples, as
+    :meth:`gnomon.texture.LitColour.finish` defines it; chunks of pixels in parallel."""
+
 def world_points(
     rays: npt.NDArray[np.float64],
     depth: npt.NDArray[np.float32],

@@ -38,6 +38,56 @@ fn finite(a: V3) -> bool {
     a.iter().all(|x| x.is_finite())
 }
 
+/// Per pixel and channel, the median of the samples a pixel is lit in (`gnomon.texture.LitColour.finish`).
+///
+/// * `stack`: `K·P·3` colour samples (K frames of P pixels, RGB), u8;
+/// * `lit`: `K·P`, non-zero = the pixel is lit in that frame (a pixel lit in
+///   none takes all K).
+///
+/// The median of n lit samples is `(s[(n−1)/2] + s[n/2] + 1) / 2` of the sorted
+/// samples (integer, rounding half up). Chunks of pixels in parallel.
+pub fn lit_median(stack: &[u8], lit: &[u8], frames: usize) -> Result<Vec<u8>, KernelError> {
+    if frames == 0 || lit.len() % frames != 0 {
+        return Err(KernelError::parameter(
+            "frames",
+            format!("{frames} does not divide the {} lit flags", lit.len()),
+        ));
+    }
+    let pixels = lit.len() / frames;
+    if stack.len() != 3 * lit.len() {
+        return Err(KernelError::LengthMismatch {
+            what: "stack (3 per lit flag)",
+            expected: 3 * lit.len(),
+            got: stack.len(),
+        });
+    }
+    let mut out = vec![0u8; 3 * pixels];
+    const PIXELS_PER_CHUNK: usize = 8192;
+    out.par_chunks_mut(3 * PIXELS_PER_CHUNK)
+        .enumerate()
+        .for_each(|(chunk, out)| {
+            let mut values = vec![0u8; frames];
+            for (i, o) in out.chunks_exact_mut(3).enumerate() {
+                let p = chunk * PIXELS_PER_CHUNK + i;
+                let any = (0..frames).any(|k| lit[k * pixels + p] != 0);
+                for (c, o) in o.iter_mut().enumerate() {
+                    let mut n = 0;
+                    for k in 0..frames {
+                        if !any || lit[k * pixels + p] != 0 {
+                            values[n] = stack[3 * (k * pixels + p) + c];
+                            n += 1;
+                        }
+                    }
+                    let v = &mut values[..n];
+                    v.sort_unstable();
+                    let (a, b) = (u16::from(v[(n - 1) / 2]), u16::from(v[n / 2]));
+                    *o = (a + b).div_ceil(2) as u8;
+                }
+            }
+        });
+    Ok(out)
+}
+
 /// World-frame points `H·W·3` (f32) of a camera depth map, NaN off the surface.
 ///
 /// * `rays`: `H·W·3` camera-frame ray directions of the pixels (any length, `r_z ≠ 0`);
@@ -261,6 +311,21 @@ pub fn stl_records(vertices: &[f32], faces: &[i32]) -> Result<Vec<u8>, KernelErr
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lit_median_of_the_lit_samples() {
+        // 4 frames of 2 pixels: pixel 0 lit in frames 0, 2, 3; pixel 1 in none (all four count).
+        let lit = [1, 0, 0, 0, 1, 0, 1, 0];
+        let mut stack = Vec::new();
+        for k in 0..4u8 {
+            stack.extend([10 * k, 200, 7, 50 - k, 100 + k, 3 * k]);
+        }
+        let got = lit_median(&stack, &lit, 4).unwrap();
+        // pixel 0: R of 0, 20, 30 → 20; G 200; B 7. Pixel 1: R 50..47 → (48 + 49 + 1)/2 = 49.
+        assert_eq!(got, vec![20, 200, 7, 49, 102, 5]);
+        assert!(lit_median(&stack[..23], &lit, 4).is_err());
+        assert!(lit_median(&stack, &lit, 3).is_err());
+    }
 
     #[test]
     fn world_points_on_the_rays_at_their_depth() {

@@ -1066,6 +1066,47 @@ fn retime_rows_sigma<'py>(
     )
 }
 
+/// Per pixel and channel, the median of the frames it is lit in: (H, W, 3) uint8 (see
+/// `gnomon_core::lit_median`).
+#[pyfunction]
+#[pyo3(signature = (stack, lit))]
+fn lit_median<'py>(
+    py: Python<'py>,
+    stack: &Bound<'py, PyAny>,
+    lit: &Bound<'py, PyAny>,
+) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    let lit = borrow_array::<u8, Ix3>(
+        lit,
+        "lit",
+        "uint8",
+        &[Extent::Any("K"), Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (k, h, w) = (lit.shape()[0], lit.shape()[1], lit.shape()[2]);
+    let stack = borrow_array::<u8, numpy::ndarray::Ix4>(
+        stack,
+        "stack",
+        "uint8",
+        &[
+            Extent::Exactly(k),
+            Extent::Exactly(h),
+            Extent::Exactly(w),
+            Extent::Exactly(3),
+        ],
+    )?;
+    let (lit, stack) = (lit.as_array(), stack.as_array());
+    let rgb = py
+        .detach(|| {
+            with_slice(&stack, |stack| {
+                with_slice(&lit, |lit| gnomon_core::lit_median(stack, lit, k))
+            })
+        })
+        .map_err(kernel_error)?;
+    let rgb = Array3::from_shape_vec((h, w, 3), rgb).map_err(|err| {
+        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
+    })?;
+    Ok(rgb.into_pyarray(py))
+}
+
 /// World-frame points (H, W, 3) float32 of a depth map, NaN off the surface (see
 /// `gnomon_core::world_points`).
 #[pyfunction]
@@ -1263,6 +1304,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(retime_rows_sigma, m)?)?;
     m.add_function(wrap_pyfunction!(world_points, m)?)?;
     m.add_function(wrap_pyfunction!(ray_map, m)?)?;
+    m.add_function(wrap_pyfunction!(lit_median, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
