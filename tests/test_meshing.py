@@ -209,3 +209,29 @@ def test_kernel_stl_records_equal_a_per_face_computation(tmp_path) -> None:
         np.testing.assert_allclose(rec["n"][k], expect, rtol=0, atol=1e-5)
     assert np.array_equal(rec["n"][3], np.zeros(3, np.float32))
     assert data[84:] == _stl_table_numpy(v, f).tobytes()
+
+
+def test_kernel_fusion_equals_fuse_depths_then_neighbour_support() -> None:
+    """_kernel.fuse_supported is fuse_depths (Gaussian weights) then supported_by_neighbours: random
+    depths with missing estimates, conflicts, isolated pixels and a depth step."""
+    from gnomon import _kernel
+    from gnomon.fusion import fuse_depths
+
+    rng = np.random.default_rng(8)
+    h, w = 33, 41
+    for k in (1, 2, 3):
+        base = np.where(np.arange(w)[None, :] < 20, 500.0, 620.0) + rng.normal(0, 0.5, (h, w))
+        depths = (base[None] + rng.normal(0, 0.3, (k, h, w))).astype(np.float32)
+        sigmas = rng.uniform(0.05, 0.5, (k, h, w)).astype(np.float32)
+        depths[rng.random((k, h, w)) < 0.15] = np.nan
+        sigmas[rng.random((k, h, w)) < 0.05] = 0.0  # no estimate
+        depths[0][rng.random((h, w)) < 0.05] += 60.0  # conflicts with the others
+        depths[:, 5, 5] = 900.0  # isolated: no neighbour shares it
+        fused, sigma, conflict = fuse_depths(list(depths), list(sigmas), 0.02)
+        keep = supported_by_neighbours(fused, 0.02)
+        got_depth, got_sigma, code = _kernel.fuse_supported(depths, sigmas, 0.02)
+        np.testing.assert_array_equal(got_depth, np.where(keep, fused, np.nan).astype(np.float32))
+        np.testing.assert_array_equal(got_sigma, np.where(keep, sigma, np.nan).astype(np.float32))
+        np.testing.assert_array_equal(code == 2, conflict)
+        np.testing.assert_array_equal(code == 3, np.isfinite(fused) & ~keep)
+        assert (code == 3).any() and (k == 1 or conflict.any())

@@ -286,6 +286,17 @@ def ray_plane_angles(
     planes (rows of ``planes`` (N, 4) interpolated at ``times`` (H, W)), row-major, NaN where a plane
     is missing: :func:`gnomon.pipeline.ray_plane_angles`; chunks of pixels in parallel."""
 
+def fuse_supported(
+    depths: npt.NDArray[np.float32],
+    sigmas: npt.NDArray[np.float32],
+    max_relative_jump: float,
+    min_support: int = 2,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
+    """K depth estimates (K, H, W) with their σ fused by inverse variance (:func:`gnomon.fusion.fuse_depths`,
+    Gaussian weights), then the fused depths no ``min_support`` of 8 neighbours share dropped
+    (:func:`gnomon.triangulation.supported_by_neighbours`): (depth, σ) (H, W) NaN where not kept, and per
+    pixel 0 no estimate, 1 kept, 2 conflict, 3 unsupported; rows in parallel."""
+
 def lit_median(stack: npt.NDArray[np.uint8], lit: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     """(H, W, 3): per pixel and channel the median of the ``stack`` (K, H, W, 3) samples it is ``lit`` (K, H, W)
     in (all K where it is lit in none), ``(s[(n−1)//2] + s[n//2] + 1) // 2`` of the n sorted samples, as

@@ -40,7 +40,6 @@ from gnomon.deblock import block_grid, deblock_times
 from gnomon.errors import FrameError
 from gnomon.fieldlog import DEFAULT_MESH_FORMATS, load_field_log
 from gnomon.frames import Frame, FrameSource, sha256_file
-from gnomon.fusion import fuse_depths
 from gnomon.light import EdgePlanes, EdgeTimes, ReferenceGeometry
 from gnomon.light.base import LightModel, Screening
 from gnomon.meshing import (
@@ -60,7 +59,7 @@ from gnomon.retiming import retime_with_sigma
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
 from gnomon.texture import LitColour, sample_indices
 from gnomon.tracking import ShadowTimes, TrackedSequence, contrast_floor, linear, track_source
-from gnomon.triangulation import supported_by_neighbours, triangulate
+from gnomon.triangulation import triangulate
 from gnomon.uncertainty import (
     depth_sigma,
     interpolation_time_sigma,
@@ -485,11 +484,11 @@ class _Fused:
 def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: float,
           levels: _Levels | None = None) -> _Fused:
     """Fuse the edges, drop unsupported points, shadow time in capture frames, under-sampled points."""
-    depth, sigma, conflict = fuse_depths([e.depth for e in edges], [e.sigma for e in edges], max_depth_jump)
-    keep = supported_by_neighbours(depth, max_depth_jump)
-    unsupported = np.isfinite(depth) & ~keep
-    depth = np.where(keep, depth, np.nan).astype(np.float32)
-    sigma = np.where(keep, sigma, np.nan).astype(np.float32)
+    # fuse_depths then supported_by_neighbours, per pixel in the kernel (rows in parallel)
+    depth, sigma, code = _kernel.fuse_supported(np.stack([e.depth for e in edges]).astype(np.float32, copy=False),
+                                                np.stack([e.sigma for e in edges]).astype(np.float32, copy=False),
+                                                float(max_depth_jump))
+    keep, conflict, unsupported = code == 1, code == 2, code == 3
     shadow_time = _mean_ignoring_nan([e.times for e in edges])
     used = tracked.used
     if len(used) and not np.array_equal(used, np.arange(len(used))):

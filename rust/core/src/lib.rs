@@ -38,7 +38,9 @@ pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
 pub use retime::{retime_rows, retime_rows_sigma, RetimeParams, Retimed, RetimedSigma};
 pub use sample::Sample;
 pub use simd::SimdPath;
-pub use surface::{grid_normals, lit_median, stl_records, world_points, STL_RECORD_BYTES};
+pub use surface::{
+    fuse_supported, grid_normals, lit_median, stl_records, world_points, STL_RECORD_BYTES,
+};
 pub use tracker::{
     find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,
 };

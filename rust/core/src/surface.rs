@@ -38,6 +38,135 @@ fn finite(a: V3) -> bool {
     a.iter().all(|x| x.is_finite())
 }
 
+/// [`fuse_supported`]'s depth and σ maps (f32) and per-pixel codes.
+pub type FusedMaps = (Vec<f32>, Vec<f32>, Vec<u8>);
+
+/// Inverse-variance fusion of K depth estimates per pixel, then the pixels no
+/// neighbour supports dropped (`gnomon.fusion.fuse_depths` with Gaussian weights,
+/// then `gnomon.triangulation.supported_by_neighbours`).
+///
+/// * `depths`, `sigmas`: `K·H·W` (f32), estimate k of pixel p at `k·H·W + p`;
+///   an estimate counts where both are finite and σ > 0;
+/// * fused `Z = Σ wₖZₖ`, `σ = √Σ (wₖσₖ)²` with `wₖ = σₖ⁻² / Σ σ⁻²` (f64); two
+///   or more estimates spreading more than `max(6·√Σσₖ², jump·|Z|)` are a
+///   conflict (no depth);
+/// * a fused depth is kept when at least `min_support` of its 8 neighbours are
+///   within `jump·|Z|` of it (f32, as the depth map is).
+///
+/// Returns (depth, σ) f32 with NaN where not kept, and per pixel a code:
+/// 0 none, 1 kept, 2 conflict, 3 fused but unsupported. Rows in parallel.
+pub fn fuse_supported(
+    depths: &[f32],
+    sigmas: &[f32],
+    estimates: usize,
+    width: usize,
+    jump: f64,
+    min_support: usize,
+) -> Result<FusedMaps, KernelError> {
+    if estimates == 0 || depths.len() % estimates != 0 {
+        return Err(KernelError::parameter(
+            "estimates",
+            format!("{estimates} does not divide the {} depths", depths.len()),
+        ));
+    }
+    let n = depths.len() / estimates;
+    KernelError::check_image(
+        n,
+        width,
+        &[("sigmas (one per depth)", depths.len(), sigmas.len())],
+    )?;
+    const CONFLICT_SIGMAS: f64 = 6.0;
+    let mut fused = vec![f32::NAN; n];
+    let mut sigma = vec![f32::NAN; n];
+    let mut code = vec![0u8; n];
+    fused
+        .par_chunks_mut(width)
+        .zip(sigma.par_chunks_mut(width))
+        .zip(code.par_chunks_mut(width))
+        .enumerate()
+        .for_each(|(row, ((fused, sigma), code))| {
+            for u in 0..width {
+                let p = row * width + u;
+                let (mut total, mut count) = (0.0f64, 0usize);
+                let (mut hi, mut lo) = (f64::NEG_INFINITY, f64::INFINITY);
+                let mut var = 0.0f64;
+                for k in 0..estimates {
+                    let (z, s) = (f64::from(depths[k * n + p]), f64::from(sigmas[k * n + p]));
+                    if z.is_finite() && s.is_finite() && s > 0.0 {
+                        total += 1.0 / (s * s);
+                        count += 1;
+                        hi = hi.max(z);
+                        lo = lo.min(z);
+                        var += s * s;
+                    }
+                }
+                if count == 0 {
+                    continue;
+                }
+                let (mut z_sum, mut s_sum) = (0.0f64, 0.0f64);
+                for k in 0..estimates {
+                    let (z, s) = (f64::from(depths[k * n + p]), f64::from(sigmas[k * n + p]));
+                    if z.is_finite() && s.is_finite() && s > 0.0 {
+                        let w = (1.0 / (s * s)) / total;
+                        z_sum += w * z;
+                        s_sum += (w * s) * (w * s);
+                    }
+                }
+                if count >= 2 && hi - lo > (CONFLICT_SIGMAS * var.sqrt()).max(jump * z_sum.abs()) {
+                    code[u] = 2;
+                    continue;
+                }
+                fused[u] = z_sum as f32;
+                sigma[u] = s_sum.sqrt() as f32;
+            }
+        });
+    // Neighbour support on the fused map (f32 comparisons, as numpy on the float32 map).
+    let height = n / width;
+    let jump32 = jump as f32;
+    let support: Vec<u8> = (0..height)
+        .into_par_iter()
+        .flat_map_iter(|v| {
+            let fused = &fused;
+            (0..width).map(move |u| {
+                let z = fused[v * width + u];
+                let mut count = 0usize;
+                for (dv, du) in [
+                    (-1, -1),
+                    (-1, 0),
+                    (-1, 1),
+                    (0, -1),
+                    (0, 1),
+                    (1, -1),
+                    (1, 0),
+                    (1, 1),
+                ] {
+                    let (vv, uu) = (v as i64 + dv, u as i64 + du);
+                    if vv < 0 || uu < 0 || vv >= height as i64 || uu >= width as i64 {
+                        continue;
+                    }
+                    let o = fused[vv as usize * width + uu as usize];
+                    if (z - o).abs() <= jump32 * z.abs() {
+                        count += 1;
+                    }
+                }
+                u8::from(z.is_finite() && count >= min_support)
+            })
+        })
+        .collect();
+    for p in 0..n {
+        if fused[p].is_finite() {
+            if support[p] != 0 {
+                code[p] = 1;
+            } else {
+                code[p] = 3;
+                fused[p] = f32::NAN;
+                sigma[p] = f32::NAN;
+            }
+        }
+    }
+    Ok((fused, sigma, code))
+}
+
 /// Per pixel and channel, the median of the samples a pixel is lit in (`gnomon.texture.LitColour.finish`).
 ///
 /// * `stack`: `K·P·3` colour samples (K frames of P pixels, RGB), u8;

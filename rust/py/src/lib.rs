@@ -1066,6 +1066,50 @@ fn retime_rows_sigma<'py>(
     )
 }
 
+/// Fused depth and σ of K estimates per pixel, neighbour-supported only, and each pixel's code
+/// (0 none, 1 kept, 2 conflict, 3 unsupported), each (H, W) (see `gnomon_core::fuse_supported`).
+#[pyfunction]
+#[pyo3(signature = (depths, sigmas, max_relative_jump, min_support = 2))]
+fn fuse_supported<'py>(
+    py: Python<'py>,
+    depths: &Bound<'py, PyAny>,
+    sigmas: &Bound<'py, PyAny>,
+    max_relative_jump: f64,
+    min_support: usize,
+) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    let depths = borrow_array::<f32, Ix3>(
+        depths,
+        "depths",
+        "float32",
+        &[Extent::Any("K"), Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (k, h, w) = (depths.shape()[0], depths.shape()[1], depths.shape()[2]);
+    let sigmas = borrow_array::<f32, Ix3>(
+        sigmas,
+        "sigmas",
+        "float32",
+        &[Extent::Exactly(k), Extent::Exactly(h), Extent::Exactly(w)],
+    )?;
+    let (depths, sigmas) = (depths.as_array(), sigmas.as_array());
+    let (depth, sigma, code) = py
+        .detach(|| {
+            with_slice(&depths, |d| {
+                with_slice(&sigmas, |s| {
+                    gnomon_core::fuse_supported(d, s, k, w.max(1), max_relative_jump, min_support)
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    pyo3::types::PyTuple::new(
+        py,
+        [
+            image(py, depth, h, w)?.into_any(),
+            image(py, sigma, h, w)?.into_any(),
+            image(py, code, h, w)?.into_any(),
+        ],
+    )
+}
+
 /// Per pixel and channel, the median of the frames it is lit in: (H, W, 3) uint8 (see
 /// `gnomon_core::lit_median`).
 #[pyfunction]
@@ -1305,6 +1349,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(world_points, m)?)?;
     m.add_function(wrap_pyfunction!(ray_map, m)?)?;
     m.add_function(wrap_pyfunction!(lit_median, m)?)?;
+    m.add_function(wrap_pyfunction!(fuse_supported, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
