@@ -5,7 +5,9 @@
 //! The distortion maps undistorted normalised coordinates `(x, y)` to
 //! distorted ones; a pixel `(u, v)` gives `t = ((u − cx)/fx, (v − cy)/fy)` and
 //! its ray is `(x, y, 1)/‖·‖` with `distort(x, y) = t`. [`ray_map`] solves that
-//! equation by Newton's method, pixel by pixel.
+//! equation by Newton's method: a row's pixels take [`BATCH_STEPS`] steps
+//! together (vectorised), then each pixel not yet within the tolerance
+//! iterates on its own from the pinhole point.
 //!
 //! Invariants: rows are processed in parallel (rayon), each pixel from its own
 //! coordinates only; a pixel's ray is returned only when its reprojection
@@ -77,6 +79,65 @@ fn undistort_point(
     }
 }
 
+/// Newton steps taken on a whole row at once, with no test per pixel (the
+/// loop over the row then vectorises); an ordinary lens needs 2-3 from the
+/// pinhole start.
+const BATCH_STEPS: u32 = 3;
+
+/// One image row's Newton iterates, advanced together.
+struct Row {
+    tx: Vec<f64>,
+    x: Vec<f64>,
+    y: Vec<f64>,
+    /// `det J > 0` at every iterate so far (the unfolded branch).
+    unfolded: Vec<bool>,
+}
+
+impl Row {
+    fn new(width: usize) -> Self {
+        Row {
+            tx: vec![0.0; width],
+            x: vec![0.0; width],
+            y: vec![0.0; width],
+            unfolded: vec![true; width],
+        }
+    }
+
+    /// `steps` Newton steps from the pinhole point for every pixel of the row at
+    /// normalised `ty` (`f = (fx, cx)` for the columns). A pixel whose iterate
+    /// met `det J ≤ 0` (or NaN) is flagged in `unfolded` and its later iterates are
+    /// not used.
+    fn solve(&mut self, ty: f64, f: (f64, f64), k: &[f64; 5], steps: u32) {
+        for (u, (((tx, x), y), unfolded)) in self
+            .tx
+            .iter_mut()
+            .zip(self.x.iter_mut())
+            .zip(self.y.iter_mut())
+            .zip(self.unfolded.iter_mut())
+            .enumerate()
+        {
+            *tx = (u as f64 - f.1) / f.0;
+            (*x, *y, *unfolded) = (*tx, ty, true);
+        }
+        for _ in 0..steps {
+            for (((tx, x), y), unfolded) in self
+                .tx
+                .iter()
+                .zip(self.x.iter_mut())
+                .zip(self.y.iter_mut())
+                .zip(self.unfolded.iter_mut())
+            {
+                let (ex, ey, a, b, d) = residual_and_jacobian(*x, *y, (*tx, ty), k);
+                let det = a * d - b * b;
+                *unfolded &= det > 0.0;
+                let inv_det = 1.0 / det;
+                *x -= (d * ex - b * ey) * inv_det;
+                *y -= (a * ey - b * ex) * inv_det;
+            }
+        }
+    }
+}
+
 /// Unit camera-frame rays of every pixel centre of a `width × height` image
 /// (pixel `(u, v)` at integer coordinates), and a flag per pixel.
 ///
@@ -133,16 +194,34 @@ pub fn ray_map(
         .zip(solved.par_chunks_mut(width * ROWS_PER_TASK))
         .enumerate()
         .for_each(|(task, (rays, solved))| {
-            for (i, (ray, ok)) in rays.chunks_exact_mut(3).zip(solved.iter_mut()).enumerate() {
-                let v = (task * ROWS_PER_TASK + i / width) as f64;
-                let u = (i % width) as f64;
-                let t = ((u - cx) / fx, (v - cy) / fy);
-                if let Some((x, y)) = undistort_point(t, &dist, (fx, fy), tol_px, max_steps) {
-                    let inv = 1.0 / (x * x + y * y + 1.0).sqrt();
-                    ray[0] = x * inv;
-                    ray[1] = y * inv;
-                    ray[2] = inv;
-                    *ok = 1;
+            let mut row = Row::new(width);
+            for (r, (rays, solved)) in rays
+                .chunks_exact_mut(3 * width)
+                .zip(solved.chunks_exact_mut(width))
+                .enumerate()
+            {
+                let ty = ((task * ROWS_PER_TASK + r) as f64 - cy) / fy;
+                row.solve(ty, (fx, cx), &dist, max_steps.min(BATCH_STEPS));
+                for (u, (ray, ok)) in rays.chunks_exact_mut(3).zip(solved.iter_mut()).enumerate() {
+                    let t = (row.tx[u], ty);
+                    let (x, y) = (row.x[u], row.y[u]);
+                    let done = row.unfolded[u] && {
+                        let (ex, ey, a, b, d) = residual_and_jacobian(x, y, t, &dist);
+                        let (rx, ry) = (ex * fx, ey * fy);
+                        a * d - b * b > 0.0 && rx * rx + ry * ry < tol_px * tol_px
+                    };
+                    let xy = if done {
+                        Some((x, y))
+                    } else {
+                        undistort_point(t, &dist, (fx, fy), tol_px, max_steps)
+                    };
+                    if let Some((x, y)) = xy {
+                        let inv = 1.0 / (x * x + y * y + 1.0).sqrt();
+                        ray[0] = x * inv;
+                        ray[1] = y * inv;
+                        ray[2] = inv;
+                        *ok = 1;
+                    }
                 }
             }
         });
