@@ -67,7 +67,19 @@ def write_text(path: str | os.PathLike, text: str) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
+class _Stream:
+    """A file as numpy's writers see a plain stream: they write through ``write``, whose failure carries
+    the system's reason (no space left, file too large), not through ``ndarray.tofile``, whose short write
+    on a full disk raises an OSError without one."""
+
+    def __init__(self, fh) -> None:
+        self._fh = fh
+
+    def write(self, data) -> int:
+        return self._fh.write(data)
+
+
 def save_npy(path: str | os.PathLike, array: np.ndarray) -> None:
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
-            np.save(fh, array)
+            np.save(_Stream(fh), array)
