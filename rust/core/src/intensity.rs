@@ -177,17 +177,9 @@ impl Intensity {
             ..
         } = self
         else {
-            return Err(KernelError::parameter(
-                "gain",
-                "only a normalised tracker takes a gain with each frame",
-            ));
+            return Err(not_normalised());
         };
-        if !(gain.is_finite() && gain > 0.0) {
-            return Err(KernelError::parameter(
-                "gain",
-                format!("must be a positive number, got {gain}"),
-            ));
-        }
+        check_gain(gain)?;
         let factor = (f64::from(NORMALISED_SCALE) / gain) as f32;
         // (the product is ≥ 0: clamped, then truncated towards zero)
         let code = |l: f32| (l * factor).clamp(0.0, CODE_MAX) as u16;
@@ -213,17 +205,9 @@ impl Intensity {
             gains, full_scale, ..
         } = self
         else {
-            return Err(KernelError::parameter(
-                "gain",
-                "only a normalised tracker takes a gain with each frame",
-            ));
+            return Err(not_normalised());
         };
-        if !(gain.is_finite() && gain > 0.0) {
-            return Err(KernelError::parameter(
-                "gain",
-                format!("must be a positive number, got {gain}"),
-            ));
-        }
+        check_gain(gain)?;
         gains.push(gain);
         full_scale.push(u16::MAX);
         Ok(())
@@ -347,6 +331,26 @@ impl Intensity {
             }
         }
     }
+}
+
+/// A frame's gain must be a positive finite number.
+fn check_gain(gain: f64) -> Result<(), KernelError> {
+    if gain.is_finite() && gain > 0.0 {
+        Ok(())
+    } else {
+        Err(KernelError::parameter(
+            "gain",
+            format!("must be a positive number, got {gain}"),
+        ))
+    }
+}
+
+/// A gain given to a tracker that is not normalised.
+fn not_normalised() -> KernelError {
+    KernelError::parameter(
+        "gain",
+        "only a normalised tracker takes a gain with each frame",
+    )
 }
 
 #[cfg(test)]

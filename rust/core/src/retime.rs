@@ -59,6 +59,30 @@ pub struct RetimeParams {
     pub backstep: f64,
 }
 
+/// The checks [`retime_rows`] and [`retime_rows_sigma`] share: one index and
+/// one flag per pixel, whole rows of `width`, and `n_frames ≥ 0`.
+fn check_rows(
+    times: &[f64],
+    index: &[i64],
+    wanted: &[u8],
+    width: usize,
+    params: RetimeParams,
+) -> Result<(), KernelError> {
+    let n = times.len();
+    KernelError::check_image(
+        n,
+        width,
+        &[
+            ("index (one per pixel)", n, index.len()),
+            ("wanted (one per pixel)", n, wanted.len()),
+        ],
+    )?;
+    if params.n_frames < 0 {
+        return Err(KernelError::parameter("n_frames", "must be ≥ 0"));
+    }
+    Ok(())
+}
+
 /// Re-time the rows of an oriented `H × width` shadow-time map (see the module).
 ///
 /// `times` `H·W` frames (NaN = none); `index` `H·W` each pixel's flat index in
@@ -72,17 +96,7 @@ pub fn retime_rows(
     params: RetimeParams,
 ) -> Result<Retimed, KernelError> {
     let n = times.len();
-    KernelError::check_image(
-        n,
-        width,
-        &[
-            ("index (one per pixel)", n, index.len()),
-            ("wanted (one per pixel)", n, wanted.len()),
-        ],
-    )?;
-    if params.n_frames < 0 {
-        return Err(KernelError::parameter("n_frames", "must be ≥ 0"));
-    }
+    check_rows(times, index, wanted, width, params)?;
     let rows: Vec<Retimed> = times
         .par_chunks(width)
         .zip(index.par_chunks(width))
@@ -140,17 +154,7 @@ pub fn retime_rows_sigma(
     params: RetimeParams,
 ) -> Result<RetimedSigma, KernelError> {
     let n = times.len();
-    KernelError::check_image(
-        n,
-        width,
-        &[
-            ("index (one per pixel)", n, index.len()),
-            ("wanted (one per pixel)", n, wanted.len()),
-        ],
-    )?;
-    if params.n_frames < 0 {
-        return Err(KernelError::parameter("n_frames", "must be ≥ 0"));
-    }
+    check_rows(times, index, wanted, width, params)?;
     if index.iter().any(|&i| i < 0 || i as usize >= sigma.len()) {
         return Err(KernelError::parameter(
             "index",

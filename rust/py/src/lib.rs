@@ -130,15 +130,29 @@ fn with_slice<T: Copy, D: Dimension, R>(
     }
 }
 
+/// A core result whose length does not match the shape the binding asked for: a kernel bug.
+fn shape_error(err: numpy::ndarray::ShapeError) -> PyErr {
+    pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
+}
+
 fn image<'py, T: Element>(
     py: Python<'py>,
     data: Vec<T>,
     height: usize,
     width: usize,
 ) -> PyResult<Bound<'py, PyArray2<T>>> {
-    let array = Array2::from_shape_vec((height, width), data).map_err(|err| {
-        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
-    })?;
+    let array = Array2::from_shape_vec((height, width), data).map_err(shape_error)?;
+    Ok(array.into_pyarray(py))
+}
+
+/// A row-major (height, width, 3) core result as a numpy array.
+fn grid3<'py, T: Element>(
+    py: Python<'py>,
+    data: Vec<T>,
+    height: usize,
+    width: usize,
+) -> PyResult<Bound<'py, PyArray3<T>>> {
+    let array = Array3::from_shape_vec((height, width, 3), data).map_err(shape_error)?;
     Ok(array.into_pyarray(py))
 }
 
@@ -669,6 +683,7 @@ impl TemporalTracker {
 /// `(points (H, W, 3) float32, valid (H, W) bool)`.
 type RaysAndMask<'py> = (Bound<'py, PyArray3<f64>>, Bound<'py, PyArray2<bool>>);
 type PointsAndMask<'py> = (Bound<'py, PyArray3<f32>>, Bound<'py, PyArray2<bool>>);
+type FacesAndSources<'py> = (Bound<'py, PyArray2<i32>>, Bound<'py, PyArray1<i64>>);
 
 /// Camera rays ∩ shadow planes interpolated at each pixel's shadow time.
 #[pyfunction]
@@ -711,10 +726,8 @@ fn triangulate<'py>(
             })
         })
         .map_err(kernel_error)?;
-    let points = Array3::from_shape_vec((h, w, 3), points).map_err(|err| {
-        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
-    })?;
-    Ok((points.into_pyarray(py), mask(py, valid, h, w)?))
+    let points = grid3(py, points, h, w)?;
+    Ok((points, mask(py, valid, h, w)?))
 }
 
 /// Angles (degrees) between the selected pixels' rays and their shadow planes (see
@@ -833,7 +846,7 @@ fn clean_faces<'py>(
     n_vertices: usize,
     faces: &Bound<'py, PyAny>,
     min_vertices: usize,
-) -> PyResult<(Bound<'py, PyArray2<i32>>, Bound<'py, PyArray1<i64>>)> {
+) -> PyResult<FacesAndSources<'py>> {
     let faces = borrow_array::<i32, Ix2>(
         faces,
         "faces",
@@ -983,9 +996,6 @@ fn retime_rows<'py>(
         Array2::from_shape_vec((n, 2), v.into_iter().flatten().collect())
             .map(|a| a.into_pyarray(py))
     };
-    let shape_err = |err: numpy::ndarray::ShapeError| {
-        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
-    };
     let done: Vec<bool> = r.done.iter().map(|&d| d != 0).collect();
     pyo3::types::PyTuple::new(
         py,
@@ -993,10 +1003,10 @@ fn retime_rows<'py>(
             image(py, r.times, h, w)?.into_any(),
             image(py, done, h, w)?.into_any(),
             r.pixel.into_pyarray(py).into_any(),
-            pairs_i(r.left).map_err(shape_err)?.into_any(),
-            pairs_i(r.right).map_err(shape_err)?.into_any(),
-            pairs_f(r.phase).map_err(shape_err)?.into_any(),
-            pairs_f(r.rise).map_err(shape_err)?.into_any(),
+            pairs_i(r.left).map_err(shape_error)?.into_any(),
+            pairs_i(r.right).map_err(shape_error)?.into_any(),
+            pairs_f(r.phase).map_err(shape_error)?.into_any(),
+            pairs_f(r.rise).map_err(shape_error)?.into_any(),
             r.gap.into_pyarray(py).into_any(),
             r.f.into_pyarray(py).into_any(),
         ],
@@ -1145,10 +1155,8 @@ fn lit_median<'py>(
             })
         })
         .map_err(kernel_error)?;
-    let rgb = Array3::from_shape_vec((h, w, 3), rgb).map_err(|err| {
-        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
-    })?;
-    Ok(rgb.into_pyarray(py))
+    let rgb = grid3(py, rgb, h, w)?;
+    Ok(rgb)
 }
 
 /// World-frame points (H, W, 3) float32 of a depth map, NaN off the surface (see
@@ -1201,10 +1209,8 @@ fn world_points<'py>(
             })
         })
         .map_err(kernel_error)?;
-    let points = Array3::from_shape_vec((h, w, 3), points).map_err(|err| {
-        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
-    })?;
-    Ok(points.into_pyarray(py))
+    let points = grid3(py, points, h, w)?;
+    Ok(points)
 }
 
 /// Unit rays (H, W, 3) float64 of every pixel of OpenCV's 5-coefficient camera and their
@@ -1223,10 +1229,8 @@ fn ray_map<'py>(
     let (rays, solved) = py
         .detach(|| gnomon_core::ray_map(width, height, intrinsics, dist, tol_px, max_steps))
         .map_err(kernel_error)?;
-    let rays = Array3::from_shape_vec((height, width, 3), rays).map_err(|err| {
-        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
-    })?;
-    Ok((rays.into_pyarray(py), mask(py, solved, height, width)?))
+    let rays = grid3(py, rays, height, width)?;
+    Ok((rays, mask(py, solved, height, width)?))
 }
 
 /// Unit normals (H, W, 3) float32 of the surface on the pixel grid (see `gnomon_core::grid_normals`).
@@ -1278,10 +1282,8 @@ fn grid_normals<'py>(
             })
         })
         .map_err(kernel_error)?;
-    let normals = Array3::from_shape_vec((h, w, 3), normals).map_err(|err| {
-        pyo3::exceptions::PyRuntimeError::new_err(format!("internal shape error: {err}"))
-    })?;
-    Ok(normals.into_pyarray(py))
+    let normals = grid3(py, normals, h, w)?;
+    Ok(normals)
 }
 
 /// The records of a binary STL file (F·50,) uint8 (see `gnomon_core::stl_records`).
