@@ -319,21 +319,8 @@ class FrameSource:
             _check_like(index, name, image.shape, image.dtype, first.shape, first.dtype)
 
     def _decode(self) -> Iterator[Frame]:
+        """A video's frames in order, on the reader thread (image files: :meth:`_decode_parallel`)."""
         first: np.ndarray | None = None
-        if self.video is None:
-            # One digest per pass: a partial pass (a peek at the first frame,
-            # read ahead by the reader thread) must not leave bytes behind.
-            digest = hashlib.sha256()
-            for i, path in enumerate(self.image_files):
-                image, raw = decode_image_file(path)
-                digest.update(raw)
-                self._check_size(i, path.name, image, first)
-                color = image if (i in self.color_frames and image.ndim == 3) else None
-                if first is None:
-                    first = image
-                yield Frame(i, to_grey(image), color[:, :, :3] if color is not None else None, path.name)
-            self._digest = digest.hexdigest()
-            return
         cap = cv2.VideoCapture(str(self.video))
         try:
             i = 0
@@ -394,7 +381,7 @@ class FrameSource:
 
     def __iter__(self) -> Iterator[Frame]:
         """Frames in order, decoded on background threads."""
-        if self.video is None and self.image_files and type(self)._decode is FrameSource._decode:
+        if self.video is None and type(self)._decode is FrameSource._decode:  # image files
             yield from self._decode_parallel()
             return
         out: queue.Queue[object] = queue.Queue(maxsize=FRAMES_IN_FLIGHT)
