@@ -24,7 +24,7 @@ during the cloud (the pole's: one or two frames) lowers ``a_p`` in those
 frames and so raises the fit; the shadow's line is thin, while ``β`` is a
 property of the surface (its share of sky light, not its albedo), shared by
 its neighbours: a pixel's ``β`` is capped at the median of its neighbourhood
-plus what its own noise allows.
+plus a fixed margin (``BETA_MARGIN``).
 """
 
 from __future__ import annotations
@@ -43,6 +43,8 @@ CLEAR_CHANGE = 0.1
 LEVEL_FLOOR = 0.01
 # Neighbourhood (px) whose median β caps a pixel's own fit.
 MEDIAN_SIZE = 9
+# What a pixel's β may exceed its neighbourhood's median by (β units).
+BETA_MARGIN = 0.1
 # β is quantised for the median in steps of BETA_STEP over [BETA_MIN, BETA_MIN + 255·BETA_STEP].
 BETA_MIN = -2.0
 BETA_STEP = 0.02
@@ -104,4 +106,4 @@ def _cap_by_neighbours(beta: np.ndarray, fit: np.ndarray) -> np.ndarray:
     """``β`` capped at its neighbourhood's median (a shadow during the dip only raises a fit)."""
     code = np.clip(np.rint((beta - BETA_MIN) / BETA_STEP), 0, 255).astype(np.uint8)
     median = cv2.medianBlur(code, MEDIAN_SIZE).astype(np.float32) * BETA_STEP + BETA_MIN
-    return np.where(fit, np.minimum(beta, median + 0.1), beta).astype(np.float32)
+    return np.where(fit, np.minimum(beta, median + BETA_MARGIN), beta).astype(np.float32)

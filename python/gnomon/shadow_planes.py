@@ -218,10 +218,8 @@ class CompletionLight:
 
 
 def _least_squares_point(planes: np.ndarray) -> np.ndarray:
-    valid = planes[np.all(np.isfinite(planes), axis=1)]
-    norms = np.linalg.norm(valid[:, :3], axis=1, keepdims=True)
-    point, *_ = np.linalg.lstsq(valid[:, :3] / norms, valid[:, 3] / norms[:, 0], rcond=None)
-    return np.asarray(point, dtype=np.float64)
+    """The point closest to every valid plane, however poorly the planes fix it."""
+    return np.asarray(light_point_or_line(planes, min_conditioning=0.0).point, dtype=np.float64)
 
 
 def completion_light(planes: np.ndarray, lines: list[ReferenceLines],
