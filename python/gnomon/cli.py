@@ -20,6 +20,7 @@ import importlib
 import os
 import signal
 import sys
+from collections.abc import Sequence
 
 from gnomon import __version__, _kernel
 from gnomon.commands import COMMANDS
@@ -62,17 +63,32 @@ def version_text() -> str:
     return f"gnomon {__version__} (kernel {_kernel.__version__}, SIMD {_kernel.simd_path()})"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``gnomon`` parser. With ``argv``, only the command it names is imported and built in
+    full; the others are listed by name and help line (:data:`gnomon.commands.COMMANDS`), which is
+    all ``gnomon --help``, ``--version`` or a misspelt command needs, so none of them loads a
+    command's modules (numpy, OpenCV, pandas ...). Without ``argv``, every command is built."""
     parser = argparse.ArgumentParser(
         prog="gnomon",
         description="Shadow-sweep 3D scanning with a desk lamp or the sun.",
     )
     parser.add_argument("--version", action="version", version=version_text())
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for name in COMMANDS:
-        module = importlib.import_module(f"gnomon.commands.{name}")
-        module.register(subparsers)
+    chosen = None if argv is None else _command_named(argv)
+    for name, help_line in COMMANDS.items():
+        if argv is None or name == chosen:
+            module = importlib.import_module(f"gnomon.commands.{name}")
+            module.register(subparsers)
+        else:
+            subparsers.add_parser(name, help=help_line)
     return parser
+
+
+def _command_named(argv: Sequence[str]) -> str | None:
+    """The sub-command ``argv`` runs: its first argument that is not an option (the top-level
+    options, --help and --version, take no value), or None."""
+    first = next((a for a in argv if not a.startswith("-")), None)
+    return first if first in COMMANDS else None
 
 
 def _install_signal_handlers() -> dict:
@@ -130,7 +146,9 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("RUST_LOG", "off")
     previous = _install_signal_handlers()
     try:
-        parser = build_parser()
+        if argv is None:
+            argv = sys.argv[1:]
+        parser = build_parser(argv)
         args = parser.parse_args(argv)
         return int(args.func(args) or 0)
     except GnomonError as exc:

@@ -29,7 +29,6 @@ from typing import Any
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
 
 from gnomon.camera import Pose
 from gnomon.errors import GnomonError
@@ -385,6 +384,8 @@ def _fit_pose_planar(camera, local2d: np.ndarray, pixels: np.ndarray, where: str
 
 
 def _refine(camera, obj, pixels, rvec, tvec):
+    from scipy.optimize import least_squares  # ≈ 0.3 s to import: only when a plane's markers are refined
+
     def fun(p):
         return np.nan_to_num(_pixel_residuals(camera, p[:3], p[3:], obj, pixels).ravel(), nan=1e6)
 

@@ -7,13 +7,14 @@ import sys
 import time
 from pathlib import Path
 
+from gnomon.commands import COMMANDS
 from gnomon.recording import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "batch",
-        help="run many scans (and merges of scan pairs) on a Dask cluster",
+        help=COMMANDS["batch"],
         description="One task per scan, one per merge (run once both its scans are done), on a local "
         "cluster or an existing Dask scheduler. Scan NAME (the field log's folder, or the file's stem) "
         "is written to OUT/NAME, a merge of A and B to OUT/A+B. A scan whose outputs are complete and "

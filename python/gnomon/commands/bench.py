@@ -12,6 +12,7 @@ import json
 
 from gnomon.atomic import write_text
 from gnomon.bench import format_table, run_bench
+from gnomon.commands import COMMANDS
 from gnomon.commands.scan import _mesh_formats
 from gnomon.errors import GnomonError
 
@@ -19,7 +20,7 @@ from gnomon.errors import GnomonError
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "bench",
-        help="kernel throughput vs the numpy reference",
+        help=COMMANDS["bench"],
         description="Synthesise grey frames of a sweeping shadow, time the Rust tracker and the numpy "
         "tracker on them, and measure the kernel's peak memory (RSS of a fresh process) for 100 and "
         "for --frames frames. With --scan FIELD_LOG: time decoding that capture's frames alone, then "

@@ -20,6 +20,7 @@ import math
 import sys
 from pathlib import Path
 
+from gnomon.commands import COMMANDS
 from gnomon.errors import GnomonError
 from gnomon.recording import add_recording_arguments
 
@@ -27,7 +28,7 @@ from gnomon.recording import add_recording_arguments
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "calibrate",
-        help="calibrate the camera (chessboard photos) or the lamp (pencil photos)",
+        help=COMMANDS["calibrate"],
         description="Calibrate the camera from chessboard photos, or the lamp from pencil photos.",
     )
     sub = p.add_subparsers(dest="what", metavar="WHAT", required=True)

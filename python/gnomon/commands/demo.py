@@ -8,11 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
+from gnomon.commands import COMMANDS
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "demo",
-        help="simulate synthetic captures, scan them, and report accuracy",
+        help=COMMANDS["demo"],
         description="Render the built-in synthetic scenes (a desk lit by a lamp; a building facade "
         "swept by a pole's shadow under the sun) with exact ground truth, scan them like real "
         "captures, and print the depth error and coverage against the truth.",

@@ -15,6 +15,7 @@ import argparse
 import os
 from pathlib import Path
 
+from gnomon.commands import COMMANDS
 from gnomon.fieldlog import VIDEO_SUFFIXES
 
 TEMPLATE = '''\
@@ -84,7 +85,7 @@ dist = [0.0, 0.0, 0.0, 0.0, 0.0]  # k1, k2, p1, p2, k3
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "init",
-        help="write a commented field-log template for a capture",
+        help=COMMANDS["init"],
         description="Write a field log for the given frames (image files, or one video) with every "
         "section commented: the frames glob, the camera (--camera FILE, or inline keys to fill in), a desk "
         "and a wall with markers to fill in, a two-plane light and the scan settings.",

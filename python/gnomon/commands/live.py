@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gnomon.commands import COMMANDS
 from gnomon.recording import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "live",
-        help="scan while the shadow moves: live view, then the scan's outputs",
+        help=COMMANDS["live"],
         description="Track the shadow frame by frame and show depth as soon as the shadow has passed "
         "(rerun: the frame and its shadow edges, the shadow-time map filling in, points coloured by σ, "
         "coverage). When the source ends, on Ctrl-C or when the sweep is complete, writes what "

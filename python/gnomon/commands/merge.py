@@ -5,13 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gnomon.commands import COMMANDS
 from gnomon.recording import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "merge",
-        help="fuse two scans of one scene (e.g. lamp left and right)",
+        help=COMMANDS["merge"],
         description="Fuse two scan output folders taken with the same fixed camera, per pixel: "
         "inverse-variance (gaussian) weights, or Bouguet & Perona's sigmoid weights with --beta.",
     )

@@ -14,11 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
+from gnomon.commands import COMMANDS
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "preview",
-        help="a picture of what a field log assumes (regions, markers, grids), before scanning",
+        help=COMMANDS["preview"],
         description="Measure the planes' markers in the first frame and draw on it: the regions, each "
         "marker found with its reprojection residual, each plane's grid reprojected through the camera, "
         "the line where the planes meet, and the pencil's pixels. No tracking: it takes seconds.",

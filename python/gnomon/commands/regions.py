@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gnomon.commands import COMMANDS
+
 # The first lines are fitted inside the hull of a plane's markers grown by this fraction around their centre.
 SEED_GROWTH = -0.25
 PLANE_COLOURS = ((60, 60, 255), (255, 120, 40), (60, 200, 60), (200, 60, 200))  # BGR
@@ -24,7 +26,7 @@ PLANE_COLOURS = ((60, 60, 255), (255, 120, 40), (60, 200, 60), (200, 60, 200))  
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "regions",
-        help="propose each reference plane's bare, swept regions from a first pass",
+        help=COMMANDS["regions"],
         description="Track the shadow once and keep, for each plane, the pixels whose shadow times the "
         "plane's own shadow lines predict (lines first fitted inside its markers, or inside the regions "
         "the field log already gives). Writes one mask image per plane, a field-log snippet and a drawing.",

@@ -12,13 +12,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from gnomon.commands import COMMANDS
 from gnomon.recording import ENTITY
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "review",
-        help="summarise, export, compare recordings",
+        help=COMMANDS["review"],
         description=(
             "Summarise a Gnomon rerun recording (.rrd): entities, timeline ranges, point count, "
             "metrics and warnings. Optionally export its final point cloud as PLY, or compare its "

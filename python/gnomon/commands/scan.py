@@ -6,13 +6,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from gnomon.commands import COMMANDS
 from gnomon.recording import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "scan",
-        help="reconstruct 3D from a field log",
+        help=COMMANDS["scan"],
         description="Track the shadow in every pixel, find the shadow planes and triangulate. "
         "Writes points.ply, mesh.ply (and mesh.obj, mesh.stl with --mesh-formats), depth.npz (with the "
         "camera), depth.npy, sigma.npy, shadow_time.npy, preview.png, report.json and scan.rrd "

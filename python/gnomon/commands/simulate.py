@@ -8,12 +8,13 @@ import json
 import time
 
 from gnomon.api import SCENES
+from gnomon.commands import COMMANDS
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "simulate",
-        help="write a synthetic capture + field log + ground truth",
+        help=COMMANDS["simulate"],
         description=(
             "Render a synthetic shadow-sweep capture with exact ground truth. "
             "desk_lamp: a desk with a sphere, a box and a cylinder, a point-like lamp left of the "

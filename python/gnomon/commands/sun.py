@@ -12,6 +12,7 @@ import argparse
 
 import numpy as np
 
+from gnomon.commands import COMMANDS
 from gnomon.sun import Site, SiteError, enu_to_world, parse_time, sun_position
 
 #: The option of each :class:`gnomon.sun.Site` field, for messages.
@@ -22,7 +23,7 @@ OPTIONS = {"latitude_deg": "--lat", "longitude_deg": "--lon", "altitude_m": "--a
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "sun",
-        help="the sun's direction at a site and time (NREL SPA)",
+        help=COMMANDS["sun"],
         description="Print the sun's apparent azimuth (clockwise from north), elevation and zenith, and "
         "the unit vector towards the sun in East-North-Up (and in the world frame with --heading). "
         "Refraction uses --pressure and --temperature when given, else the pressure from --alt and 12 °C.",

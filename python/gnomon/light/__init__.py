@@ -9,12 +9,17 @@
 ``[site]``, ``[pole]``, ``[gnomon]`` for the sun) into one of them, once, at
 the edge; the scan then only talks to the interface. The lamp's own
 calibration from pencil photos lives in :mod:`gnomon.light.lamp_calibration`.
+
+The sun's names (:class:`SunClock`, :class:`SunWithLines`, :class:`SunWithPole`, ...) are
+loaded on first use: they need pandas and pvlib, which a lamp or two-plane scan never loads.
 """
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING
+
 import numpy as np
-import pandas as pd
 
 from gnomon.camera import Pose
 from gnomon.errors import FrameError, GnomonError
@@ -29,11 +34,18 @@ from gnomon.light.lamp_calibration import (
     detect_missing_tips,
     load_pencil_log,
 )
-from gnomon.light.sun import HeadingEstimate, SunClock, SunWithLines, SunWithPole, heading_from_gnomon
 from gnomon.light.two_plane import TwoPlaneLight
 from gnomon.reference_lines import PlaneInCamera
-from gnomon.sun import Site, SiteError
-from gnomon.timestamps import frame_times
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from gnomon.light.sun import HeadingEstimate as HeadingEstimate
+    from gnomon.light.sun import SunClock as SunClock
+    from gnomon.light.sun import SunWithLines as SunWithLines
+    from gnomon.light.sun import SunWithPole as SunWithPole
+    from gnomon.light.sun import heading_from_gnomon as heading_from_gnomon
+    from gnomon.sun import Site
 
 __all__ = [
     "EdgePlanes", "EdgeTimes", "LampCalibration", "LampLight", "LightModel", "PencilLog", "ReferenceGeometry",
@@ -41,6 +53,19 @@ __all__ = [
     "calibrate_lamp_from_pencil",
     "detect_missing_tips", "light_from_field_log", "load_pencil_log",
 ]
+
+#: Names of :mod:`gnomon.light.sun` this package gives, imported on first use (pandas, pvlib).
+_SUN_NAMES = ("HeadingEstimate", "SunClock", "SunWithLines", "SunWithPole", "heading_from_gnomon")
+
+
+def __getattr__(name: str):
+    if name in _SUN_NAMES:
+        return getattr(importlib.import_module("gnomon.light.sun"), name)
+    raise AttributeError(f"module 'gnomon.light' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_SUN_NAMES))
 
 
 def light_from_field_log(log: FieldLog, pose: Pose, n_frames: int, warnings: list[str]) -> LightModel:
@@ -56,6 +81,8 @@ def light_from_field_log(log: FieldLog, pose: Pose, n_frames: int, warnings: lis
     if kind == "two-plane":
         return TwoPlaneLight(pose)
     if kind == "sun":
+        from gnomon.light.sun import SunWithLines, SunWithPole
+
         clock = _sun_clock(log, pose, n_frames, warnings)
         if log.pole is not None:
             return SunWithPole(clock, pose, log.pole.base, log.pole.top, log.pole.radius)
@@ -69,6 +96,8 @@ SITE_KEYS = {"latitude_deg": "latitude", "longitude_deg": "longitude", "altitude
 
 
 def _site(log: FieldLog) -> Site:
+    from gnomon.sun import Site, SiteError
+
     s = log.site
     assert s is not None
     try:
@@ -79,6 +108,8 @@ def _site(log: FieldLog) -> Site:
 
 def _capture_times(log: FieldLog, n_frames: int) -> pd.DatetimeIndex:
     """UTC time of every frame of the capture."""
+    from gnomon.timestamps import frame_times
+
     c = log.capture
     if c.timestamps is None:
         raise GnomonError(f"{log.path}: [capture] has no 'timestamps'; a sun scan needs the time of every frame")
@@ -92,6 +123,8 @@ def _capture_times(log: FieldLog, n_frames: int) -> pd.DatetimeIndex:
 
 def _gnomon_heading(log: FieldLog, g: GnomonSpec, pose: Pose, times: pd.DatetimeIndex,
                     site: Site) -> HeadingEstimate:
+    from gnomon.light.sun import heading_from_gnomon
+
     names = [p.name for p in log.capture.image_files]
     frame_name = g.frame.split("/")[-1]
     if frame_name not in names:
@@ -107,6 +140,8 @@ def _gnomon_heading(log: FieldLog, g: GnomonSpec, pose: Pose, times: pd.Datetime
 
 def _sun_clock(log: FieldLog, pose: Pose, n_frames: int, warnings: list[str]) -> SunClock:
     """Frame times, the heading of the world frame ([site] or a gnomon), and the sun over the capture."""
+    from gnomon.light.sun import SunClock
+
     assert log.site is not None  # the field log requires [site] for the sun
     site = _site(log)
     times = _capture_times(log, n_frames)

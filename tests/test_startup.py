@@ -1,0 +1,70 @@
+"""Start-up cost: what `import gnomon.pipeline` and `gnomon --version` load.
+
+A scan with a lamp or two planes needs neither pandas (the sun's clock, through pvlib)
+nor scipy.optimize (refining a plane's pose from its markers): together ≈ 0.6 s of
+imports. Each check runs in a fresh interpreter, since this one has loaded them already.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import gnomon
+from gnomon.cli import build_parser
+from gnomon.commands import COMMANDS
+
+PACKAGE_ROOT = Path(gnomon.__file__).resolve().parents[1]
+
+
+def _loaded_after(code: str, modules: list[str]) -> dict[str, bool]:
+    """Which of ``modules`` are in sys.modules after running ``code`` in a fresh interpreter."""
+    script = f"{code}\nimport json, sys\nprint(json.dumps({{m: m in sys.modules for m in {modules!r}}}))"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(PACKAGE_ROOT), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_pipeline_import_loads_neither_pandas_nor_scipy_optimize() -> None:
+    loaded = _loaded_after("import gnomon.pipeline", ["gnomon.pipeline", "pandas", "scipy.optimize", "pvlib"])
+    assert loaded == {"gnomon.pipeline": True, "pandas": False, "scipy.optimize": False, "pvlib": False}
+
+
+def test_sun_names_load_on_first_use() -> None:
+    """gnomon.light still gives the sun's classes: asking for one loads them (and pandas) then."""
+    loaded = _loaded_after("import gnomon.light\nassert 'gnomon.light.sun' not in __import__('sys').modules\n"
+                           "from gnomon.light import SunClock, SunWithLines, SunWithPole\n"
+                           "from gnomon.light.sun import SunClock as direct\nassert SunClock is direct",
+                           ["gnomon.light.sun", "pandas"])
+    assert loaded == {"gnomon.light.sun": True, "pandas": True}
+
+
+def test_version_loads_no_command() -> None:
+    """`gnomon --version` (and --help) build the parser from the commands' names and help lines alone."""
+    code = ("import contextlib, io\nfrom gnomon import cli\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    try:\n        cli.main(['--version'])\n    except SystemExit:\n        pass")
+    modules = ["numpy", "cv2", *(f"gnomon.commands.{name}" for name in COMMANDS)]
+    loaded = _loaded_after(code, modules)
+    assert not any(loaded.values()), [m for m, v in loaded.items() if v]
+
+
+def _subparsers(parser):
+    return next(a for a in parser._actions if a.dest == "command")
+
+
+def test_listed_commands_are_the_registered_ones() -> None:
+    """The help listing built without importing the commands is the one their modules register."""
+    full, listed = _subparsers(build_parser()), _subparsers(build_parser(["--help"]))
+    assert list(full.choices) == list(listed.choices) == list(COMMANDS)
+    assert [(a.dest, a.help) for a in full._choices_actions] == [(a.dest, a.help) for a in listed._choices_actions]
+    # the command asked for is built in full (its own options), the others only listed
+    scan_only = _subparsers(build_parser(["scan", "log.toml"]))
+    assert "--out" in scan_only.choices["scan"]._option_string_actions
+    assert "--out" not in scan_only.choices["merge"]._option_string_actions
+    args = build_parser(["scan", "log.toml", "--out", "o"]).parse_args(["scan", "log.toml", "--out", "o"])
+    assert args.command == "scan" and args.out == Path("o") and callable(args.func)
