@@ -347,6 +347,9 @@ class FrameSource:
         fails to decode raises (its :class:`FrameError`) when its turn comes, after the
         frames before it; leaving early (an error, a peek at the first frame) cancels the
         frames not started and waits for those being decoded (no thread outlives the pass).
+
+        The files' bytes are hashed in order on a thread of their own (hashlib releases the GIL),
+        not on the consumer's (its time is the tracker's); leaving the pass waits for it.
         """
         colour = self.color_frames
         digest = hashlib.sha256()
@@ -354,7 +357,8 @@ class FrameSource:
         pending: deque[Future[_Decoded]] = deque()
         files = enumerate(self.image_files)
         workers = self.decode_threads or decode_workers()
-        with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gnomon-frame-decode") as pool:
+        with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gnomon-frame-decode") as pool, \
+                ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-frame-digest") as hasher:
             try:
                 # Start with one frame per thread (a peek decodes little more than the first),
                 # then keep FRAMES_IN_FLIGHT ahead.
@@ -368,7 +372,7 @@ class FrameSource:
                         pending.append(pool.submit(_decode_file, i, path, i in colour))
                         if len(pending) >= FRAMES_IN_FLIGHT:
                             break
-                    digest.update(decoded.raw)
+                    hasher.submit(digest.update, decoded.raw)  # one thread: in the files' order
                     if first is None:
                         first = (decoded.shape, decoded.dtype)
                     else:
