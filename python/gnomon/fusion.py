@@ -15,14 +15,42 @@ more than a depth jump (``max_relative_jump·Z``) cannot be the same surface
 point (a mixed pixel at an occlusion, a glint): such pixels are dropped and
 counted. σ models image noise only, so smaller disagreements (sampling and
 model errors) are averaged, not discarded.
+
+A fused point whose own σ is too large for the scan's depth-jump test to tell
+which surface it lies on is refused (:func:`beyond_trust`): two points of one
+surface, each with that σ, differ by ``√2·σ`` (1σ), and the neighbour support,
+the conflict test and the mesh join points only when they lie within
+``max_relative_jump·Z``; beyond ``σ = max_relative_jump·Z / (TRUST_SIGMAS·√2)``
+a surface's own points fall apart by chance more often than once in a million
+pairs, so the point's depth says nothing the scan can vouch for.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["CONFLICT_SIGMAS", "METHODS", "TRUST_SIGMAS", "beyond_trust", "fuse_depths", "fusion_weights",
+           "trust_limit"]
+
 CONFLICT_SIGMAS = 6.0
 METHODS = ("gaussian", "sigmoid")
+# Two points of one surface must stay within the depth jump at this many σ of their difference.
+TRUST_SIGMAS = 5.0
+
+
+def trust_limit(depth: np.ndarray, max_relative_jump: float) -> np.ndarray:
+    """The largest σZ (world units, like ``depth``) the scan trusts at each depth:
+    ``max_relative_jump·|Z| / (TRUST_SIGMAS·√2)`` (see the module)."""
+    return max_relative_jump * np.abs(np.asarray(depth, dtype=np.float64)) / (TRUST_SIGMAS * np.sqrt(2.0))
+
+
+def beyond_trust(depth: np.ndarray, sigma: np.ndarray, max_relative_jump: float) -> np.ndarray:
+    """(H, W) bool: points (finite depth) whose σZ exceeds :func:`trust_limit`. A point without a finite σ
+    is not judged here (it is not refused)."""
+    z = np.asarray(depth, dtype=np.float64)
+    s = np.asarray(sigma, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(z) & np.isfinite(s) & (s > trust_limit(z, max_relative_jump))
 
 
 def fusion_weights(sigmas: np.ndarray, method: str = "gaussian", beta: float = 10.0) -> np.ndarray:
