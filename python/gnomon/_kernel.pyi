@@ -286,6 +286,24 @@ def ray_plane_angles(
     planes (rows of ``planes`` (N, 4) interpolated at ``times`` (H, W)), row-major, NaN where a plane
     is missing: :func:`gnomon.pipeline.ray_plane_angles`; chunks of pixels in parallel."""
 
+def depth_sigma(
+    rays: npt.NDArray[np.float64],
+    times: npt.NDArray[np.float32],
+    planes: npt.NDArray[np.float64],
+    depth: npt.NDArray[np.float32],
+    sigma_t_pixel: npt.NDArray[np.float32],
+    line_sigma: npt.NDArray[np.float64],
+    line_fill: float,
+    step: float,
+    min_cos: float = 1e-3,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """σZ, ∂Z/∂t and the line's time σ (each (H, W) float32) of every pixel: the depths at
+    ``times ± step`` (``rays`` (H, W, 3), ``planes`` (N, 4), ``min_cos`` as :func:`triangulate`)
+    against ``depth`` (H, W; NaN = none, σZ NaN there), the pixel's ``sigma_t_pixel`` (H, W) and
+    ``line_sigma`` (N,) interpolated at its time (``line_fill`` where that is not finite), in the
+    arithmetic of :func:`gnomon.uncertainty.depth_sigma`'s numpy definition; chunks of pixels in
+    parallel."""
+
 def fuse_supported(
     depths: npt.NDArray[np.float32],
     sigmas: npt.NDArray[np.float32],

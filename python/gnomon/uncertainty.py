@@ -24,8 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gnomon import _kernel
 from gnomon.reference_lines import ReferenceLines
-from gnomon.triangulation import triangulate
+from gnomon.triangulation import MIN_RAY_PLANE_COS, triangulate
 
 DERIVATIVE_STEP_FRAMES = 0.25
 # A transition sampled by fewer than this many frames (steepest single-frame
@@ -195,7 +196,34 @@ class DepthUncertainty:
 
 def depth_sigma(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray, depth: np.ndarray,
                 sigma_t_pixel: np.ndarray, sigma_t_line_per_frame: np.ndarray) -> DepthUncertainty:
-    """First-order σZ for every pixel with a depth."""
+    """First-order σZ for every pixel with a depth.
+
+    ``ray_map`` (H, W, 3) camera rays, ``times`` (H, W) frames (NaN = none), ``planes`` (N, 4) as
+    :func:`~gnomon.triangulation.triangulate` takes them; ``depth`` (H, W) camera Z at ``times``
+    (world units, NaN = none); ``sigma_t_pixel`` (H, W) each time's σ (frames);
+    ``sigma_t_line_per_frame`` (N,) the σ (frames) each plane's line adds. On float32 maps the
+    kernel computes it per pixel (``_kernel.depth_sigma``, chunks of pixels in parallel, the
+    same arithmetic); :func:`_depth_sigma_numpy` is the definition.
+    """
+    line = np.asarray(sigma_t_line_per_frame, dtype=np.float64)
+    maps = (times, depth, sigma_t_pixel)
+    if (all(isinstance(m, np.ndarray) and m.dtype == np.float32 and m.ndim == 2 for m in maps)
+            and times.shape == depth.shape == sigma_t_pixel.shape and len(line)
+            and np.shape(ray_map) == (*times.shape, 3)):
+        finite = line[np.isfinite(line)]
+        fill = float(np.median(finite)) if finite.size else 0.0
+        sigma_z, dz_dt, st_line = _kernel.depth_sigma(
+            np.ascontiguousarray(ray_map, dtype=np.float64), np.ascontiguousarray(times),
+            np.ascontiguousarray(planes, dtype=np.float64), np.ascontiguousarray(depth),
+            np.ascontiguousarray(sigma_t_pixel), np.ascontiguousarray(line), fill,
+            DERIVATIVE_STEP_FRAMES, MIN_RAY_PLANE_COS)
+        return DepthUncertainty(sigma_z, dz_dt, sigma_t_pixel, st_line)
+    return _depth_sigma_numpy(ray_map, times, planes, depth, sigma_t_pixel, sigma_t_line_per_frame)
+
+
+def _depth_sigma_numpy(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray, depth: np.ndarray,
+                       sigma_t_pixel: np.ndarray, sigma_t_line_per_frame: np.ndarray) -> DepthUncertainty:
+    """:func:`depth_sigma` in numpy (the kernel's ``depth_sigma`` gives the same on float32 maps)."""
     h = DERIVATIVE_STEP_FRAMES
     plus = triangulate(ray_map, times + h, planes).depth
     minus = triangulate(ray_map, times - h, planes).depth

@@ -5,7 +5,7 @@
 //!   grey frames, `O(pixels)` memory whatever the number of frames;
 //! * the live watch ([`TemporalTracker::watch`], [`live`]): pixels whose
 //!   shadow has passed, with provisional times, as soon as it has passed;
-//! * [`triangulate`]: camera rays ∩ interpolated shadow planes;
+//! * [`triangulate`]: camera rays ∩ interpolated shadow planes; [`depth_sigma`]: their σZ;
 //! * [`grid_faces`], [`clean_faces`], [`obj_text`]: the mesh on the pixel grid, its clean-up, its OBJ text;
 //! * [`retime_rows`], [`retime_rows_sigma`]: a fast sweep's shadow times between the isochrones (and their σ);
 //! * [`world_points`], [`grid_normals`], [`stl_records`]: the surface's world points and normals on the
@@ -44,4 +44,4 @@ pub use surface::{
 pub use tracker::{
     find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,
 };
-pub use triangulate::{plane_at, ray_plane_angles, triangulate};
+pub use triangulate::{depth_sigma, plane_at, ray_plane_angles, triangulate, DepthSigma};

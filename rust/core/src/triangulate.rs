@@ -28,6 +28,37 @@ pub fn plane_at(planes: &[Option<Plane>], t: f64) -> Option<Plane> {
     Some(Plane::lerp(&a, &b, s))
 }
 
+/// Where the ray `ray` (3 values, any length) meets the plane at time `t`
+/// ([`plane_at`], [`Plane::intersect`] with `min_cos`); `None` as [`triangulate`] says.
+fn hit(
+    planes: &[Option<Plane>],
+    t: f32,
+    ray: &[f64],
+    min_cos: f64,
+) -> Option<nalgebra::Point3<f64>> {
+    plane_at(planes, f64::from(t)).and_then(|plane| {
+        let ray = Ray::new(Vector3::new(ray[0], ray[1], ray[2]))?;
+        plane.intersect(&ray, min_cos)
+    })
+}
+
+/// The planes of `N·4` rows `[nx, ny, nz, d]` (`None` for a row with a NaN), checked.
+fn plane_rows(planes: &[f64]) -> Result<Vec<Option<Plane>>, KernelError> {
+    if planes.len() % 4 != 0 {
+        return Err(KernelError::parameter(
+            "planes",
+            format!(
+                "needs rows of 4 values [nx, ny, nz, d], got {} values",
+                planes.len()
+            ),
+        ));
+    }
+    Ok(planes
+        .chunks_exact(4)
+        .map(|row| Plane::from_row([row[0], row[1], row[2], row[3]]))
+        .collect())
+}
+
 /// Intersect every pixel's ray with the shadow plane at its shadow time.
 ///
 /// * `rays`: `H·W·3` unit camera-frame ray directions, row-major (pixel-major
@@ -55,25 +86,8 @@ pub fn triangulate(
             got: rays.len(),
         });
     }
-    if planes.len() % 4 != 0 {
-        return Err(KernelError::parameter(
-            "planes",
-            format!(
-                "needs rows of 4 values [nx, ny, nz, d], got {} values",
-                planes.len()
-            ),
-        ));
-    }
-    if !(0.0..=1.0).contains(&min_cos) {
-        return Err(KernelError::parameter(
-            "min_cos",
-            format!("must be in [0, 1], got {min_cos}"),
-        ));
-    }
-    let planes: Vec<Option<Plane>> = planes
-        .chunks_exact(4)
-        .map(|row| Plane::from_row([row[0], row[1], row[2], row[3]]))
-        .collect();
+    let planes = plane_rows(planes)?;
+    check_min_cos(min_cos)?;
 
     let mut points = vec![f32::NAN; rays.len()];
     let mut valid = vec![0u8; times.len()];
@@ -89,11 +103,7 @@ pub fn triangulate(
                 .zip(times)
                 .zip(rays.chunks_exact(3))
             {
-                let hit = plane_at(&planes, f64::from(t)).and_then(|plane| {
-                    let ray = Ray::new(Vector3::new(ray[0], ray[1], ray[2]))?;
-                    plane.intersect(&ray, min_cos)
-                });
-                if let Some(p) = hit {
+                if let Some(p) = hit(&planes, t, ray, min_cos) {
                     point[0] = p.x as f32;
                     point[1] = p.y as f32;
                     point[2] = p.z as f32;
@@ -102,6 +112,159 @@ pub fn triangulate(
             }
         });
     Ok((points, valid))
+}
+
+fn check_min_cos(min_cos: f64) -> Result<(), KernelError> {
+    if !(0.0..=1.0).contains(&min_cos) {
+        return Err(KernelError::parameter(
+            "min_cos",
+            format!("must be in [0, 1], got {min_cos}"),
+        ));
+    }
+    Ok(())
+}
+
+/// First-order depth σ of every pixel (`gnomon.uncertainty.depth_sigma`, whose numpy
+/// definition this is, value for value): `σZ = |∂Z/∂t| · sqrt(σt_pixel² + σt_line²)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthSigma {
+    /// σZ (world units), NaN where `depth` is not finite.
+    pub sigma_z: Vec<f32>,
+    /// ∂Z/∂t (world units per frame): central difference of the depths at `t ± step`, else
+    /// the forward one, else the backward one (NaN when none exists).
+    pub dz_dt: Vec<f32>,
+    /// The line's time σ (frames) at each pixel's time.
+    pub sigma_t_line: Vec<f32>,
+}
+
+/// σZ of every pixel by first-order propagation (see [`DepthSigma`]).
+///
+/// * `rays`, `times`, `planes`, `min_cos` as [`triangulate`]; `depth` (`H·W`) the pixel's
+///   depth at its time (NaN = none: σZ NaN there);
+/// * `sigma_t_pixel` (`H·W`) the time σ of each pixel (frames);
+/// * `line_sigma` (`N ≥ 1`) the time σ each row's line adds, interpolated at `t` between rows
+///   `i = clamp(⌊t⌋, 0, N−1)` and `min(i + 1, N−1)` with weight `t − ⌊t⌋` (f64); a non-finite
+///   time takes row 0 with weight 0 (as numpy's casts do); where the interpolation is not
+///   finite, `line_fill` (the rows' median);
+/// * `step` (frames): the depths at `t ± step` give ∂Z/∂t.
+///
+/// The arithmetic is the numpy definition's, type for type: the depths and their differences
+/// in f32 (`step` and `2·step` rounded to f32), the line's σ in f64, `σt_pixel²` in f32,
+/// σZ rounded to f32 at the end. Chunks of pixels in parallel.
+#[allow(clippy::too_many_arguments)]
+pub fn depth_sigma(
+    rays: &[f64],
+    times: &[f32],
+    planes: &[f64],
+    depth: &[f32],
+    sigma_t_pixel: &[f32],
+    line_sigma: &[f64],
+    line_fill: f64,
+    step: f64,
+    min_cos: f64,
+) -> Result<DepthSigma, KernelError> {
+    let n = times.len();
+    for (what, got, expected) in [
+        ("rays (3 per shadow time)", rays.len(), 3 * n),
+        ("depth (one per shadow time)", depth.len(), n),
+        (
+            "sigma_t_pixel (one per shadow time)",
+            sigma_t_pixel.len(),
+            n,
+        ),
+    ] {
+        if got != expected {
+            return Err(KernelError::LengthMismatch {
+                what,
+                expected,
+                got,
+            });
+        }
+    }
+    let planes = plane_rows(planes)?;
+    check_min_cos(min_cos)?;
+    if line_sigma.is_empty() {
+        return Err(KernelError::parameter(
+            "line_sigma",
+            "needs one value per plane row, got none",
+        ));
+    }
+    if !(step.is_finite() && step > 0.0) {
+        return Err(KernelError::parameter(
+            "step",
+            format!("must be finite and > 0, got {step}"),
+        ));
+    }
+    let last = line_sigma.len() as i64 - 1;
+    let line = |k: i64| {
+        let v = line_sigma[k as usize];
+        if v.is_finite() {
+            v
+        } else {
+            f64::NAN
+        }
+    };
+    let (h, h2) = (step as f32, (2.0 * step) as f32);
+    let z_at = |t: f32, ray: &[f64]| hit(&planes, t, ray, min_cos).map_or(f32::NAN, |p| p.z as f32);
+    let mut out = DepthSigma {
+        sigma_z: vec![f32::NAN; n],
+        dz_dt: vec![f32::NAN; n],
+        sigma_t_line: vec![f32::NAN; n],
+    };
+    out.sigma_z
+        .par_chunks_mut(PIXELS_PER_TASK)
+        .zip(out.dz_dt.par_chunks_mut(PIXELS_PER_TASK))
+        .zip(out.sigma_t_line.par_chunks_mut(PIXELS_PER_TASK))
+        .enumerate()
+        .for_each(|(chunk, ((sigma_z, dz_dt), st_line))| {
+            let start = chunk * PIXELS_PER_TASK;
+            for k in 0..sigma_z.len() {
+                let i = start + k;
+                let (t, z) = (times[i], depth[i]);
+                let ray = &rays[3 * i..3 * i + 3];
+                let (plus, minus) = (z_at(t + h, ray), z_at(t - h, ray));
+                let central = (plus - minus) / h2;
+                let forward = (plus - z) / h;
+                let backward = (z - minus) / h;
+                let dz = if central.is_finite() {
+                    central
+                } else if forward.is_finite() {
+                    forward
+                } else {
+                    backward
+                };
+                let floor = t.floor();
+                // numpy: nan_to_num, then the int64 cast (x86: out of range → i64::MIN), then clip
+                let row = if floor.is_finite() && floor.abs() < 9.0e18 {
+                    (floor as i64).clamp(0, last)
+                } else {
+                    0
+                };
+                let frac = {
+                    let f = t - floor;
+                    if f.is_nan() {
+                        0.0
+                    } else {
+                        f
+                    }
+                };
+                let next = (row + 1).clamp(0, last);
+                let mut st = f64::from(1.0 - frac) * line(row) + f64::from(frac) * line(next);
+                if !st.is_finite() {
+                    st = line_fill;
+                }
+                let sp = sigma_t_pixel[i];
+                let total = (f64::from(sp * sp) + st * st).sqrt();
+                dz_dt[k] = dz;
+                st_line[k] = st as f32;
+                sigma_z[k] = if z.is_finite() {
+                    (f64::from(dz.abs()) * total) as f32
+                } else {
+                    f32::NAN
+                };
+            }
+        });
+    Ok(out)
 }
 
 /// The angle (degrees) between each selected pixel's ray and the shadow plane at its time
@@ -244,6 +407,54 @@ mod tests {
         assert!(got[3].is_nan()); // row 3 is missing
         assert!(ray_plane_angles(&rays[..14], &times, &planes, &[1; 5]).is_err());
         assert!(ray_plane_angles(&rays, &times, &planes[..5], &[1; 5]).is_err());
+    }
+
+    #[test]
+    fn depth_sigma_of_a_moving_plane() {
+        // z = 2 + t/2 at frames 0..4 (row k: z = 2 + k/2): a ray along z has ∂Z/∂t = 0.5.
+        let planes: Vec<f64> = (0..5)
+            .flat_map(|k| [0.0, 0.0, 1.0, 2.0 + 0.5 * k as f64])
+            .collect();
+        let rays = [0.0, 0.0, 1.0].repeat(5);
+        //          central, forward (t − h < 0), backward (t + h > 4), no time, NaN line row
+        let times = [1.5f32, 0.1, 3.9, f32::NAN, 2.5];
+        let (points, _) = triangulate(&rays, &times, &planes, 1e-3).unwrap();
+        let depth: Vec<f32> = points.chunks_exact(3).map(|p| p[2]).collect();
+        let line = [0.1, 0.2, 0.3, f64::NAN, 0.5];
+        let sp = [0.4f32; 5];
+        let got =
+            depth_sigma(&rays, &times, &planes, &depth, &sp, &line, 0.25, 0.25, 1e-3).unwrap();
+        for i in [0, 1, 2, 4] {
+            assert!((got.dz_dt[i] - 0.5).abs() < 1e-6, "{:?}", got.dz_dt);
+        }
+        assert!(got.dz_dt[3].is_nan() && got.sigma_z[3].is_nan());
+        // line σ: 0.2·0.5 + 0.3·0.5 at t = 1.5; the NaN row 3 at t = 2.5 gives the fill 0.25
+        let st = [0.25, 0.9 * 0.1 + 0.1 * 0.2, 0.25, 0.1, 0.25];
+        for i in [0, 1, 2, 4] {
+            assert!((f64::from(got.sigma_t_line[i]) - st[i]).abs() < 1e-6);
+            let want = 0.5 * (0.16 + st[i] * st[i]).sqrt();
+            assert!(
+                (f64::from(got.sigma_z[i]) - want).abs() < 1e-6,
+                "{i}: {:?}",
+                got.sigma_z
+            );
+        }
+        // t = 3.9: the next row clamps to the last one; a NaN time takes row 0
+        assert!((f64::from(got.sigma_t_line[3]) - 0.1).abs() < 1e-7);
+        assert!(depth_sigma(&rays, &times, &planes, &depth, &sp, &[], 0.0, 0.25, 1e-3).is_err());
+        assert!(depth_sigma(
+            &rays,
+            &times,
+            &planes,
+            &depth[..4],
+            &sp,
+            &line,
+            0.0,
+            0.25,
+            1e-3
+        )
+        .is_err());
+        assert!(depth_sigma(&rays, &times, &planes, &depth, &sp, &line, 0.0, 0.0, 1e-3).is_err());
     }
 
     #[test]

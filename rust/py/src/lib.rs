@@ -730,6 +730,85 @@ fn triangulate<'py>(
     Ok((points, mask(py, valid, h, w)?))
 }
 
+/// σZ, ∂Z/∂t and the line's time σ of every pixel, each (H, W) float32 (see
+/// `gnomon_core::depth_sigma`).
+#[pyfunction]
+#[pyo3(signature = (rays, times, planes, depth, sigma_t_pixel, line_sigma, line_fill, step, min_cos = 1e-3))]
+#[allow(clippy::too_many_arguments)]
+fn depth_sigma<'py>(
+    py: Python<'py>,
+    rays: &Bound<'py, PyAny>,
+    times: &Bound<'py, PyAny>,
+    planes: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
+    sigma_t_pixel: &Bound<'py, PyAny>,
+    line_sigma: &Bound<'py, PyAny>,
+    line_fill: f64,
+    step: f64,
+    min_cos: f64,
+) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    let times = borrow_array::<f32, Ix2>(
+        times,
+        "times",
+        "float32",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (times.shape()[0], times.shape()[1]);
+    let grid = [Extent::Exactly(h), Extent::Exactly(w)];
+    let rays = borrow_array::<f64, Ix3>(
+        rays,
+        "rays",
+        "float64",
+        &[Extent::Exactly(h), Extent::Exactly(w), Extent::Exactly(3)],
+    )?;
+    let planes = borrow_array::<f64, Ix2>(
+        planes,
+        "planes",
+        "float64",
+        &[Extent::Any("N"), Extent::Exactly(4)],
+    )?;
+    let depth = borrow_array::<f32, Ix2>(depth, "depth", "float32", &grid)?;
+    let sigma_t_pixel = borrow_array::<f32, Ix2>(sigma_t_pixel, "sigma_t_pixel", "float32", &grid)?;
+    let line_sigma =
+        borrow_array::<f64, Ix1>(line_sigma, "line_sigma", "float64", &[Extent::Any("N")])?;
+    let (rays, times, planes, depth, sigma_t_pixel, line_sigma) = (
+        rays.as_array(),
+        times.as_array(),
+        planes.as_array(),
+        depth.as_array(),
+        sigma_t_pixel.as_array(),
+        line_sigma.as_array(),
+    );
+    let out = py
+        .detach(|| {
+            with_slice(&rays, |rays| {
+                with_slice(&times, |times| {
+                    with_slice(&planes, |planes| {
+                        with_slice(&depth, |depth| {
+                            with_slice(&sigma_t_pixel, |sp| {
+                                with_slice(&line_sigma, |ls| {
+                                    gnomon_core::depth_sigma(
+                                        rays, times, planes, depth, sp, ls, line_fill, step,
+                                        min_cos,
+                                    )
+                                })
+                            })
+                        })
+                    })
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    pyo3::types::PyTuple::new(
+        py,
+        [
+            image(py, out.sigma_z, h, w)?,
+            image(py, out.dz_dt, h, w)?,
+            image(py, out.sigma_t_line, h, w)?,
+        ],
+    )
+}
+
 /// Angles (degrees) between the selected pixels' rays and their shadow planes (see
 /// `gnomon_core::ray_plane_angles`), row-major.
 #[pyfunction]
@@ -1341,6 +1420,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyFinishedPixels>()?;
     m.add_function(wrap_pyfunction!(triangulate, m)?)?;
     m.add_function(wrap_pyfunction!(ray_plane_angles, m)?)?;
+    m.add_function(wrap_pyfunction!(depth_sigma, m)?)?;
     m.add_function(wrap_pyfunction!(grid_faces, m)?)?;
     m.add_function(wrap_pyfunction!(clean_faces, m)?)?;
     m.add_function(wrap_pyfunction!(obj_text, m)?)?;
