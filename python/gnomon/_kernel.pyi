@@ -304,6 +304,26 @@ def depth_sigma(
     arithmetic of :func:`gnomon.uncertainty.depth_sigma`'s numpy definition; chunks of pixels in
     parallel."""
 
+def frame_lines(
+    xy: npt.NDArray[np.float64],
+    bounds: npt.NDArray[np.int64],
+    k: float,
+    iterations: int,
+    min_points: int,
+    min_extent_to_rms: float,
+    min_extent_fraction: float,
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
+           npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+    """Every frame's own shadow line on a reference plane (:func:`gnomon.reference_lines.lines_on_plane`'s
+    fits): ``xy`` (K, 2) crossings in plane coordinates grouped by frame, frame t's being
+    ``bounds[t]:bounds[t + 1]`` (``bounds`` (N + 1,)). Each frame with ``min_points`` crossings is fitted
+    (:func:`gnomon.fitting.fit_line_robust` with ``k``, ``iterations``); a fit that keeps ``min_points``
+    inliers and is a line (extent ≥ ``min_extent_to_rms`` × RMS) and reaches ``min_extent_fraction`` of
+    the 90th percentile of those lines' extents is accepted, its direction turned within 90° of the
+    previous accepted one. Returns ``(accepted (N,), centre (N, 2), direction (N, 2) unit, rms (N,),
+    count (N,), extent (N,), inliers (K,))``, NaN / 0 / False off the accepted lines; frames in
+    parallel."""
+
 def fuse_supported(
     depths: npt.NDArray[np.float32],
     sigmas: npt.NDArray[np.float32],

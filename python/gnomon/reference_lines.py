@@ -22,16 +22,21 @@ line in plane coordinates.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from gnomon import _kernel
 from gnomon.camera import CameraModel, Pose
 from gnomon.fitting import fit_line_robust
 
 # Crossings a frame needs for a line.
 MIN_POINTS = 10
+# Each frame's robust line fit (gnomon.fitting.fit_line_robust): outliers beyond FIT_K robust σ, at most
+# FIT_ITERATIONS fits.
+FIT_K = 3.0
+FIT_ITERATIONS = 5
 
 __all__ = [
     "PlaneInCamera", "ReferenceLines", "ReferencePlane", "fit_line_robust", "isochrone_crossings", "lines_on_plane",
@@ -324,6 +329,8 @@ def lines_on_plane(
     name: str = "plane",
     min_extent_fraction: float = MIN_EXTENT_FRACTION,
     ransac_tolerance: float | None = None,
+    *,
+    kernel: bool = True,
 ) -> ReferenceLines:
     """The shadow line on one reference plane at every integer frame, from all its regions at once.
 
@@ -341,6 +348,11 @@ def lines_on_plane(
     RMS distance to it. ``ransac_tolerance`` (world units): start each frame's
     fit from the RANSAC line (:func:`ransac_line`), for masks that may hold
     much besides the bare plane (a first guess at the regions).
+
+    Without RANSAC the frames' own fits are the kernel's (``_kernel.frame_lines``, frames in
+    parallel; the same fits up to round-off, the first line's sense taken from
+    :func:`~gnomon.fitting.fit_line_robust`); ``kernel=False`` fits them in numpy, one frame after
+    the other (the definition).
     """
     frame, pix = mask_crossings(times, mask, n_frames)
 
@@ -376,41 +388,35 @@ def lines_on_plane(
         points3d[t] = on_plane[idx][inl]
         extent[t] = _extent(xy[idx][inl] @ d2)
 
-    # Every frame's own fit first; which of them set the direction is decided
-    # by their extent against the longest lines of the plane.
-    fits: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, float]] = {}
-    for t, idx in enumerate(per_frame):
-        if len(idx) < MIN_POINTS:
-            continue
-        if ransac_tolerance is not None:
-            first = ransac_line(xy[idx], ransac_tolerance)
-            if first.sum() < MIN_POINTS:
-                continue
-            centre, d2, sub = fit_line_robust(xy[idx][first])
-            inl = np.zeros(len(idx), dtype=bool)
-            inl[np.flatnonzero(first)[sub]] = True
-        else:
-            centre, d2, inl = fit_line_robust(xy[idx])
-        if inl.sum() < MIN_POINTS:
-            continue
-        ext = _extent(xy[idx][inl] @ d2)
-        spread = float(np.sqrt(np.mean(((xy[idx][inl] - centre) @ np.array([-d2[1], d2[0]])) ** 2)))
-        if ext < MIN_EXTENT_TO_RMS * spread:
-            continue
-        fits[t] = (centre, d2, inl, ext)
-    if not fits:
-        return ReferenceLines(name, plane, point, direction, rms, count, pixels, extrapolated, points3d, extent)
-    longest = float(np.percentile([f[3] for f in fits.values()], 90))
     angle = np.full(n_frames, np.nan)  # line direction in plane coordinates
-    for t in sorted(fits):
-        centre, d2, inl, ext = fits[t]
-        if ext < min_extent_fraction * longest:
-            continue
-        previous = angle[np.isfinite(angle)]
-        if previous.size and np.cos(np.arctan2(d2[1], d2[0]) - previous[-1]) < 0:
-            d2 = -d2  # keep a consistent sense, so angles can be interpolated
-        angle[t] = np.arctan2(d2[1], d2[0])
-        keep(t, per_frame[t], centre, d2, inl)
+    if ransac_tolerance is None and kernel:
+        # Every frame's own fit, and which of them set the direction (their extent against the
+        # longest lines of the plane), per frame in the kernel (frames in parallel).
+        accepted, centres, dirs, fit_rms, fit_count, fit_extent, inliers = _kernel.frame_lines(
+            np.ascontiguousarray(xy[order]), bounds.astype(np.int64), FIT_K, FIT_ITERATIONS, MIN_POINTS,
+            MIN_EXTENT_TO_RMS, min_extent_fraction)
+        lines = np.flatnonzero(accepted)
+        if lines.size:
+            # The kernel's axes take a sense of their own; the first line keeps the one
+            # fit_line_robust gives it (the others follow it).
+            first = per_frame[lines[0]]
+            if float(fit_line_robust(xy[first], FIT_K, FIT_ITERATIONS)[1] @ dirs[lines[0]]) < 0:
+                dirs = -dirs
+            point[lines] = plane.from_plane_coords(centres[lines])
+            d3 = dirs[lines, :1] * plane.e1 + dirs[lines, 1:2] * plane.e2
+            direction[lines] = [d / np.linalg.norm(d) for d in d3]
+            rms[lines], count[lines], extent[lines] = fit_rms[lines], fit_count[lines], fit_extent[lines]
+            angle[lines] = np.arctan2(dirs[lines, 1], dirs[lines, 0])
+            pix_sorted, on_sorted = pix[order], on_plane[order]
+            for f in lines.tolist():
+                part = slice(bounds[f], bounds[f + 1])
+                sel = pix_sorted[part][inliers[part]]
+                pixels[f] = sel[np.argsort(sel[:, 1])]
+                points3d[f] = on_sorted[part][inliers[part]]
+    else:
+        _own_lines_numpy(xy, per_frame, ransac_tolerance, min_extent_fraction, angle, keep)
+    if not np.isfinite(angle).any():
+        return ReferenceLines(name, plane, point, direction, rms, count, pixels, extrapolated, points3d, extent)
 
     # A short line's direction is poorly measured. It changes slowly with
     # time, so take it from the measured frames — interpolated between the
@@ -447,3 +453,44 @@ def lines_on_plane(
         if not np.isfinite(point[t, 0]) and len(idx):
             points3d[t] = on_plane[idx]
     return ReferenceLines(name, plane, point, direction, rms, count, pixels, extrapolated, points3d, extent)
+
+
+def _own_lines_numpy(xy: np.ndarray, per_frame: list[np.ndarray], ransac_tolerance: float | None,
+                     min_extent_fraction: float, angle: np.ndarray, keep: Callable[..., None]) -> None:
+    """:func:`lines_on_plane`'s own fits of the frames in numpy, with ``ransac_tolerance`` each started
+    from its RANSAC line: the lines that set their direction are handed to ``keep`` and their angles
+    written into ``angle`` (the kernel's ``frame_lines`` fits the same without RANSAC)."""
+    # Every frame's own fit first; which of them set the direction is decided
+    # by their extent against the longest lines of the plane.
+    fits: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, float]] = {}
+    for t, idx in enumerate(per_frame):
+        if len(idx) < MIN_POINTS:
+            continue
+        if ransac_tolerance is not None:
+            first = ransac_line(xy[idx], ransac_tolerance)
+            if first.sum() < MIN_POINTS:
+                continue
+            centre, d2, sub = fit_line_robust(xy[idx][first], FIT_K, FIT_ITERATIONS)
+            inl = np.zeros(len(idx), dtype=bool)
+            inl[np.flatnonzero(first)[sub]] = True
+        else:
+            centre, d2, inl = fit_line_robust(xy[idx], FIT_K, FIT_ITERATIONS)
+        if inl.sum() < MIN_POINTS:
+            continue
+        ext = _extent(xy[idx][inl] @ d2)
+        spread = float(np.sqrt(np.mean(((xy[idx][inl] - centre) @ np.array([-d2[1], d2[0]])) ** 2)))
+        if ext < MIN_EXTENT_TO_RMS * spread:
+            continue
+        fits[t] = (centre, d2, inl, ext)
+    if not fits:
+        return
+    longest = float(np.percentile([f[3] for f in fits.values()], 90))
+    for t in sorted(fits):
+        centre, d2, inl, ext = fits[t]
+        if ext < min_extent_fraction * longest:
+            continue
+        previous = angle[np.isfinite(angle)]
+        if previous.size and np.cos(np.arctan2(d2[1], d2[0]) - previous[-1]) < 0:
+            d2 = -d2  # keep a consistent sense, so angles can be interpolated
+        angle[t] = np.arctan2(d2[1], d2[0])
+        keep(t, per_frame[t], centre, d2, inl)

@@ -809,6 +809,66 @@ fn depth_sigma<'py>(
     )
 }
 
+/// Every frame's own shadow line on a reference plane (see `gnomon_core::frame_lines`):
+/// `(accepted (N,) bool, centre (N, 2), direction (N, 2), rms (N,), count (N,) int64,
+/// extent (N,), inliers (K,) bool)`.
+#[pyfunction]
+#[pyo3(signature = (xy, bounds, k, iterations, min_points, min_extent_to_rms, min_extent_fraction))]
+#[allow(clippy::too_many_arguments)]
+fn frame_lines<'py>(
+    py: Python<'py>,
+    xy: &Bound<'py, PyAny>,
+    bounds: &Bound<'py, PyAny>,
+    k: f64,
+    iterations: usize,
+    min_points: usize,
+    min_extent_to_rms: f64,
+    min_extent_fraction: f64,
+) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    let xy =
+        borrow_array::<f64, Ix2>(xy, "xy", "float64", &[Extent::Any("K"), Extent::Exactly(2)])?;
+    let bounds = borrow_array::<i64, Ix1>(bounds, "bounds", "int64", &[Extent::Any("N + 1")])?;
+    let params = gnomon_core::LineParams {
+        k,
+        iterations,
+        min_points,
+        min_extent_to_rms,
+        min_extent_fraction,
+    };
+    let (xy, bounds) = (xy.as_array(), bounds.as_array());
+    let out = py
+        .detach(|| {
+            with_slice(&xy, |xy| {
+                with_slice(&bounds, |b| gnomon_core::frame_lines(xy, b, &params))
+            })
+        })
+        .map_err(kernel_error)?;
+    let n = out.accepted.len();
+    let pairs = |v: Vec<[f64; 2]>| image(py, v.into_iter().flatten().collect(), n, 2);
+    pyo3::types::PyTuple::new(
+        py,
+        [
+            out.accepted
+                .iter()
+                .map(|&a| a != 0)
+                .collect::<Vec<bool>>()
+                .into_pyarray(py)
+                .into_any(),
+            pairs(out.centre)?.into_any(),
+            pairs(out.direction)?.into_any(),
+            out.rms.into_pyarray(py).into_any(),
+            out.count.into_pyarray(py).into_any(),
+            out.extent.into_pyarray(py).into_any(),
+            out.inliers
+                .iter()
+                .map(|&a| a != 0)
+                .collect::<Vec<bool>>()
+                .into_pyarray(py)
+                .into_any(),
+        ],
+    )
+}
+
 /// Angles (degrees) between the selected pixels' rays and their shadow planes (see
 /// `gnomon_core::ray_plane_angles`), row-major.
 #[pyfunction]
@@ -1421,6 +1481,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(triangulate, m)?)?;
     m.add_function(wrap_pyfunction!(ray_plane_angles, m)?)?;
     m.add_function(wrap_pyfunction!(depth_sigma, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_lines, m)?)?;
     m.add_function(wrap_pyfunction!(grid_faces, m)?)?;
     m.add_function(wrap_pyfunction!(clean_faces, m)?)?;
     m.add_function(wrap_pyfunction!(obj_text, m)?)?;
