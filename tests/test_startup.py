@@ -68,3 +68,24 @@ def test_listed_commands_are_the_registered_ones() -> None:
     assert "--out" not in scan_only.choices["merge"]._option_string_actions
     args = build_parser(["scan", "log.toml", "--out", "o"]).parse_args(["scan", "log.toml", "--out", "o"])
     assert args.command == "scan" and args.out == Path("o") and callable(args.func)
+
+
+def _frozen_at_exit(call: str) -> bool:
+    """Whether the interpreter's objects were exempt from garbage collection at its teardown after
+    ``call`` (an atexit handler registered before it runs after the CLI's)."""
+    script = ("import atexit, contextlib, gc, io, sys\n"
+              "atexit.register(lambda: print('frozen', gc.get_freeze_count() > 0))\n"
+              "from gnomon.cli import main\nsys.argv = ['gnomon', '--version']\n"
+              f"with contextlib.redirect_stdout(io.StringIO()):\n    try:\n        {call}\n"
+              "    except SystemExit:\n        pass\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(PACKAGE_ROOT), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout.split() == ["frozen", "True"]
+
+
+def test_the_command_line_skips_the_teardown_collections() -> None:
+    """`gnomon ...` (main() on the process's arguments) leaves its objects out of the teardown's garbage
+    collections; main(argv) called by a program does not touch the program's collector."""
+    assert _frozen_at_exit("main()")
+    assert not _frozen_at_exit("main(['--version'])")
