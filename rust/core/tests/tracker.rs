@@ -951,3 +951,117 @@ fn per_pixel_levels_divide_each_pixel_by_its_own_factor() {
         .update_with_levels(&[0u16; 2], 1.0, &[1.0, 1.0])
         .is_err());
 }
+
+// ---- Normalised frames against the straightforward encoding -------------
+
+/// A frame's normalised codes computed sample by sample, as
+/// [`gnomon_core::intensity`] defines them: `min(⌊L(DN) · (S / gain)⌋, 65535)`,
+/// or with per-pixel `levels` `min(⌊L(DN) · (S / gain) / level⌋, 65534)` and
+/// the input's largest DN stored as 65535.
+fn straight_codes(frame: &[u8], table: &[f32], gain: f64, levels: Option<&[f32]>) -> Vec<u16> {
+    let factor = (f64::from(gnomon_core::NORMALISED_SCALE) / gain) as f32;
+    frame
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| match levels {
+            None => (table[usize::from(v)] * factor).clamp(0.0, 65535.0) as u16,
+            Some(_) if v == 255 => u16::MAX,
+            Some(l) => (table[usize::from(v)] * factor / l[i]).clamp(0.0, 65534.0) as u16,
+        })
+        .collect()
+}
+
+#[test]
+fn normalised_frames_equal_a_tracker_fed_their_codes() {
+    // Noisy u8 frames of pixels with one to three dips each (some clipped at 0 or 255), in a light
+    // whose gain drifts between 0.7 and 1.3, a few frames with per-pixel levels (a cloud), second
+    // dips kept. A normalised tracker (codes from each frame's table, stored in parallel pieces,
+    // every SIMD path) must find exactly the dips, times and second candidates of a DN tracker
+    // fed the same codes computed sample by sample, whose table is the codes' decoding c / S.
+    let table: Vec<f32> = (0..256).map(|v| (v as f32 / 255.0).powf(2.2)).collect();
+    let decode: Vec<f32> = (0..65536)
+        .map(|c| (f64::from(c) / f64::from(gnomon_core::NORMALISED_SCALE)) as f32)
+        .collect();
+    let mut rng = XorShift(0x5eed_1234_abcd_9876);
+    let (height, width, len) = (5, 53, 150);
+    let pixels = height * width;
+    let dips: Vec<Vec<(usize, usize, f32)>> = (0..pixels)
+        .map(|_| {
+            (0..1 + rng.below(3))
+                .map(|_| {
+                    let enter = rng.below(len as u64) as usize;
+                    let depth = 0.05 + (rng.below(90) as f32) / 100.0;
+                    (enter, enter + 1 + rng.below(20) as usize, depth)
+                })
+                .collect()
+        })
+        .collect();
+    let gains: Vec<f64> = (0..len)
+        .map(|f| 1.0 + 0.3 * (f as f64 / 11.0).sin())
+        .collect();
+    let cloudy = |f: usize| (60..66).contains(&f) || f == 120;
+    let frames: Vec<(Vec<u8>, Option<Vec<f32>>)> = (0..len)
+        .map(|f| {
+            let frame = (0..pixels)
+                .map(|p| {
+                    let lit = 0.2 + 0.7 * (p % 7) as f32 / 6.0;
+                    let shade = dips[p]
+                        .iter()
+                        .filter(|&&(e, l, _)| e <= f && f < l)
+                        .fold(1.0f32, |s, &(_, _, d)| s.min(1.0 - d));
+                    let x = lit * shade * gains[f] as f32;
+                    let noise = rng.below(7) as f32 - 3.0;
+                    (x.powf(1.0 / 2.2) * 255.0 + noise).clamp(0.0, 255.0) as u8
+                })
+                .collect();
+            let levels = cloudy(f).then(|| {
+                (0..pixels)
+                    .map(|_| 0.6 + rng.below(60) as f32 / 100.0)
+                    .collect()
+            });
+            (frame, levels)
+        })
+        .collect();
+    for max_width in [8, 16, 32] {
+        let params = TrackerParams {
+            window: 4,
+            max_width,
+            ambiguity: 0.6,
+            second_dips: true,
+        };
+        let mut straight =
+            TemporalTracker::<u16>::with_table(height, width, params, &decode).unwrap();
+        for (f, (frame, levels)) in frames.iter().enumerate() {
+            let codes = straight_codes(frame, &table, gains[f], levels.as_deref());
+            straight.update(&codes).unwrap();
+        }
+        let want = straight.finish(0.0).unwrap();
+        let want2 = straight.finish_second().unwrap();
+        let eq = |x: &[f32], y: &[f32]| x.iter().zip(y).all(|(&p, &q)| same(p, q));
+        // (valid and ambiguous pixels, second candidates with times: every case is exercised)
+        assert!(want.valid.iter().filter(|&&v| v == 1).count() > pixels / 4);
+        assert!(want.ambiguous.iter().filter(|&&v| v == 1).count() > pixels / 4);
+        assert!(want2.enter.iter().filter(|v| v.is_finite()).count() > pixels / 10);
+        for path in SimdPath::supported() {
+            let mut t = TemporalTracker::<u16>::normalised(height, width, params, &table).unwrap();
+            t.set_simd_path(path).unwrap();
+            for (f, (frame, levels)) in frames.iter().enumerate() {
+                match levels {
+                    Some(l) => t.update_with_levels(frame, gains[f], l).unwrap(),
+                    None => t.update_with_gain(frame, gains[f]).unwrap(),
+                }
+            }
+            let got = t.finish(0.0).unwrap();
+            let got2 = t.finish_second().unwrap();
+            let at = format!("{}, max_width {max_width}", path.name());
+            assert!(eq(&got.enter, &want.enter), "{at}: enter");
+            assert!(eq(&got.leave, &want.leave), "{at}: leave");
+            assert_eq!(got.valid, want.valid, "{at}: valid");
+            assert_eq!(got.ambiguous, want.ambiguous, "{at}: ambiguous");
+            assert!(eq(&got2.enter, &want2.enter), "{at}: second enter");
+            assert!(eq(&got2.leave, &want2.leave), "{at}: second leave");
+            assert!(eq(&got2.best_enter, &want2.best_enter), "{at}: best enter");
+            assert!(eq(&got2.best_leave, &want2.best_leave), "{at}: best leave");
+        }
+    }
+}
