@@ -56,7 +56,7 @@ from gnomon.preview import coverage_map, write_preview
 from gnomon.publish import OUTPUT_FILES, staged_outputs
 from gnomon.recording import ScanRecording, playable_video, warm_rerun_import
 from gnomon.reference_lines import ReferenceLines
-from gnomon.retiming import retime_with_sigma
+from gnomon.retiming import ACROSS_HALF_ROWS, retime_with_sigma
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
 from gnomon.texture import LitColour, sample_indices
 from gnomon.tracking import ShadowTimes, TrackedSequence, contrast_floor, linear, track_source
@@ -261,7 +261,8 @@ def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: Tracked
                levels: _Levels | None = None) -> EdgeTimes:
     """One edge's times and σ; a fast sweep's (most pixels crossed within two frames) re-timed between
     the isochrones (:mod:`gnomon.retiming`), each re-timed σ from the σ of the pixels its crossings
-    were interpolated between."""
+    were interpolated between, and the re-timed times averaged across the sweep over ±ACROSS_HALF_ROWS
+    rows (:func:`gnomon.retiming.average_across_sweep`)."""
     levels = levels or _Levels(tracked)
     sigma = _pixel_time_sigma(slope, tracked, levels)
     grid = block_grid(times)
@@ -270,7 +271,7 @@ def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: Tracked
     fast = undersampled(slope, levels.imax, levels.imin)
     timed = np.isfinite(times)
     if timed.any() and fast[timed].mean() > RETIME_UNDERSAMPLED_SHARE:
-        retimed, retimed_sigma = retime_with_sigma(times, tracked.n_frames, sigma)
+        retimed, retimed_sigma = retime_with_sigma(times, tracked.n_frames, sigma, across=ACROSS_HALF_ROWS)
         return EdgeTimes(name, retimed, slope, retimed_sigma)
     return EdgeTimes(name, times, slope, sigma)
 

@@ -38,7 +38,8 @@ import numpy as np
 
 from gnomon import _kernel
 
-__all__ = ["MAX_GAP_PX", "RetimedTimes", "retime_between_isochrones", "retime_with_sigma"]
+__all__ = ["ACROSS_BEND_FRAMES", "ACROSS_HALF_ROWS", "MAX_GAP_PX", "RetimedTimes", "average_across_sweep",
+           "retime_between_isochrones", "retime_with_sigma"]
 
 # Crossings of consecutive frames farther apart than this (pixels) are not interpolated between.
 MAX_GAP_PX = 40.0
@@ -47,6 +48,12 @@ MAX_GAP_PX = 40.0
 MIN_GAP_PX = 3.0
 # A run tolerates times going back by this much (frames): the noise of a staircase's plateau.
 BACKSTEP = 0.25
+# The scan averages each re-timed time with the re-timed rows this far on either side across the sweep
+# (:func:`average_across_sweep`): less than the MIN_GAP_PX a re-timed time already spans along it.
+ACROSS_HALF_ROWS = 2
+# ... taking a pair of rows only when the time bends across them by at most this (frames): half the
+# staircase's step, which a depth edge between the rows exceeds.
+ACROSS_BEND_FRAMES = 0.5
 
 
 def _sweep_axis(times: np.ndarray) -> tuple[bool, float]:
@@ -160,10 +167,14 @@ def retime_between_isochrones(times: np.ndarray, n_frames: int, max_gap: float =
 
 
 def retime_with_sigma(times: np.ndarray, n_frames: int, sigma_t: np.ndarray, max_gap: float = MAX_GAP_PX,
-                      where: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      where: np.ndarray | None = None, across: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """``(times, σ)`` (H, W) float32: ``retime_between_isochrones(...).times`` and
     ``.sigma(sigma_t)`` in one kernel pass (``_kernel.retime_rows_sigma``, rows in parallel), without
     the per-pixel details of the crossings. ``sigma_t`` (H, W) the σ (frames) of every pixel's own time.
+
+    ``across`` > 0: the re-timed times then averaged across the sweep over ``±across`` rows
+    (:func:`average_across_sweep`); their σ is left as it was (an upper bound: the rows' crossing
+    errors are partly shared, by the codec's blocks and the occluder's own edge).
     """
     t = np.asarray(times, dtype=np.float64)
     s = np.asarray(sigma_t, dtype=np.float64)
@@ -185,9 +196,49 @@ def retime_with_sigma(times: np.ndarray, n_frames: int, sigma_t: np.ndarray, max
         a = a[:, ::-1] if sense < 0 else a
         return np.ascontiguousarray(a if along_rows else a.T)
 
-    new, _, sigma = _kernel.retime_rows_sigma(orient(t), orient(index), orient(wanted), s.ravel(), int(n_frames),
-                                              float(max_gap), MIN_GAP_PX, BACKSTEP)
-    return back(new), back(sigma)
+    new, done, sigma = _kernel.retime_rows_sigma(orient(t), orient(index), orient(wanted), s.ravel(), int(n_frames),
+                                                 float(max_gap), MIN_GAP_PX, BACKSTEP)
+    new = back(new)
+    if across > 0:
+        new = average_across_sweep(new, back(done), along_rows, across)
+    return new, back(sigma)
+
+
+def average_across_sweep(times: np.ndarray, retimed: np.ndarray, along_rows: bool, half: int = ACROSS_HALF_ROWS,
+                         bend: float = ACROSS_BEND_FRAMES) -> np.ndarray:
+    """(H, W) float32: each re-timed pixel's time averaged with re-timed pixels across the sweep.
+
+    Along the sweep a re-timed time is interpolated between two crossings found
+    in that pixel's row alone (column, for a sweep along the columns), so each
+    row carries its own crossing errors: on a dim surface the map breaks into
+    streaks along the sweep. The isochrones run across the sweep and are
+    continuous there except at a depth edge, so the rows ``v ± d`` (``d = 1 …
+    half``) estimate the same smooth time. They are taken in symmetric pairs (a
+    time that changes linearly across the rows keeps its value) and only when
+    both are re-timed and the pair bends by at most ``bend`` frames
+    (``|t(v−d) + t(v+d) − 2 t(v)|``; a depth edge between the rows shifts the
+    staircase by a frame or more). ``times`` (H, W) frames (NaN = none),
+    ``retimed`` (H, W) bool; ``along_rows``: the sweep runs along the rows
+    (:func:`_sweep_axis`). Pixels not re-timed keep their time.
+    """
+    t = np.asarray(times, dtype=np.float64)
+    ok = np.asarray(retimed, dtype=bool) & np.isfinite(t)
+    if not along_rows:
+        t, ok = t.T, ok.T
+    h = t.shape[0]
+    total = np.where(ok, t, 0.0)
+    count = ok.astype(np.float64)
+    for d in range(1, half + 1):
+        if h <= 2 * d:
+            break
+        centre, up, down = t[d:h - d], t[:h - 2 * d], t[2 * d:]
+        with np.errstate(invalid="ignore"):
+            pair = (ok[d:h - d] & ok[:h - 2 * d] & ok[2 * d:]
+                    & (np.abs(up + down - 2.0 * centre) <= bend))
+        total[d:h - d] += np.where(pair, up + down, 0.0)
+        count[d:h - d] += 2.0 * pair
+    out = np.where(ok, total / np.maximum(count, 1.0), t)
+    return np.ascontiguousarray((out if along_rows else out.T).astype(np.float32))
 
 
 def _retime_numpy(times: np.ndarray, n_frames: int, max_gap: float = MAX_GAP_PX,
