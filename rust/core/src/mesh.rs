@@ -47,32 +47,74 @@ impl UnionFind {
     }
 }
 
-/// Link the nodes of equal undirected edges: `edges` (a, b, node), vertices `< n`.
-///
-/// Edges are bucketed by their smaller vertex (a counting sort, linear time);
-/// within a bucket (a handful on a mesh) equal larger vertices are linked.
-fn union_edges(n: usize, edges: &[(u32, u32, u32)], sets: &mut UnionFind) {
-    let mut start = vec![0u32; n + 1];
-    for &(a, b, _) in edges {
-        start[a.min(b) as usize + 1] += 1;
-    }
-    for i in 0..n {
-        start[i + 1] += start[i];
-    }
-    let mut fill = start.clone();
-    let mut slot = vec![(0u32, 0u32); edges.len()];
-    for &(a, b, node) in edges {
-        let lo = a.min(b) as usize;
-        slot[fill[lo] as usize] = (a.max(b), node);
-        fill[lo] += 1;
-    }
-    for lo in 0..n {
-        let bucket = &slot[start[lo] as usize..start[lo + 1] as usize];
-        for (i, &(hi, node)) in bucket.iter().enumerate() {
-            if let Some(&(_, other)) = bucket[..i].iter().find(|e| e.0 == hi) {
-                sets.union(other, node);
+/// The faces' undirected edges bucketed by their smaller vertex (a counting sort, linear
+/// time): bucket `lo` holds `(larger vertex, face)` of every edge at `lo`, in face order (each
+/// face's edges `(f0, f1)`, `(f1, f2)`, `(f2, f0)`). A bucket holds a handful on a mesh.
+struct EdgeBuckets {
+    start: Vec<u32>,
+    slot: Vec<(u32, u32)>,
+}
+
+impl EdgeBuckets {
+    /// Invariant: every vertex index is in `0..n` (checked by the caller) and `3·faces` fits a u32.
+    fn new(n: usize, faces: &[[i32; 3]]) -> Self {
+        let edges = |f: &[i32; 3]| [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])];
+        let mut start = vec![0u32; n + 1];
+        for f in faces {
+            for (a, b) in edges(f) {
+                start[a.min(b) as usize + 1] += 1;
             }
         }
+        for i in 0..n {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut slot = vec![(0u32, 0u32); 3 * faces.len()];
+        for (i, f) in faces.iter().enumerate() {
+            for (a, b) in edges(f) {
+                let lo = a.min(b) as usize;
+                slot[fill[lo] as usize] = (a.max(b) as u32, i as u32);
+                fill[lo] += 1;
+            }
+        }
+        EdgeBuckets { start, slot }
+    }
+
+    fn bucket(&self, lo: usize) -> &[(u32, u32)] {
+        &self.slot[self.start[lo] as usize..self.start[lo + 1] as usize]
+    }
+
+    /// Link the faces that share an edge (each to the first earlier face in its bucket with it).
+    fn link(&self, sets: &mut UnionFind) {
+        for lo in 0..self.start.len() - 1 {
+            let bucket = self.bucket(lo);
+            for (i, &(hi, face)) in bucket.iter().enumerate() {
+                if let Some(&(_, other)) = bucket[..i].iter().find(|e| e.0 == hi) {
+                    sets.union(other, face);
+                }
+            }
+        }
+    }
+
+    /// Interior edges (in two or more of the faces `keep` marks) at each vertex, `n` vertices.
+    fn interior(&self, keep: &[bool]) -> Vec<u32> {
+        let n = self.start.len() - 1;
+        let mut interior = vec![0u32; n];
+        for lo in 0..n {
+            let bucket = self.bucket(lo);
+            for (i, &(hi, face)) in bucket.iter().enumerate() {
+                if !keep[face as usize] {
+                    continue;
+                }
+                let kept_hi = |e: &&(u32, u32)| e.0 == hi && keep[e.1 as usize];
+                let seen_before = bucket[..i].iter().any(|e| kept_hi(&e));
+                if !seen_before && bucket[i + 1..].iter().any(|e| kept_hi(&e)) {
+                    interior[lo] += 1;
+                    interior[hi as usize] += 1;
+                }
+            }
+        }
+        interior
     }
 }
 
@@ -224,8 +266,8 @@ pub fn clean_faces(
     min_vertices: usize,
 ) -> Result<CleanMesh, KernelError> {
     if faces
-        .iter()
-        .flatten()
+        .as_flattened()
+        .par_iter()
         .any(|&v| v < 0 || v as usize >= n_vertices)
     {
         return Err(KernelError::parameter(
@@ -240,16 +282,9 @@ pub fn clean_faces(
         ));
     }
     // Pieces: faces sharing an edge.
+    let buckets = EdgeBuckets::new(n_vertices, faces);
     let mut sets = UnionFind::new(faces.len());
-    let edges: Vec<(u32, u32, u32)> = faces
-        .iter()
-        .enumerate()
-        .flat_map(|(i, f)| {
-            [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])].map(|(a, b)| (a as u32, b as u32, i as u32))
-        })
-        .collect();
-    union_edges(n_vertices, &edges, &mut sets);
-    drop(edges);
+    buckets.link(&mut sets);
     let root: Vec<u32> = (0..faces.len() as u32).map(|i| sets.find(i)).collect();
     let mut vertex_piece = vec![u32::MAX; n_vertices];
     for (f, &r) in faces.iter().zip(&root) {
@@ -261,87 +296,62 @@ pub fn clean_faces(
     for &r in vertex_piece.iter().filter(|&&r| r != u32::MAX) {
         size[r as usize] += 1;
     }
-    let kept: Vec<[i32; 3]> = faces
+    let keep: Vec<bool> = root
         .iter()
-        .zip(&root)
-        .filter(|(_, &r)| size[r as usize] >= min_vertices)
-        .map(|(f, _)| *f)
+        .map(|&r| size[r as usize] >= min_vertices)
         .collect();
-    Ok(split_fans(n_vertices, &kept))
+    let interior = buckets.interior(&keep);
+    drop(buckets);
+    Ok(split_fans(n_vertices, faces, &keep, &interior))
 }
 
-fn split_fans(n_vertices: usize, faces: &[[i32; 3]]) -> CleanMesh {
-    if faces.is_empty() {
-        return CleanMesh {
-            faces: Vec::new(),
-            source: Vec::new(),
-        };
-    }
+/// The faces `keep` marks, renumbered, with every fan of triangles at a vertex beyond its first
+/// given its own copy of the vertex (see [`clean_faces`]); `interior[v]`: the edges at `v` in two
+/// or more of the kept faces.
+///
+/// Invariant: vertex indices of `faces` are in `0..n_vertices`. The kept vertices are numbered
+/// in their order (a monotonic renumbering, so edges compare equal before and after it).
+fn split_fans(n_vertices: usize, faces: &[[i32; 3]], keep: &[bool], interior: &[u32]) -> CleanMesh {
     let mut degree = vec![0u32; n_vertices];
-    for &v in faces.iter().flatten() {
-        degree[v as usize] += 1;
+    for (f, _) in faces.iter().zip(keep).filter(|(_, &k)| k) {
+        for &v in f {
+            degree[v as usize] += 1;
+        }
     }
-    let mut remap = vec![-1i64; n_vertices];
+    let mut remap = vec![-1i32; n_vertices];
     let mut source: Vec<i64> = Vec::new();
+    // A vertex with two or more open fans has more faces than interior edges plus one.
+    let mut several_fans: Vec<bool> = Vec::new();
     for (v, &d) in degree.iter().enumerate() {
         if d > 0 {
-            remap[v] = source.len() as i64;
+            remap[v] = source.len() as i32;
             source.push(v as i64);
+            several_fans.push(i64::from(d) - i64::from(interior[v]) >= 2);
         }
     }
-    // Interior edges (in two or more faces) at each vertex; a vertex with two or
-    // more open fans has more faces than interior edges plus one.
-    let mut interior = vec![0u32; n_vertices];
-    {
-        // edges by their smaller vertex; an edge in two or more faces is interior
-        let mut start = vec![0u32; n_vertices + 1];
-        for f in faces {
-            for (a, b) in [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])] {
-                start[a.min(b) as usize + 1] += 1;
-            }
-        }
-        for i in 0..n_vertices {
-            start[i + 1] += start[i];
-        }
-        let mut fill = start.clone();
-        let mut slot = vec![0u32; 3 * faces.len()];
-        for f in faces {
-            for (a, b) in [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])] {
-                let lo = a.min(b) as usize;
-                slot[fill[lo] as usize] = a.max(b) as u32;
-                fill[lo] += 1;
-            }
-        }
-        for lo in 0..n_vertices {
-            let bucket = &slot[start[lo] as usize..start[lo + 1] as usize];
-            for (i, &hi) in bucket.iter().enumerate() {
-                let seen_before = bucket[..i].contains(&hi);
-                let count = bucket.iter().filter(|&&x| x == hi).count();
-                if !seen_before && count >= 2 {
-                    interior[lo] += 1;
-                    interior[hi as usize] += 1;
-                }
-            }
-        }
-    }
-    let flat: Vec<i32> = faces.iter().flatten().copied().collect();
-    let corners: Vec<usize> = (0..flat.len())
-        .filter(|&c| degree[flat[c] as usize] as i64 - interior[flat[c] as usize] as i64 >= 2)
+    drop(degree);
+    let mut out: Vec<[i32; 3]> = faces
+        .par_iter()
+        .zip(keep.par_iter())
+        .filter(|(_, &k)| k)
+        .map(|(f, _)| f.map(|v| remap[v as usize]))
         .collect();
-    let mut new: Vec<i64> = flat.iter().map(|&v| remap[v as usize]).collect();
+    drop(remap);
+    let corners: Vec<usize> = (0..3 * out.len())
+        .into_par_iter()
+        .filter(|&c| several_fans[out[c / 3][c % 3] as usize])
+        .collect();
     if !corners.is_empty() {
         // Fans: corners at one vertex whose triangles share an edge at it.
         // Directed edges (v → next, v → previous) of the corners, sorted: equal ones link corners.
-        let n = n_vertices as u64;
+        let n = source.len() as u64;
         let mut sets = UnionFind::new(corners.len());
         let mut pairs: Vec<(u64, u32)> = Vec::with_capacity(2 * corners.len());
         for (k, &c) in corners.iter().enumerate() {
-            let (face, pos) = (c / 3, c % 3);
-            let v = flat[c] as u64;
-            let nxt = faces[face][(pos + 1) % 3] as u64;
-            let prv = faces[face][(pos + 2) % 3] as u64;
-            pairs.push((v * n + nxt, k as u32));
-            pairs.push((v * n + prv, k as u32));
+            let (face, pos) = (out[c / 3], c % 3);
+            let v = face[pos] as u64;
+            pairs.push((v * n + face[(pos + 1) % 3] as u64, k as u32));
+            pairs.push((v * n + face[(pos + 2) % 3] as u64, k as u32));
         }
         pairs.par_sort_unstable_by_key(|p| p.0);
         for w in pairs.windows(2) {
@@ -352,37 +362,33 @@ fn split_fans(n_vertices: usize, faces: &[[i32; 3]]) -> CleanMesh {
         // Fan labels in order of their first corner; the first fan at a vertex keeps it.
         let mut label = vec![u32::MAX; corners.len()];
         let mut fan_vertex: Vec<i32> = Vec::new();
-        for k in 0..corners.len() {
+        for (k, &c) in corners.iter().enumerate() {
             let r = sets.find(k as u32) as usize;
             if label[r] == u32::MAX {
                 label[r] = fan_vertex.len() as u32;
-                fan_vertex.push(flat[corners[k]]);
+                fan_vertex.push(out[c / 3][c % 3]);
             }
         }
-        let mut first_fan = vec![u32::MAX; n_vertices];
-        let mut fan_new = vec![0i64; fan_vertex.len()];
+        let mut first_fan = vec![u32::MAX; source.len()];
+        let mut fan_new = vec![0i32; fan_vertex.len()];
         for (f, &v) in fan_vertex.iter().enumerate() {
             if first_fan[v as usize] == u32::MAX {
                 first_fan[v as usize] = f as u32;
-                fan_new[f] = remap[v as usize];
+                fan_new[f] = v;
             }
         }
         for (f, &v) in fan_vertex.iter().enumerate() {
             if first_fan[v as usize] != f as u32 {
-                fan_new[f] = source.len() as i64;
-                source.push(v as i64);
+                fan_new[f] = source.len() as i32;
+                source.push(source[v as usize]);
             }
         }
         for (k, &c) in corners.iter().enumerate() {
             let r = sets.find(k as u32) as usize;
-            new[c] = fan_new[label[r] as usize];
+            out[c / 3][c % 3] = fan_new[label[r] as usize];
         }
     }
-    let faces = new
-        .chunks_exact(3)
-        .map(|t| [t[0] as i32, t[1] as i32, t[2] as i32])
-        .collect();
-    CleanMesh { faces, source }
+    CleanMesh { faces: out, source }
 }
 
 /// Decimal digits of `x` (at least one).

@@ -972,8 +972,7 @@ fn grid_faces<'py>(
 
 fn rows<'py>(py: Python<'py>, faces: Vec<[i32; 3]>) -> PyResult<Bound<'py, PyArray2<i32>>> {
     let n = faces.len();
-    let flat: Vec<i32> = faces.into_iter().flatten().collect();
-    image(py, flat, n, 3)
+    image(py, faces.into_flattened(), n, 3)
 }
 
 /// Drop small pieces and split non-manifold vertices (see `gnomon_core::clean_faces`):
