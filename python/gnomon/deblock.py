@@ -52,15 +52,18 @@ class BlockGrid:
     ratio: float
 
 
-def _step_profile(times: np.ndarray, axis: int, size: int) -> np.ndarray:
-    """Mean |step| between neighbours along ``axis`` (frames), by the position of the step modulo ``size``."""
+def _steps(times: np.ndarray, axis: int) -> np.ndarray:
+    """|step| between neighbours along ``axis`` (frames), NaN where there is none or it exceeds ``MAX_STEP``."""
     d = np.abs(np.diff(times, axis=axis))
-    d = np.where(d <= MAX_STEP, d, np.nan)
-    pos = np.arange(d.shape[axis]) % size
+    return np.where(d <= MAX_STEP, d, np.nan)
+
+
+def _step_profile(steps: np.ndarray, axis: int, size: int) -> np.ndarray:
+    """Mean of ``steps`` (:func:`_steps` along ``axis``) by the position of the step modulo ``size``."""
     out = np.full(size, np.nan)
     with np.errstate(invalid="ignore"):
         for k in range(size):
-            sel = np.take(d, np.flatnonzero(pos == k), axis=axis)
+            sel = steps[:, k::size] if axis == 1 else steps[k::size]
             if np.isfinite(sel).any():
                 out[k] = float(np.nanmean(sel))
     return out
@@ -71,10 +74,13 @@ def block_grid(times: np.ndarray) -> BlockGrid | None:
     t = np.asarray(times, dtype=np.float64)
     if np.isfinite(t).sum() < 1000:
         return None
+    steps: dict[int, np.ndarray] = {}  # per axis, computed when first needed
     for size in BLOCK_SIZES:
         starts, ratios = [], []
         for axis in (1, 0):
-            prof = _step_profile(t, axis, size)
+            if axis not in steps:
+                steps[axis] = _steps(t, axis)
+            prof = _step_profile(steps[axis], axis, size)
             if not np.isfinite(prof).all():
                 break
             k = int(np.argmax(prof))
@@ -82,6 +88,8 @@ def block_grid(times: np.ndarray) -> BlockGrid | None:
             ratio = float(prof[k] / max(float(within.mean()), 1e-9))
             starts.append((k + 1) % size)
             ratios.append(ratio)
+            if ratio < MIN_STEP_RATIO:  # not this grid whatever the other axis gives
+                break
         if len(ratios) == 2 and min(ratios) >= MIN_STEP_RATIO:
             return BlockGrid(size, starts[0], starts[1], min(ratios))
     return None

@@ -81,8 +81,8 @@ def grid_mesh(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, max_rela
     Faces are oriented counter-clockwise as seen from the camera.
     """
     pixel_index = np.flatnonzero(valid)
-    vertices = points.reshape(-1, 3)[pixel_index].astype(np.float32)
-    vn = None if normals is None else normals.reshape(-1, 3)[pixel_index].astype(np.float32)
+    vertices = points.reshape(-1, 3)[pixel_index].astype(np.float32, copy=False)  # a gather: a new array
+    vn = None if normals is None else normals.reshape(-1, 3)[pixel_index].astype(np.float32, copy=False)
     if depth.dtype == np.float32 and (sigma is None or sigma.dtype == np.float32):
         # the same faces from the kernel (f32 arithmetic, as numpy does on these maps)
         sig32 = np.zeros(depth.shape, np.float32) if sigma is None else np.ascontiguousarray(sigma)

@@ -785,10 +785,11 @@ def surface_points(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np
     world_grid = _kernel.world_points(np.ascontiguousarray(ray_map, dtype=np.float64), depth,
                                       np.ascontiguousarray(valid, dtype=np.uint8), pose.R, pose.t)
     normals = grid_normals(world_grid, depth, valid, pose.camera_centre_world, max_relative_jump)
-    v, u = np.nonzero(valid)
+    index = np.flatnonzero(valid)  # the valid pixels, row-major: one gather per array
+    v, u = np.divmod(index, valid.shape[1])
     uv = np.stack([u, v], axis=1).astype(np.float32)
-    return SurfacePoints(depth, sigma, valid, world_grid[valid], rgb[valid], uv, normals[valid], rgb, world_grid,
-                         normals)
+    return SurfacePoints(depth, sigma, valid, world_grid.reshape(-1, 3)[index], rgb.reshape(-1, 3)[index], uv,
+                         normals.reshape(-1, 3)[index], rgb, world_grid, normals)
 
 
 def mesh_surface(points: SurfacePoints, max_relative_jump: float) -> Surface:

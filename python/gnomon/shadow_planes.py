@@ -50,18 +50,23 @@ def lamp_shadow_planes(lines: list[ReferenceLines], lamp_cam: np.ndarray) -> tup
     planes = np.full((n_frames, 4), np.nan)
     degenerate = 0
     sin_min = np.sin(np.radians(MIN_LAMP_LINE_ANGLE_DEG))
-    for t in range(n_frames):
-        found = [ln for ln in lines if np.isfinite(ln.point[t, 0])]
-        if not found:
-            continue
-        if len(found) == 1:
-            p, d = found[0].point[t], found[0].direction[t]
-            to_line = p - lamp_cam
-            normal = np.cross(d, to_line)
+    found_on = np.stack([np.isfinite(ln.point[:, 0]) for ln in lines])
+    # The frames with one line: the crosses of all of them at once (row for row numpy's cross).
+    single = np.flatnonzero(found_on.sum(axis=0) == 1)
+    point, direction = np.zeros((n_frames, 3)), np.zeros((n_frames, 3))
+    for ln, on in zip(lines, found_on, strict=True):
+        point[on], direction[on] = ln.point[on], ln.direction[on]
+    to_lines = point[single] - lamp_cam
+    crosses = dict(zip(single.tolist(), zip(np.cross(direction[single], to_lines), to_lines, strict=True),
+                       strict=True))
+    for t in np.flatnonzero(found_on.any(axis=0)).tolist():
+        if t in crosses:
+            normal, to_line = crosses[t]
             if np.linalg.norm(normal) < sin_min * np.linalg.norm(to_line):
                 degenerate += 1
                 continue
         else:
+            found = [ln for ln in lines if np.isfinite(ln.point[t, 0])]
             samples = []
             for ln in found:
                 extent = np.linalg.norm(ln.point[t] - lamp_cam) * 0.25
