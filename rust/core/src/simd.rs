@@ -128,12 +128,16 @@ pub trait Vector<T: Sample>: Copy {
     fn add_sat(self, o: Self) -> Self;
     /// Mask of `self > o` (unsigned).
     fn gt(self, o: Self) -> Self;
+    /// Mask of `self ≤ o` (unsigned): one operation fewer than [`gt`](Self::gt) on x86.
+    fn le(self, o: Self) -> Self;
     /// `if mask { a } else { b }` lane by lane (mask lanes all-ones or zero).
     fn select(mask: Self, a: Self, b: Self) -> Self;
     /// Mask of `self != o`.
     fn ne(self, o: Self) -> Self;
     /// Bitwise or (of masks).
     fn or(self, o: Self) -> Self;
+    /// Bitwise and (of masks).
+    fn and(self, o: Self) -> Self;
     /// Whether any bit is set.
     fn any(self) -> bool;
 }
@@ -191,6 +195,20 @@ impl<T: Sample, const N: usize> Vector<T> for Portable<T, N> {
         self.map2(o, |a, b| if a > b { T::MAX } else { T::MIN })
     }
     #[inline(always)]
+    fn le(self, o: Self) -> Self {
+        self.map2(o, |a, b| if a <= b { T::MAX } else { T::MIN })
+    }
+    #[inline(always)]
+    fn and(self, o: Self) -> Self {
+        self.map2(o, |a, b| {
+            if a != T::MIN && b != T::MIN {
+                T::MAX
+            } else {
+                T::MIN
+            }
+        })
+    }
+    #[inline(always)]
     fn select(mask: Self, a: Self, b: Self) -> Self {
         let mut out = b.0;
         for ((r, &m), &x) in out.iter_mut().zip(&mask.0).zip(&a.0) {
@@ -243,6 +261,11 @@ mod x86 {
                 unsafe { Self($xor($cmpeq(d.0, $zero()), $setones)) }
             }
             #[inline(always)]
+            fn le(self, o: Self) -> Self {
+                let d = self.sub_sat(o);
+                unsafe { Self($cmpeq(d.0, $zero())) }
+            }
+            #[inline(always)]
             fn ne(self, o: Self) -> Self {
                 unsafe { Self($xor($cmpeq(self.0, o.0), $setones)) }
             }
@@ -251,12 +274,38 @@ mod x86 {
                 unsafe { Self($or(self.0, o.0)) }
             }
             #[inline(always)]
-            fn select(mask: Self, a: Self, b: Self) -> Self {
-                unsafe { Self($xor(b.0, $and($xor(a.0, b.0), mask.0))) }
+            fn and(self, o: Self) -> Self {
+                unsafe { Self($and(self.0, o.0)) }
             }
             #[inline(always)]
             fn any(self) -> bool {
                 unsafe { $movemask(self.0) != 0 }
+            }
+        };
+    }
+
+    /// `if mask { a } else { b }` with SSE2's bit operations.
+    macro_rules! select_sse2 {
+        () => {
+            #[inline(always)]
+            fn select(mask: Self, a: Self, b: Self) -> Self {
+                unsafe {
+                    Self(_mm_xor_si128(
+                        b.0,
+                        _mm_and_si128(_mm_xor_si128(a.0, b.0), mask.0),
+                    ))
+                }
+            }
+        };
+    }
+
+    /// `if mask { a } else { b }` in one AVX2 blend (the mask's lanes are
+    /// all-ones or zero, so blending bytes blends lanes of either width).
+    macro_rules! select_avx2 {
+        () => {
+            #[inline(always)]
+            fn select(mask: Self, a: Self, b: Self) -> Self {
+                unsafe { Self(_mm256_blendv_epi8(b.0, a.0, mask.0)) }
             }
         };
     }
@@ -300,6 +349,7 @@ mod x86 {
         fn add_sat(self, o: Self) -> Self {
             unsafe { Self(_mm_adds_epu8(self.0, o.0)) }
         }
+        select_sse2!();
         common!(
             _mm_setzero_si128,
             _mm_cmpeq_epi8,
@@ -341,6 +391,7 @@ mod x86 {
         fn add_sat(self, o: Self) -> Self {
             unsafe { Self(_mm_adds_epu16(self.0, o.0)) }
         }
+        select_sse2!();
         common!(
             _mm_setzero_si128,
             _mm_cmpeq_epi16,
@@ -382,6 +433,7 @@ mod x86 {
         fn add_sat(self, o: Self) -> Self {
             unsafe { Self(_mm256_adds_epu8(self.0, o.0)) }
         }
+        select_avx2!();
         common!(
             _mm256_setzero_si256,
             _mm256_cmpeq_epi8,
@@ -423,6 +475,7 @@ mod x86 {
         fn add_sat(self, o: Self) -> Self {
             unsafe { Self(_mm256_adds_epu16(self.0, o.0)) }
         }
+        select_avx2!();
         common!(
             _mm256_setzero_si256,
             _mm256_cmpeq_epi16,

@@ -494,31 +494,33 @@ fn evaluate_span<'a, T: Sample, V: Vector<T>, const SECOND: bool>(
     };
     let mut moved2 = none;
     let from_best = V::splat(T::from_offset(FROM_BEST));
+    // The frame's block-local offset in every lane.
+    let mut offset = zero;
+    // Masks are of the cheaper `≤` (`notbetter` = not a new best, `near` =
+    // within W after it), the selects' operands ordered accordingly.
     for (i, r) in rows.iter().enumerate() {
         let cur: V = load(r, x0);
         let lit = left.min(right[i]);
         let depth = lit.sub_sat(cur);
         age = age.add_sat(one);
-        let better = depth.gt(d1);
-        let far = age.gt(far_after);
+        let notbetter = depth.le(d1);
+        let near = age.le(far_after);
         if SECOND {
-            let promote = V::select(far, better, zero);
-            let deeper2 = V::select(better, zero, V::select(far, depth.gt(d2), zero));
-            hi2 = V::select(promote, hi, V::select(deeper2, lit, hi2));
-            lo2 = V::select(promote, lo, V::select(deeper2, cur, lo2));
-            moved2 = V::select(
-                promote,
-                from_best,
-                V::select(deeper2, V::splat(T::from_offset(i)), moved2),
-            );
+            // far and better: the best becomes the second (promote); far, not better and
+            // deeper than the second: this frame becomes it; else the second stays.
+            let keep2 = near.or(notbetter.and(depth.le(d2)));
+            hi2 = V::select(keep2, hi2, V::select(notbetter, lit, hi));
+            lo2 = V::select(keep2, lo2, V::select(notbetter, cur, lo));
+            moved2 = V::select(keep2, moved2, V::select(notbetter, offset, from_best));
         }
-        d2 = V::select(far, d2.max(depth.min(d1)), d2);
+        d2 = V::select(near, d2, d2.max(depth.min(d1)));
         d1 = d1.max(depth);
-        age = V::select(better, zero, age);
-        hi = V::select(better, lit, hi);
-        lo = V::select(better, cur, lo);
-        moved = V::select(better, V::splat(T::from_offset(i)), moved);
+        age = V::select(notbetter, age, zero);
+        hi = V::select(notbetter, hi, lit);
+        lo = V::select(notbetter, lo, cur);
+        moved = V::select(notbetter, moved, offset);
         left = left.max(cur);
+        offset = offset.add_sat(one);
     }
     store(d1, &mut state.d1, x0);
     store(d2, &mut state.d2, x0);
