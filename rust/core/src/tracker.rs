@@ -1359,7 +1359,10 @@ impl TemporalTracker<u16> {
                 got: levels.len(),
             });
         }
-        if let Some(i) = levels.iter().position(|l| !(l.is_finite() && *l > 0.0)) {
+        // (a fold over the whole frame, which vectorises; the position only on error)
+        let ok = |l: f32| l > 0.0 && l < f32::INFINITY;
+        let all_ok = levels.iter().fold(true, |all, &l| all & ok(l));
+        if let Some(i) = levels.iter().position(|&l| !all_ok && !ok(l)) {
             return Err(KernelError::parameter(
                 "levels",
                 format!("must be finite and > 0, got {} at pixel {i}", levels[i]),
@@ -1371,27 +1374,20 @@ impl TemporalTracker<u16> {
                 "only a normalised tracker, with frames of its table's type, takes per-pixel levels",
             ));
         }
-        let decode = self.intensity.input_table().to_vec();
+        // L(DN) · (S / gain) per DN of the input, then divided per pixel
+        let factor = (f64::from(crate::intensity::NORMALISED_SCALE) / gain) as f32;
+        let scaled: Vec<f32> = self.intensity.input_table()[..I::LUT_LEN]
+            .iter()
+            .map(|&l| l * factor)
+            .collect();
         // (the frame's code table is only used for its gain and clipping code here)
         self.intensity.encoder_levelled(gain)?;
-        let factor = (f64::from(crate::intensity::NORMALISED_SCALE) / gain) as f32;
-        let top = I::LUT_LEN - 1;
         self.ring
             .slot_mut(self.frames_seen)
             .par_chunks_mut(STORE_PIECE)
             .zip(frame.par_chunks(STORE_PIECE))
             .zip(levels.par_chunks(STORE_PIECE))
-            .for_each(|((dst, src), lev)| {
-                for ((d, s), l) in dst.iter_mut().zip(src).zip(lev) {
-                    let i = s.index();
-                    *d = if i >= top {
-                        u16::MAX
-                    } else {
-                        // (≥ 0: clamped, then truncated towards zero)
-                        (decode[i] * factor / l).clamp(0.0, f32::from(u16::MAX - 1)) as u16
-                    };
-                }
-            });
+            .for_each(|((dst, src), lev)| encode_levelled(dst, src, lev, &scaled));
         self.stored();
         Ok(())
     }
@@ -1419,6 +1415,38 @@ fn encode<I: Sample>(dst: &mut [u16], src: &[I], code: &[u16]) {
     }
     for (d, s) in d4.into_remainder().iter_mut().zip(s4.remainder()) {
         *d = code[s.index()];
+    }
+}
+
+/// `dst[i]`: the code of sample `src[i]` divided by its level `lev[i]`,
+/// `min(⌊scaled[src[i]] / lev[i]⌋, 65534)`, or 65535 for the input's largest
+/// DN (`scaled.len() == I::LUT_LEN`: `L(DN) · S / gain`). The table look-ups
+/// go into a small buffer first, so that the divisions, clamps and
+/// conversions run as one loop the compiler vectorises.
+#[inline(always)]
+fn encode_levelled<I: Sample>(dst: &mut [u16], src: &[I], lev: &[f32], scaled: &[f32]) {
+    const PIECE: usize = 256;
+    let scaled = &scaled[..I::LUT_LEN];
+    let top = I::LUT_LEN - 1;
+    const CAPPED: f32 = (u16::MAX - 1) as f32;
+    let mut linear = [0.0f32; PIECE];
+    for ((d, s), l) in dst
+        .chunks_mut(PIECE)
+        .zip(src.chunks(PIECE))
+        .zip(lev.chunks(PIECE))
+    {
+        let linear = &mut linear[..d.len()];
+        for (x, v) in linear.iter_mut().zip(s) {
+            *x = scaled[v.index()];
+        }
+        for (((d, &x), &l), v) in d.iter_mut().zip(linear.iter()).zip(l).zip(s) {
+            // (never NaN, the table being finite and the level finite and > 0: clamped by
+            // compares and selects, then truncated towards zero through i32, which vectorise)
+            let q = x / l;
+            let q = if q < CAPPED { q } else { CAPPED };
+            let code = (if q > 0.0 { q } else { 0.0 }) as i32 as u16;
+            *d = if v.index() >= top { u16::MAX } else { code };
+        }
     }
 }
 
