@@ -258,11 +258,11 @@ def _pixel_time_sigma(slope: np.ndarray, tracked: TrackedSequence, levels: _Leve
 
 
 def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: TrackedSequence,
-               levels: _Levels | None = None) -> EdgeTimes:
+               levels: _Levels | None = None, across: int = ACROSS_HALF_ROWS) -> EdgeTimes:
     """One edge's times and σ; a fast sweep's (most pixels crossed within two frames) re-timed between
     the isochrones (:mod:`gnomon.retiming`), each re-timed σ from the σ of the pixels its crossings
-    were interpolated between, and the re-timed times averaged across the sweep over ±ACROSS_HALF_ROWS
-    rows (:func:`gnomon.retiming.average_across_sweep`)."""
+    were interpolated between, and the re-timed times averaged across the sweep over ±``across`` rows
+    (:func:`gnomon.retiming.average_across_sweep`)."""
     levels = levels or _Levels(tracked)
     sigma = _pixel_time_sigma(slope, tracked, levels)
     grid = block_grid(times)
@@ -271,15 +271,16 @@ def _edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: Tracked
     fast = undersampled(slope, levels.imax, levels.imin)
     timed = np.isfinite(times)
     if timed.any() and fast[timed].mean() > RETIME_UNDERSAMPLED_SHARE:
-        retimed, retimed_sigma = retime_with_sigma(times, tracked.n_frames, sigma, across=ACROSS_HALF_ROWS)
+        retimed, retimed_sigma = retime_with_sigma(times, tracked.n_frames, sigma, across=across)
         return EdgeTimes(name, retimed, slope, retimed_sigma)
     return EdgeTimes(name, times, slope, sigma)
 
 
-def _edge_times(tracked: TrackedSequence, levels: _Levels | None = None) -> tuple[EdgeTimes, EdgeTimes]:
+def _edge_times(tracked: TrackedSequence, levels: _Levels | None = None,
+                across: int = ACROSS_HALF_ROWS) -> tuple[EdgeTimes, EdgeTimes]:
     t, levels = tracked.times, levels or _Levels(tracked)
-    return (_edge_time("enter", t.enter, t.enter_slope, tracked, levels),
-            _edge_time("leave", t.leave, t.leave_slope, tracked, levels))
+    return (_edge_time("enter", t.enter, t.enter_slope, tracked, levels, across),
+            _edge_time("leave", t.leave, t.leave_slope, tracked, levels, across))
 
 
 def edge_time_maps(tracked: TrackedSequence, edge: str = "both") -> list[np.ndarray]:
@@ -291,9 +292,12 @@ def edge_time_maps(tracked: TrackedSequence, edge: str = "both") -> list[np.ndar
     (:mod:`gnomon.retiming`). ``edge``: ``"both"`` (entering, leaving),
     ``"enter"`` or ``"leave"``. ``gnomon regions`` judges its regions on these,
     so that a staircase of under-sampled times (±0.5 frame) does not hide an
-    isochrone that bends off the plane.
+    isochrone that bends off the plane; without the scan's averaging of the
+    re-timed times across the sweep (:func:`gnomon.retiming.average_across_sweep`),
+    which runs along the isochrones and would smooth the very bends the regions
+    look for.
     """
-    enter, leave = _edge_times(tracked)
+    enter, leave = _edge_times(tracked, across=0)
     if edge == "both":
         return [enter.times, leave.times]
     return [enter.times if edge == "enter" else leave.times]
