@@ -162,3 +162,45 @@ def test_kernel_fits_equal_the_numpy_fits() -> None:
         np.testing.assert_allclose(got.extent, want.extent, rtol=1e-12)
         for a, b in zip(got.pixels + got.points, want.pixels + want.points, strict=True):
             np.testing.assert_array_equal(a, b)
+
+
+def test_speeds_are_each_frames_speed() -> None:
+    """ReferenceLines.speeds() gives speed(t) of every frame bit for bit (the first and last lines have one
+    neighbour, the frames next to a missing line one), and the sweep's 5 mm per frame."""
+    from gnomon.reference_lines import PlaneInCamera, lines_on_plane
+
+    times = desk_times() + np.random.default_rng(2).normal(0, 0.02, (120, 160))
+    plane = PlaneInCamera.from_world(np.zeros(3), np.array([0, 0, 1.0]), POSE)
+    lines = lines_on_plane(times, 60, plane, np.ones(times.shape, dtype=bool), CAMERA, "desk")
+    lines.point[30] = np.nan  # a frame without a line
+    speeds = lines.speeds()
+    want = np.array([lines.speed(t) for t in range(60)])
+    np.testing.assert_array_equal(speeds, want)
+    found = np.flatnonzero(lines.found)
+    assert len(found) > 40
+    np.testing.assert_allclose(speeds[found], SPEED, rtol=0.02)
+
+
+def test_kernel_crossings_equal_the_numpy_definition() -> None:
+    """The kernel's isochrone crossings are the numpy definition's, value for value and in order: sweeps
+    along the rows and along the columns, in both senses, with noise, wrong single-pixel times (lines
+    crossing a frame twice), missing times and times outside the frames; with and without ``unique``."""
+    from gnomon.reference_lines import _isochrone_crossings_numpy, isochrone_crossings
+
+    rng = np.random.default_rng(5)
+    v, u = np.mgrid[0:47, 0:63].astype(np.float64)
+    for sweep in (0.3 * u + 0.05 * v, -0.3 * u + 20, 0.02 * u + 0.4 * v, -0.5 * v + 30, 0.4 * u - 3):
+        times = (sweep + rng.normal(0, 0.05, sweep.shape)).astype(np.float32)
+        wrong = rng.random(times.shape) < 0.02
+        times[wrong] = rng.uniform(-2, 30, wrong.sum()).astype(np.float32)
+        times[rng.random(times.shape) < 0.05] = np.nan
+        for unique in (True, False):
+            got = isochrone_crossings(times, 25, unique)
+            want = _isochrone_crossings_numpy(times, 25, unique)
+            assert len(want[0]) > 300
+            for a, b in zip(got, want, strict=True):
+                assert a.dtype == b.dtype
+                np.testing.assert_array_equal(a, b)
+    flat = np.full((5, 7), 3.0, np.float32)  # no step: no crossing
+    assert all(len(x) == 0 for x in isochrone_crossings(flat, 10))
+    assert all(len(x) == 0 for x in isochrone_crossings(np.zeros((0, 4), np.float32), 10))

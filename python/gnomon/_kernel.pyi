@@ -304,6 +304,16 @@ def depth_sigma(
     arithmetic of :func:`gnomon.uncertainty.depth_sigma`'s numpy definition; chunks of pixels in
     parallel."""
 
+def isochrone_crossings(
+    times: npt.NDArray[np.float32],
+    n_frames: int,
+    unique: bool = True,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Where the shadow-time map ``times`` (H, W) float32 (frames, NaN = none) crosses each integer frame
+    ``0 … n_frames − 1``, sub-pixel: ``(frame, u, v)`` (K,) each, as
+    :func:`gnomon.reference_lines.isochrone_crossings`'s numpy definition gives them (the same values, in
+    its order); lines in parallel."""
+
 def frame_lines(
     xy: npt.NDArray[np.float64],
     bounds: npt.NDArray[np.int64],

@@ -52,20 +52,25 @@ class BlockGrid:
     ratio: float
 
 
-def _steps(times: np.ndarray, axis: int) -> np.ndarray:
-    """|step| between neighbours along ``axis`` (frames), NaN where there is none or it exceeds ``MAX_STEP``."""
-    d = np.abs(np.diff(times, axis=axis))
-    return np.where(d <= MAX_STEP, d, np.nan)
-
-
-def _step_profile(steps: np.ndarray, axis: int, size: int) -> np.ndarray:
-    """Mean of ``steps`` (:func:`_steps` along ``axis``) by the position of the step modulo ``size``."""
-    out = np.full(size, np.nan)
+def _steps(times: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """|step| between neighbours along ``axis`` (frames), 0 where there is none or it exceeds ``MAX_STEP``,
+    and where there is one."""
     with np.errstate(invalid="ignore"):
-        for k in range(size):
-            sel = steps[:, k::size] if axis == 1 else steps[k::size]
-            if np.isfinite(sel).any():
-                out[k] = float(np.nanmean(sel))
+        d = np.abs(np.diff(times, axis=axis))
+        counted = d <= MAX_STEP
+    return np.where(counted, d, 0.0), counted
+
+
+def _step_profile(steps: tuple[np.ndarray, np.ndarray], axis: int, size: int) -> np.ndarray:
+    """Mean step (:func:`_steps` along ``axis``) by the position of the step modulo ``size``: ``np.nanmean`` of
+    the steps at each position (the same sum, over the same contiguous copy, over the same count)."""
+    value, counted = steps
+    out = np.full(size, np.nan)
+    for k in range(size):
+        part = (slice(None), slice(k, None, size)) if axis == 1 else (slice(k, None, size),)
+        n = np.count_nonzero(counted[part])
+        if n:
+            out[k] = float(np.sum(np.array(value[part], copy=True)) / n)
     return out
 
 
@@ -74,7 +79,7 @@ def block_grid(times: np.ndarray) -> BlockGrid | None:
     t = np.asarray(times, dtype=np.float64)
     if np.isfinite(t).sum() < 1000:
         return None
-    steps: dict[int, np.ndarray] = {}  # per axis, computed when first needed
+    steps: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # per axis, computed when first needed
     for size in BLOCK_SIZES:
         starts, ratios = [], []
         for axis in (1, 0):

@@ -143,6 +143,25 @@ class ReferenceLines:
                 moves.append(float(np.linalg.norm(delta - (delta @ d) * d)))
         return float(np.mean(moves)) if moves else 0.0
 
+    def speeds(self) -> np.ndarray:
+        """(N,) :meth:`speed` of every frame at once (the same values; NaN at frames without a line
+        that have a neighbour with one)."""
+        found = self.found
+        n = len(self.point)
+        d = self.direction
+        moves = []
+        for step in (-1, 1):  # the previous frame's line, then the next one's
+            has = np.zeros(n, dtype=bool)
+            other = np.clip(np.arange(n) + step, 0, max(n - 1, 0))
+            inside = (np.arange(n) + step >= 0) & (np.arange(n) + step < n)
+            has[inside] = found[other[inside]]
+            delta = self.point[other] - self.point
+            along = delta[:, 0] * d[:, 0] + delta[:, 1] * d[:, 1] + delta[:, 2] * d[:, 2]  # delta @ d, row by row
+            moves.append((has, np.linalg.norm(delta - along[:, None] * d, axis=1)))
+        (has_a, a), (has_b, b) = moves
+        with np.errstate(invalid="ignore"):
+            return np.where(has_a & has_b, (a + b) / 2, np.where(has_a, a, np.where(has_b, b, 0.0)))
+
 
 def _typical_step(times: np.ndarray, axis: int) -> float:
     """Median non-zero change of the shadow time between neighbours along ``axis``.
@@ -168,7 +187,19 @@ def isochrone_crossings(times: np.ndarray, n_frames: int,
     on a row (or column) that crosses it more than once (a wrong time in one
     pixel adds a second crossing); otherwise keep them all, for a robust line
     fit to sort out.
+
+    A float32 map goes to the kernel (``_kernel.isochrone_crossings``, lines in parallel: the
+    same values in the same order); :func:`_isochrone_crossings_numpy` is the definition.
     """
+    if isinstance(times, np.ndarray) and times.dtype == np.float32 and times.ndim == 2:
+        return _kernel.isochrone_crossings(np.ascontiguousarray(times), int(n_frames), bool(unique))
+    return _isochrone_crossings_numpy(times, n_frames, unique)
+
+
+def _isochrone_crossings_numpy(times: np.ndarray, n_frames: int,
+                               unique: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`isochrone_crossings` in numpy (the kernel's ``isochrone_crossings`` gives the same on float32
+    maps)."""
     if times.size == 0:
         empty = np.zeros(0)
         return empty.astype(np.int64), empty, empty

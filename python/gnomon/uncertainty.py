@@ -170,17 +170,13 @@ def line_time_sigma(lines: ReferenceLines) -> np.ndarray:
     speed across the plane (from its neighbours in time).
     """
     sigma = np.full(len(lines.point), np.nan)
-    for t in np.flatnonzero(lines.found):
-        pix = lines.count[t]
-        if pix < 3:
-            continue
-        v = lines.speed(int(t))
-        if v <= 0:
-            continue
-        # A line fit to n points spread uniformly has var(tilt)·Σs² = var(offset)·n,
-        # so the tilt term at the RMS along-line distance equals the offset term.
-        sigma_across = lines.rms[t] * np.sqrt(2.0 / pix)
-        sigma[t] = sigma_across / v
+    speed = lines.speeds()
+    with np.errstate(invalid="ignore"):
+        ok = lines.found & (lines.count >= 3) & (speed > 0)
+    # A line fit to n points spread uniformly has var(tilt)·Σs² = var(offset)·n,
+    # so the tilt term at the RMS along-line distance equals the offset term.
+    sigma_across = lines.rms[ok] * np.sqrt(2.0 / lines.count[ok])
+    sigma[ok] = sigma_across / speed[ok]
     return sigma
 
 

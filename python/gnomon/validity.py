@@ -307,10 +307,11 @@ def reference_line_residuals(lines, sigma_t: np.ndarray) -> LineResiduals | None
     lines have a neighbour to measure their motion against."""
     residual, expected = [], []
     h, w = sigma_t.shape
+    speeds = lines.speeds()
     for t in np.flatnonzero(lines.found):
         if lines.count[t] < 3 or lines.extrapolated[t] or not np.isfinite(lines.rms[t]):
             continue
-        speed = lines.speed(int(t))
+        speed = float(speeds[t])
         if speed <= 0:
             continue
         px = np.rint(lines.pixels[t]).astype(np.int64)

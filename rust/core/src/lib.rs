@@ -7,7 +7,8 @@
 //!   shadow has passed, with provisional times, as soon as it has passed;
 //! * [`triangulate`]: camera rays ∩ interpolated shadow planes; [`depth_sigma`]: their σZ;
 //! * [`grid_faces`], [`clean_faces`], [`obj_text`]: the mesh on the pixel grid, its clean-up, its OBJ text;
-//! * [`frame_lines`]: each frame's robust shadow line on a reference plane;
+//! * [`isochrone_crossings`], [`frame_lines`]: where the shadow-time map crosses each frame, each
+//!   frame's robust shadow line on a reference plane;
 //! * [`retime_rows`], [`retime_rows_sigma`]: a fast sweep's shadow times between the isochrones (and their σ);
 //! * [`world_points`], [`grid_normals`], [`stl_records`]: the surface's world points and normals on the
 //!   pixel grid, a mesh's binary STL records;
@@ -35,7 +36,7 @@ pub use camera::ray_map;
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
 pub use intensity::NORMALISED_SCALE;
-pub use lines::{frame_lines, FrameLines, LineParams};
+pub use lines::{frame_lines, isochrone_crossings, Crossings, FrameLines, LineParams};
 pub use live::{FinishedPixel, WatchParams};
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
 pub use retime::{retime_rows, retime_rows_sigma, RetimeParams, Retimed, RetimedSigma};

@@ -1,6 +1,7 @@
 //! The shadow line of every frame on one reference plane (`gnomon.reference_lines.lines_on_plane`,
-//! docs/method.md §3): each frame's crossings, in plane coordinates, fitted with a robust
-//! total-least-squares line; the fits long enough to be lines set their own direction.
+//! docs/method.md §3): where the shadow-time map crosses each frame ([`isochrone_crossings`]),
+//! and each frame's crossings, in plane coordinates, fitted with a robust total-least-squares
+//! line ([`frame_lines`]); the fits long enough to be lines set their own direction.
 //!
 //! Invariants: the crossings are grouped by frame (`bounds[t] .. bounds[t + 1]` are frame `t`'s,
 //! in the caller's order); a direction is a unit 2-vector; the directions of the accepted frames
@@ -286,6 +287,144 @@ pub fn frame_lines(xy: &[f64], bounds: &[i64], p: &LineParams) -> Result<FrameLi
     Ok(out)
 }
 
+/// Sub-pixel points where a shadow-time map crosses each integer frame
+/// (`gnomon.reference_lines.isochrone_crossings`, whose numpy definition this is, value for value).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Crossings {
+    /// The frame crossed.
+    pub frame: Vec<i64>,
+    /// Column (`u`) and row (`v`) of the crossing, pixels; one of them an integer.
+    pub u: Vec<f64>,
+    pub v: Vec<f64>,
+}
+
+/// Median of the finite non-zero steps between neighbours (`times[i + stride] − times[i]` over
+/// the pairs `pairs` yields), in f32 as numpy takes it (the mean of the two middle ones for an
+/// even count); 0 when there is none.
+fn typical_step(steps: impl Iterator<Item = f32>) -> f64 {
+    let mut d: Vec<f32> = steps.filter(|v| v.is_finite() && *v != 0.0).collect();
+    let n = d.len();
+    if n == 0 {
+        return 0.0;
+    }
+    let (_, &mut upper, _) = d.select_nth_unstable_by(n / 2, f32::total_cmp);
+    if n % 2 == 1 {
+        return f64::from(upper);
+    }
+    let lower = d[..n / 2].iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    f64::from((lower + upper) / 2.0)
+}
+
+/// Where a shadow-time map crosses each integer frame, sub-pixel (see [`Crossings`]).
+///
+/// * `times`: `H·W` shadow times (frames, NaN = none), row-major, `width` W;
+/// * `n_frames`: frames `0 … n_frames − 1` are looked for.
+///
+/// The crossings are searched along the axis where the times change fastest (the typical step
+/// along the rows unless the one along the columns is larger), in the sweep's own sense only;
+/// each pair of neighbours `(a, b)` owns the frames in `[min, max)`, located by linear
+/// interpolation (`along = c + (frame − a)/(b − a)`, `b − a` in f32, the rest in f64). With
+/// `unique`, a frame crossed twice on one line (row or column) is dropped there. Order: lines,
+/// then pairs along them, then frames (numpy's `nonzero` order). Lines in parallel.
+pub fn isochrone_crossings(
+    times: &[f32],
+    width: usize,
+    n_frames: i64,
+    unique: bool,
+) -> Result<Crossings, KernelError> {
+    if times.is_empty() {
+        return Ok(Crossings::default());
+    }
+    KernelError::check_image(times.len(), width, &[])?;
+    if n_frames < 0 {
+        return Err(KernelError::parameter(
+            "n_frames",
+            format!("must be ≥ 0, got {n_frames}"),
+        ));
+    }
+    let height = times.len() / width;
+    let du = typical_step(
+        times
+            .chunks_exact(width)
+            .flat_map(|row| row.windows(2).map(|w| w[1] - w[0])),
+    );
+    let dv = typical_step(
+        times
+            .chunks_exact(width)
+            .zip(times.chunks_exact(width).skip(1))
+            .flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| y - x)),
+    );
+    // the typical steps are medians of finite values: never NaN
+    let along_rows = dv.abs() <= du.abs();
+    let direction = if along_rows { du } else { dv };
+    let (lines, length) = if along_rows {
+        (height, width)
+    } else {
+        (width, height)
+    };
+    let at = |line: usize, k: usize| {
+        if along_rows {
+            times[line * width + k]
+        } else {
+            times[k * width + line]
+        }
+    };
+    let last_frame = n_frames - 1;
+    let per_line: Vec<Crossings> = (0..lines)
+        .into_par_iter()
+        .map(|line| {
+            // (frame, pair index, a, b) of this line
+            let mut found: Vec<(i64, usize, f32, f32)> = Vec::new();
+            for k in 0..length.saturating_sub(1) {
+                let (a, b) = (at(line, k), at(line, k + 1));
+                let step = f64::from(b - a) * direction.signum();
+                if !(a.is_finite() && b.is_finite() && step > 0.0 && direction != 0.0) {
+                    continue;
+                }
+                // numpy: ceil in f32, then the int64 cast
+                let first = (a.min(b).ceil() as i64).max(0);
+                let last = (a.max(b).ceil() as i64 - 1).min(last_frame);
+                for frame in first..=last {
+                    found.push((frame, k, a, b));
+                }
+            }
+            if unique {
+                let mut frames: Vec<i64> = found.iter().map(|f| f.0).collect();
+                frames.sort_unstable();
+                let twice: Vec<i64> = frames
+                    .windows(2)
+                    .filter(|w| w[0] == w[1])
+                    .map(|w| w[0])
+                    .collect();
+                if !twice.is_empty() {
+                    found.retain(|f| twice.binary_search(&f.0).is_err());
+                }
+            }
+            let mut out = Crossings::default();
+            for (frame, k, a, b) in found {
+                let along = k as f64 + (frame as f64 - f64::from(a)) / f64::from(b - a);
+                let across = line as f64;
+                out.frame.push(frame);
+                let (u, v) = if along_rows {
+                    (along, across)
+                } else {
+                    (across, along)
+                };
+                out.u.push(u);
+                out.v.push(v);
+            }
+            out
+        })
+        .collect();
+    let mut out = Crossings::default();
+    for part in per_line {
+        out.frame.extend(part.frame);
+        out.u.extend(part.u);
+        out.v.extend(part.v);
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -377,6 +516,49 @@ mod tests {
         assert_eq!(got.accepted, vec![1, 1]);
         let d = got.direction[1];
         assert!((d[1].atan2(d[0]) - b).abs() < 1e-9, "{d:?}");
+    }
+
+    #[test]
+    fn crossings_of_ramps_along_rows_and_columns() {
+        // 3 rows × 6 columns, t = 0.8·u + 0.05·v + 0.1 (along the rows): frame f is crossed at
+        // u = (f − 0.1 − 0.05·v)/0.8
+        let times: Vec<f32> = (0..18)
+            .map(|i| 0.8 * (i % 6) as f32 + 0.05 * (i / 6) as f32 + 0.1)
+            .collect();
+        let got = isochrone_crossings(&times, 6, 10, true).unwrap();
+        assert_eq!(got.frame, [1, 2, 3, 4].repeat(3));
+        for ((&f, &u), &v) in got.frame.iter().zip(&got.u).zip(&got.v) {
+            assert!((u - (f as f64 - 0.1 - 0.05 * v) / 0.8).abs() < 1e-6, "{u}");
+            assert!(v == 0.0 || v == 1.0 || v == 2.0);
+        }
+        // the transpose sweeps along the columns, downwards: the same crossings with u and v swapped
+        let transposed: Vec<f32> = (0..18).map(|i| times[(i % 3) * 6 + i / 3]).collect();
+        let down = isochrone_crossings(&transposed, 3, 10, true).unwrap();
+        assert_eq!(down.frame, got.frame);
+        assert_eq!(
+            (down.u.clone(), down.v.clone()),
+            (got.v.clone(), got.u.clone())
+        );
+        // a frame crossed twice on a row (a wrong time) is dropped there unless all are kept
+        let mut spiky = times.clone();
+        spiky[3] = 0.5; // row 0: 0.1 0.9 1.7 0.5 3.3 4.1 crosses frame 1 twice (0.9 → 1.7 and 0.5 → 3.3)
+        let unique = isochrone_crossings(&spiky, 6, 10, true).unwrap();
+        let all = isochrone_crossings(&spiky, 6, 10, false).unwrap();
+        let row0 = |c: &Crossings| -> Vec<i64> {
+            c.frame
+                .iter()
+                .zip(&c.v)
+                .filter(|(_, &v)| v == 0.0)
+                .map(|(&f, _)| f)
+                .collect()
+        };
+        assert_eq!(row0(&unique), [2, 3, 4]);
+        assert_eq!(row0(&all), [1, 1, 2, 3, 4]);
+        assert!(isochrone_crossings(&times, 7, 10, true).is_err());
+        assert_eq!(
+            isochrone_crossings(&[], 1, 10, true).unwrap(),
+            Crossings::default()
+        );
     }
 
     #[test]

@@ -809,6 +809,41 @@ fn depth_sigma<'py>(
     )
 }
 
+/// Where a shadow-time map (H, W) float32 crosses each integer frame (see
+/// `gnomon_core::isochrone_crossings`): `(frame (K,) int64, u (K,), v (K,))`.
+#[pyfunction]
+#[pyo3(signature = (times, n_frames, unique = true))]
+fn isochrone_crossings<'py>(
+    py: Python<'py>,
+    times: &Bound<'py, PyAny>,
+    n_frames: i64,
+    unique: bool,
+) -> PyResult<Bound<'py, pyo3::types::PyTuple>> {
+    let times = borrow_array::<f32, Ix2>(
+        times,
+        "times",
+        "float32",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let w = times.shape()[1];
+    let times = times.as_array();
+    let out = py
+        .detach(|| {
+            with_slice(&times, |t| {
+                gnomon_core::isochrone_crossings(t, w.max(1), n_frames, unique)
+            })
+        })
+        .map_err(kernel_error)?;
+    pyo3::types::PyTuple::new(
+        py,
+        [
+            out.frame.into_pyarray(py).into_any(),
+            out.u.into_pyarray(py).into_any(),
+            out.v.into_pyarray(py).into_any(),
+        ],
+    )
+}
+
 /// Every frame's own shadow line on a reference plane (see `gnomon_core::frame_lines`):
 /// `(accepted (N,) bool, centre (N, 2), direction (N, 2), rms (N,), count (N,) int64,
 /// extent (N,), inliers (K,) bool)`.
@@ -1481,6 +1516,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(ray_plane_angles, m)?)?;
     m.add_function(wrap_pyfunction!(depth_sigma, m)?)?;
     m.add_function(wrap_pyfunction!(frame_lines, m)?)?;
+    m.add_function(wrap_pyfunction!(isochrone_crossings, m)?)?;
     m.add_function(wrap_pyfunction!(grid_faces, m)?)?;
     m.add_function(wrap_pyfunction!(clean_faces, m)?)?;
     m.add_function(wrap_pyfunction!(obj_text, m)?)?;
