@@ -1,4 +1,4 @@
-"""Points whose σ the scan's depth-jump test cannot vouch for are refused (gnomon.fusion.beyond_trust)."""
+"""Points whose σ the scan's depth-jump test cannot vouch for are flagged (gnomon.fusion.beyond_trust)."""
 
 from __future__ import annotations
 
@@ -14,10 +14,10 @@ def _pairs_torn_apart(depth: np.ndarray, jump: float) -> float:
     return float(np.mean(np.abs(a - b) > jump * 0.5 * (a + b)))
 
 
-def test_the_limit_keeps_a_surface_together_and_the_refused_points_fall_apart() -> None:
+def test_the_limit_keeps_a_surface_together_and_the_flagged_points_fall_apart() -> None:
     """A flat surface 1000 mm away, max_depth_jump 2 %: half its points measured with σ at 0.9 of the limit,
-    half with three times it. The first are all kept and their neighbours essentially never differ by a jump
-    (5.6 σ of a pair's difference: 2e-8 of the pairs); the second are all refused, and as many of their
+    half with three times it. None of the first is flagged and their neighbours essentially never differ by a jump
+    (5.6 σ of a pair's difference: 2e-8 of the pairs); the second are all flagged, and as many of their
     neighbour pairs as the Gaussian predicts (erfc(5 / 3 / √2) ≈ 9.6 %) would be torn apart by the scan's
     own jump test."""
     jump, z0 = 0.02, 1000.0
@@ -28,14 +28,14 @@ def test_the_limit_keeps_a_surface_together_and_the_refused_points_fall_apart() 
     sigma = np.full((h, w), 0.9 * limit)  # the limit scales with the measured Z: a margin of 35 σ
     sigma[:, w // 2:] = 3.0 * limit
     depth = z0 + sigma * rng.standard_normal((h, w))
-    refused = beyond_trust(depth.astype(np.float32), sigma.astype(np.float32), jump)
-    assert not refused[:, : w // 2].any() and refused[:, w // 2:].all()
-    kept_torn = _pairs_torn_apart(depth[:, : w // 2], jump)
-    refused_torn = _pairs_torn_apart(depth[:, w // 2:], jump)
+    flagged = beyond_trust(depth.astype(np.float32), sigma.astype(np.float32), jump)
+    assert not flagged[:, : w // 2].any() and flagged[:, w // 2:].all()
+    within_torn = _pairs_torn_apart(depth[:, : w // 2], jump)
+    beyond_torn = _pairs_torn_apart(depth[:, w // 2:], jump)
     expected = float(erfc(TRUST_SIGMAS / 3.0 / np.sqrt(2.0)))
     n = h * (w // 2 - 1)
-    assert kept_torn == 0.0  # expected 2e-8 · 1e5 pairs
-    assert abs(refused_torn - expected) <= 4 * np.sqrt(expected * (1 - expected) / n)
+    assert within_torn == 0.0  # expected 2e-8 · 1e5 pairs
+    assert abs(beyond_torn - expected) <= 4 * np.sqrt(expected * (1 - expected) / n)
 
 
 def test_points_without_a_finite_sigma_or_depth_are_not_judged() -> None:

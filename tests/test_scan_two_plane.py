@@ -146,14 +146,13 @@ def test_every_plane_from_its_own_markers(two_plane) -> None:
 def test_coverage_map_gives_the_reasons_the_report_counts(two_plane) -> None:
     """The coverage map's classes add up to the report's counts, and the pixels refused because no
     neighbour shares their depth were measured worse than the points kept (against the truth)."""
-    from gnomon.preview import EDGES_DISAGREE, NO_NEIGHBOUR, POINT, UNDERSAMPLED, UNTRUSTED
+    from gnomon.preview import EDGES_DISAGREE, NO_NEIGHBOUR, POINT, UNDERSAMPLED
 
     _, result, truth = two_plane
     cov, counts = result.coverage, result.report["coverage"]
     assert cov is not None
     assert int(np.isin(cov, (POINT, UNDERSAMPLED)).sum()) == counts["points"]
     assert int((cov == EDGES_DISAGREE).sum()) == counts["edge_conflicts"]
-    assert int((cov == UNTRUSTED).sum()) == counts["sigma_beyond_jump"]
     lonely = cov == NO_NEIGHBOUR
     assert lonely.sum() > 0
     kept = np.isin(cov, (POINT, UNDERSAMPLED))

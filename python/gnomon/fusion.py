@@ -17,12 +17,15 @@ counted. σ models image noise only, so smaller disagreements (sampling and
 model errors) are averaged, not discarded.
 
 A fused point whose own σ is too large for the scan's depth-jump test to tell
-which surface it lies on is refused (:func:`beyond_trust`): two points of one
-surface, each with that σ, differ by ``√2·σ`` (1σ), and the neighbour support,
-the conflict test and the mesh join points only when they lie within
-``max_relative_jump·Z``; beyond ``σ = max_relative_jump·Z / (TRUST_SIGMAS·√2)``
-a surface's own points fall apart by chance more often than once in a million
-pairs, so the point's depth says nothing the scan can vouch for.
+which surface it lies on is flagged (:func:`beyond_trust`, counted in
+report.json): two points of one surface, each with that σ and independent
+errors, differ by ``√2·σ`` (1σ), and the neighbour support, the conflict test
+and the mesh join points only when they lie within ``max_relative_jump·Z``;
+beyond ``σ = max_relative_jump·Z / (TRUST_SIGMAS·√2)`` a surface's own points
+would fall apart by chance more often than once in a million pairs. They are
+counted, not refused: where the errors are shared by neighbours (rays grazing
+the shadow planes, as in the phone captures of docs/method.md) the surface
+holds together at a far larger σ, and such a scan would lose most of its points.
 """
 
 from __future__ import annotations

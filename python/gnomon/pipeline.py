@@ -485,12 +485,12 @@ class _Fused:
     shadow_time: np.ndarray
     undersampled: np.ndarray
     unsupported: np.ndarray  # (H, W) a fused depth no neighbour shares (dropped)
-    untrusted: np.ndarray  # (H, W) a fused depth whose σ the depth-jump test cannot vouch for (dropped)
+    untrusted: np.ndarray  # (H, W) a kept point whose σ the depth-jump test cannot vouch for (counted, kept)
 
 
 def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: float,
           levels: _Levels | None = None) -> _Fused:
-    """Fuse the edges, drop unsupported points and those whose σ is beyond the depth-jump test
+    """Fuse the edges, drop unsupported points, flag those whose σ is beyond the depth-jump test
     (:func:`gnomon.fusion.beyond_trust`), shadow time in capture frames, under-sampled points."""
     # fuse_depths then supported_by_neighbours, per pixel in the kernel (rows in parallel)
     depth, sigma, code = _kernel.fuse_supported(np.stack([e.depth for e in edges]).astype(np.float32, copy=False),
@@ -498,9 +498,6 @@ def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: flo
                                                 float(max_depth_jump))
     keep, conflict, unsupported = code == 1, code == 2, code == 3
     untrusted = keep & beyond_trust(depth, sigma, max_depth_jump)
-    keep &= ~untrusted
-    depth[untrusted] = np.nan
-    sigma[untrusted] = np.nan
     shadow_time = _mean_ignoring_nan([e.times for e in edges])
     used = tracked.used
     if len(used) and not np.array_equal(used, np.arange(len(used))):
@@ -634,7 +631,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
                                     setup.max_depth_jump)
             coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
                                     ambiguous=tracked.times.ambiguous, conflict=fused.conflict,
-                                    unsupported=fused.unsupported, untrusted=fused.untrusted)
+                                    unsupported=fused.unsupported)
             if on_points is not None:
                 on_points(PointsReady(points, fused.shadow_time, fused.undersampled, coverage, None if recorder is None
                                       else _record_points_part(timings, setup, edges, points, fused, frame_stride,
@@ -1178,7 +1175,7 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
             "fraction_of_image": float(keep.mean()),
             "fraction_of_contrast_ok": float(keep.sum() / max(int(times.valid.sum()), 1)),
             "edge_conflicts": int(fused.conflict.sum()),
-            # fused points refused because their σZ exceeds max_depth_jump·Z / (5·√2) (gnomon.fusion.beyond_trust)
+            # points (kept) whose σZ exceeds max_depth_jump·Z / (5·√2) (gnomon.fusion.beyond_trust)
             "sigma_beyond_jump": int(fused.untrusted.sum()),
             "undersampled": int(fused.undersampled.sum()),
             # pixels whose lit level is at the input's full scale (clipped: the shadow's edges
