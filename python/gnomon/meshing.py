@@ -81,8 +81,10 @@ def grid_mesh(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, max_rela
     Faces are oriented counter-clockwise as seen from the camera.
     """
     pixel_index = np.flatnonzero(valid)
-    vertices = points.reshape(-1, 3)[pixel_index].astype(np.float32, copy=False)  # a gather: a new array
-    vn = None if normals is None else normals.reshape(-1, 3)[pixel_index].astype(np.float32, copy=False)
+    # np.take: the same rows as fancy indexing, several times faster on (N, 3) arrays; a new array
+    vertices = np.take(points.reshape(-1, 3), pixel_index, axis=0).astype(np.float32, copy=False)
+    vn = None if normals is None else np.take(normals.reshape(-1, 3), pixel_index, axis=0).astype(np.float32,
+                                                                                                  copy=False)
     if depth.dtype == np.float32 and (sigma is None or sigma.dtype == np.float32):
         # the same faces from the kernel (f32 arithmetic, as numpy does on these maps)
         sig32 = np.zeros(depth.shape, np.float32) if sigma is None else np.ascontiguousarray(sigma)
@@ -354,8 +356,8 @@ def remove_small_components(mesh: GridMesh, min_vertices: int = 50) -> GridMesh:
     """
     faces, source = _kernel.clean_faces(len(mesh.vertices), np.ascontiguousarray(mesh.faces, dtype=np.int32),
                                         int(min_vertices))
-    return GridMesh(mesh.vertices[source], faces, mesh.pixel_index[source],
-                    None if mesh.normals is None else mesh.normals[source])
+    return GridMesh(np.take(mesh.vertices, source, axis=0), faces, np.take(mesh.pixel_index, source),
+                    None if mesh.normals is None else np.take(mesh.normals, source, axis=0))
 
 
 def _remove_small_components_numpy(mesh: GridMesh, min_vertices: int = 50) -> GridMesh:

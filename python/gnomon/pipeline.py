@@ -786,11 +786,12 @@ def surface_points(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np
     world_grid = _kernel.world_points(np.ascontiguousarray(ray_map, dtype=np.float64), depth,
                                       np.ascontiguousarray(valid, dtype=np.uint8), pose.R, pose.t)
     normals = grid_normals(world_grid, depth, valid, pose.camera_centre_world, max_relative_jump)
-    index = np.flatnonzero(valid)  # the valid pixels, row-major: one gather per array
+    index = np.flatnonzero(valid)  # the valid pixels, row-major: one gather (np.take) per array
     v, u = np.divmod(index, valid.shape[1])
     uv = np.stack([u, v], axis=1).astype(np.float32)
-    return SurfacePoints(depth, sigma, valid, world_grid.reshape(-1, 3)[index], rgb.reshape(-1, 3)[index], uv,
-                         normals.reshape(-1, 3)[index], rgb, world_grid, normals)
+    return SurfacePoints(depth, sigma, valid, np.take(world_grid.reshape(-1, 3), index, axis=0),
+                         np.take(rgb.reshape(-1, 3), index, axis=0), uv, np.take(normals.reshape(-1, 3), index, axis=0),
+                         rgb, world_grid, normals)
 
 
 def mesh_surface(points: SurfacePoints, max_relative_jump: float) -> Surface:
@@ -798,7 +799,7 @@ def mesh_surface(points: SurfacePoints, max_relative_jump: float) -> Surface:
     mesh = remove_small_components(grid_mesh(points.world_grid, points.depth, points.valid, max_relative_jump,
                                              sigma=points.sigma, normals=points.normal_grid))
     return Surface(points.depth, points.sigma, points.valid, points.points_world, points.colors, points.uv, mesh,
-                   points.rgb.reshape(-1, 3)[mesh.pixel_index], points.normals, points.rgb)
+                   np.take(points.rgb.reshape(-1, 3), mesh.pixel_index, axis=0), points.normals, points.rgb)
 
 
 def build_surface(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np.ndarray, valid: np.ndarray,
