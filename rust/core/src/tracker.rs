@@ -53,13 +53,18 @@
 //!
 //! # Speed
 //! Each frame is copied into a ring of the last `3W + 2m` frames (in
-//! parallel pieces). When block `b + 1` is complete (and `m − 1` frames
+//! parallel pieces; a normalised frame through its code table, a frame with
+//! per-pixel levels through a vectorised division). The ring's slots are
+//! skewed by a quarter page so that one pixel of many frames does not fall in
+//! one cache set ([`FrameRing`]), and backed by huge pages where Linux allows
+//! (faulting it in by 4 KiB pages cost as much as the normalised store). When block `b + 1` is complete (and `m − 1` frames
 //! more), block `b` is evaluated row by row (rayon over rows), one SIMD
 //! vector of pixels at a time ([`crate::simd`], chosen at run time): block
 //! `b + 1`'s maximum, a backward pass for the right contexts (and block `b`'s
 //! maximum, kept for the next block's left contexts), a forward pass for the
 //! left contexts, the depths and the events, all in the sample's lane width
-//! and in registers. Windows are captured (a scalar look into the ring) only for
+//! and in registers (masks of `≤`, which x86 computes in two operations, and
+//! AVX2's one-instruction blends). Windows are captured (a scalar look into the ring) only for
 //! pixels whose best dip moved, which is rare once the sweep is under way.
 
 use rayon::prelude::*;
