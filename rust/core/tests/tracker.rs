@@ -761,7 +761,7 @@ fn the_second_candidate_keeps_the_other_dip_s_times() {
     // Two comparable dips: ambiguous, but both candidates' times are there.
     let two = with_dips(160, &[(30, 6, 40), (110, 6, 55)]);
     let p = params(4, 16);
-    let s = track_second(&[two.clone()], 1, 1, p, None);
+    let s = track_second(std::slice::from_ref(&two), 1, 1, p, None);
     assert_eq!((s.best_enter[0], s.best_leave[0]), (29.5, 35.5));
     assert_eq!((s.enter[0], s.leave[0]), (109.5, 115.5));
     assert_eq!((s.imax[0], s.imin[0], s.contrast[0]), (200.0, 55.0, 145.0));
