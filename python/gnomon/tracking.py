@@ -20,32 +20,15 @@ threshold at mid-level in *linear irradiance* ``(L(imax) + L(imin)) / 2``
 where ``L`` decodes DN to irradiance (see :func:`decoding_lut`), and two
 shadow times in frames (frame ``i`` is time ``i``) at sub-frame precision:
 
-* ``enter``: the intensity falls through the enter edge's threshold into the dip,
-* ``leave``: it rises back through the leave edge's threshold, after ``enter``.
+* ``enter``: the intensity falls through the threshold into the dip,
+* ``leave``: it rises back through it, after ``enter``.
 
 How: the enter and leave crossings are located in DN (the last fall through
 ``(imax + imin)/2`` before the dip's darkest frame, the first rise after it)
 and the ``2m`` raw samples around each are kept (frames ``j−m … j+m−1``,
-clamped to the sequence); at the end each edge's crossing of its own linear
-threshold nearest its window's centre is interpolated linearly between the two
-decoded samples around it: ``t = k + (v_k − thr) / (v_k − v_{k+1})``.
-
-Each edge's own threshold: light scattered from nearby surfaces that the shadow
-reaches first dims a pixel slowly for many frames before its sharp edge (and
-brightens it slowly after), so a threshold halfway to the brightest level would
-be crossed early on enter and late on leave. From the mid-level crossing ``t0``
-(of ``(L(imax) + L(imin)) / 2``) and the edge's slope ``s`` (the steepest step of
-the crossing's pair and its two neighbours) the level ``u(o)`` is interpolated
-at ``t0 ∓ o`` (− for enter, + for leave) and clipped to ``L(imax)``; the edge's
-ramp from the dark level to it spans ``D(o) = (u(o) − L(imin)) / s`` frames;
-``o`` starts at ``EDGE_OUTSIDE_MIN`` and moves out to ``D(o)`` while
-``D(o) > o`` (at most ``EDGE_OUTSIDE_STEPS`` times), a little past the end of
-the edge's own ramp. The edge's threshold is ``(L(imin) + u(o)) / 2``. Where a
-sample needed is outside the window (a ramp longer than about ``m`` frames),
-``u ≤ L(imin)``, or the edge's threshold is never crossed, the mid-level
-crossing is kept. ``threshold``
-stays the dip's mid-level ``(L(imax) + L(imin)) / 2`` (the contrast and noise
-models use it); the slopes are those at the crossings reported. The slope
+clamped to the sequence); at the end the crossing of the linear threshold
+nearest each window's centre is interpolated linearly between the two decoded
+samples around it: ``t = k + (v_k − thr) / (v_k − v_{k+1})``. The slope
 ``|v_k − v_{k+1}|`` (linear units per frame) at the crossing is kept for the
 noise model ``σ_t = σ_I / slope``. ``clipped`` flags a dip whose levels or
 interpolated samples are 0 or the type's maximum (times may be biased).
@@ -85,12 +68,6 @@ from gnomon.validity import MIN_CONTRAST_SIGMAS
 
 SUPPORTED_DTYPES = (np.dtype(np.uint8), np.dtype(np.uint16))
 
-EDGE_OUTSIDE_MIN = 2.0
-"""Frames: the shortest distance from an edge's mid-level crossing to the sample whose
-level sets that edge's own threshold (the kernel's ``EDGE_OUTSIDE_MIN``)."""
-EDGE_OUTSIDE_STEPS = 4
-"""How many times that sample moves out to the edge's ramp length (``EDGE_OUTSIDE_STEPS``)."""
-
 
 @dataclass
 class ShadowTimes:
@@ -99,10 +76,9 @@ class ShadowTimes:
     ``imax``, ``imin``, ``contrast``: float32, DN of the input: the deepest
     dip's lit level, darkest sample and depth (0 where there is no dip;
     fractional with illumination normalisation, in the light of the dip).
-    ``threshold``: float32, the dip's mid-level ``(L(imax) + L(imin)) / 2`` in linear
-    irradiance units of the decoding LUT.
-    ``enter``, ``leave``: float32 shadow times in frames, each edge's crossing of its own
-    threshold (module docstring), NaN = no crossing or invalid pixel. ``enter_slope``, ``leave_slope``: float32
+    ``threshold``: float32, linear irradiance units of the decoding LUT.
+    ``enter``, ``leave``: float32 shadow times in frames, NaN = no crossing or
+    invalid pixel. ``enter_slope``, ``leave_slope``: float32
     ``|ΔL|`` per frame at the crossing (linear units), NaN likewise.
     ``rival``: float32 DN, depth of the deepest other dip (0 = none).
     ``valid``: bool, a dip with ``contrast ≥ min_contrast`` that is not ambiguous.
@@ -791,8 +767,8 @@ class NumpyTracker:
         deep = has_dip & (contrast >= np.float32(min_contrast))
         ambiguous = deep & (rival >= np.float32(self._ambiguity) * contrast)
         valid = deep & ~ambiguous
-        enter, enter_slope, enter_clip = self._solve(s.enter_at, s.enter_window, hi, lo, valid, lut, True)
-        leave, leave_slope, leave_clip = self._solve(s.leave_at, s.leave_window, hi, lo, valid, lut, False)
+        enter, enter_slope, enter_clip = self._solve(s.enter_at, s.enter_window, threshold, valid, lut, True)
+        leave, leave_slope, leave_clip = self._solve(s.leave_at, s.leave_window, threshold, valid, lut, False)
         clipped = has_dip & ((hi == top) | (lo == 0)) | enter_clip | leave_clip
         shape = self._shape
         return ShadowTimes(
@@ -810,10 +786,9 @@ class NumpyTracker:
             clipped=clipped.reshape(shape),
         )
 
-    def _solve(self, at, window, hi, lo, valid, lut, falling: bool):
-        """Each edge's crossing of its own threshold nearest the window centre (the rule of
-        :data:`EDGE_OUTSIDE_MIN`): time (frames), slope (NaN if none) and whether a
-        sample interpolated is clipped."""
+    def _solve(self, at, window, threshold, valid, lut, falling: bool):
+        """Crossing nearest the window centre: time (frames), slope (NaN if none) and
+        whether a sample interpolated is clipped."""
         n = at.shape[0]
         time = np.full(n, np.nan, np.float32)
         slope = np.full(n, np.nan, np.float32)
@@ -823,60 +798,18 @@ class NumpyTracker:
             return time, slope, clipped
         raw = window[idx]
         v = lut[raw]  # (n, 2m) float32
-        lit, dark = lut[hi[idx]], lut[lo[idx]]
+        thr = threshold[idx][:, None]
         a, b = v[:, :-1], v[:, 1:]
+        cross = (a >= thr) & (thr > b) if falling else (a < thr) & (thr <= b)
         centre = self._m - 1
         order = [centre]
         for d in range(1, self._m):
             order += [centre - d, centre + d]
-        order_k = np.asarray(order)
-
-        def nearest(thr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            """(found, k): whether ``thr`` (n,) is crossed, and the pair nearest the centre."""
-            t = thr[:, None]
-            cross = (a >= t) & (t > b) if falling else (a < t) & (t <= b)
-            ordered = cross[:, order_k]
-            return ordered.any(axis=1), order_k[ordered.argmax(axis=1)]
-
-        rows_all = np.arange(idx.size)
-        # the mid-level crossing first
-        mid = (lit + dark) * np.float32(0.5)
-        found, k = nearest(mid)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a0, b0 = a[rows_all, k], b[rows_all, k]
-            t0 = k.astype(np.float32) + (a0 - mid) / (a0 - b0)
-        # the edge's slope: the steepest step of the crossing's pair and its neighbours
-        steps = np.abs(a - b)
-        near = np.clip(k[:, None] + np.arange(-1, 2)[None, :], 0, steps.shape[1] - 1)
-        steep = steps[rows_all[:, None], near].max(axis=1)
-        end = np.float32(v.shape[1] - 1)
-        outside = np.full(idx.size, EDGE_OUTSIDE_MIN, np.float32)
-        level = lit.copy()
-        active = found.copy()  # still moving its outside sample out
-        inside = found.copy()  # every sample needed was in the window
-        for step in range(EDGE_OUTSIDE_STEPS + 1):
-            at_o = t0 - outside if falling else t0 + outside
-            inside &= ~active | ((at_o >= 0) & (at_o <= end))
-            active &= inside
-            ko = np.clip(np.floor(np.where(active, at_o, 0)).astype(np.int64), 0, v.shape[1] - 2)
-            fo = np.where(active, at_o, 0).astype(np.float32) - ko.astype(np.float32)
-            here = np.minimum(v[rows_all, ko] + fo * (v[rows_all, ko + 1] - v[rows_all, ko]), lit)
-            level = np.where(active, here, level)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ramp = (level - dark) / steep
-            grow = active & (ramp > outside) & (step < EDGE_OUTSIDE_STEPS)
-            outside = np.where(grow, ramp, outside)
-            active = grow
-        use = inside & (level > dark)
-        edge_thr = (dark + level) * np.float32(0.5)
-        found_e, k_e = nearest(np.where(use, edge_thr, mid))
-        use &= found_e
-        k = np.where(use, k_e, k)
-        thr = np.where(use, edge_thr, mid)
-
+        ordered = cross[:, order]
+        found = ordered.any(axis=1)
+        k = np.asarray(order)[ordered.argmax(axis=1)][found]
         rows = np.flatnonzero(found)
-        k = k[found]
-        a_k, b_k, t_k = a[rows, k], b[rows, k], thr[rows]
+        a_k, b_k, t_k = a[rows, k], b[rows, k], thr[rows, 0]
         fraction = (a_k - t_k) / (a_k - b_k)
         frame = at[idx][found] - self._m + k
         time[idx[found]] = (frame.astype(np.float64) + fraction.astype(np.float64)).astype(np.float32)

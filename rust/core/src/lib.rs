@@ -46,7 +46,6 @@ pub use surface::{
     fuse_supported, grid_normals, lit_median, stl_records, world_points, STL_RECORD_BYTES,
 };
 pub use tracker::{
-    find_crossing, find_edge_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker,
-    TrackerParams,
+    find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,
 };
 pub use triangulate::{depth_sigma, plane_at, ray_plane_angles, triangulate, DepthSigma};

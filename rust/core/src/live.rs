@@ -23,13 +23,9 @@
 //! ring: enter is the frame after the last bright sample (`2·v ≥ lit + lo`)
 //! before `k_min`, leave the first bright one after it; the `2m` samples
 //! around each (clamped to the frames in the ring) are decoded with the LUT
-//! and each edge's crossing of its own threshold (between `L(lo)` and the
-//! level just outside the edge's crossing of `(L(lit) + L(lo)) / 2`) nearest
-//! the window's centre is interpolated ([`find_edge_crossing`]). A dip whose
-//! enter has left the ring (wider than the ring) gets NaN times. An edge
-//! whose outside level is not yet seen (`recover` shorter than the edge's
-//! reach, [`find_edge_crossing`]) keeps the mid-level crossing: its times
-//! are then not the final pass's. Levels,
+//! and the crossing of the linear threshold `(L(lit) + L(lo)) / 2` nearest
+//! the window's centre is interpolated ([`find_crossing`]). A dip whose
+//! enter has left the ring (wider than the ring) gets NaN times. Levels,
 //! threshold and slopes are reported as [`finish`] reports them: DN of the
 //! input and linear values in the light of the dip.
 //!
@@ -43,7 +39,7 @@ use crate::error::KernelError;
 use crate::intensity::Intensity;
 use crate::sample::Sample;
 use crate::simd::{Portable, SimdPath, Vector};
-use crate::tracker::{find_edge_crossing, Edge, FrameRing};
+use crate::tracker::{find_crossing, Edge, FrameRing};
 
 /// Per-pixel phase of the watch (stored in the sample type, so that a
 /// row's whole state is in one lane width and the update vectorises).
@@ -269,10 +265,7 @@ impl WatchConfig {
                 let f = (j + i).saturating_sub(self.half).clamp(oldest, last);
                 *l = lut[at(f).index()];
             }
-            // window index i holds frame j + i − m: seen if in oldest ..= last
-            let known = (oldest + self.half).saturating_sub(j)
-                ..(last + 1 + self.half).saturating_sub(j).min(span);
-            match find_edge_crossing(linear, lut[hi.index()], lut[lo.index()], edge, known) {
+            match find_crossing(linear, threshold, edge) {
                 Some(c) => {
                     let frame = j as i64 - self.half as i64 + c.index as i64;
                     ((frame as f64 + f64::from(c.fraction)) as f32, c.slope)

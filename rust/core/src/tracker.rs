@@ -46,11 +46,9 @@
 //! (within the left context), its leave the first rise through it after `k1`
 //! (within the right context): so enter < leave, and both bound the same dip.
 //! The `2m` raw samples around each (`m` = [`TrackerParams::window`]) are kept;
-//! [`TemporalTracker::finish`] decodes them with `L`, finds each edge's
-//! crossing of its own linear threshold nearest its window's centre
-//! ([`find_edge_crossing`]: halfway between `L(lo)` and the level a little
-//! outside the edge's crossing of `thr`, against the slow dimming ahead of a
-//! shadow) and interpolates linearly. Memory is `O(pixels)`, independent of the number of
+//! [`TemporalTracker::finish`] decodes them with `L`, finds the crossing of
+//! the linear threshold nearest each window's centre ([`find_crossing`]) and
+//! interpolates linearly. Memory is `O(pixels)`, independent of the number of
 //! frames.
 //!
 //! # Speed
@@ -180,13 +178,11 @@ pub struct ShadowTimes {
     pub imin: Vec<f32>,
     /// `imax − imin`: the depth of the deepest dip (DN), which `min_contrast` bounds.
     pub contrast: Vec<f32>,
-    /// `(L(imax) + L(imin)) / 2` (linear units): the dip's mid-level, from
-    /// which each edge's own threshold is found.
+    /// `(L(imax) + L(imin)) / 2` (linear units).
     pub threshold: Vec<f32>,
-    /// Time the intensity falls through the enter edge's own threshold
-    /// ([`find_edge_crossing`]) (frames); NaN = none or invalid.
+    /// Time the intensity falls through the threshold (frames); NaN = none or invalid.
     pub enter: Vec<f32>,
-    /// Time the intensity rises back through the leave edge's own threshold (frames); NaN = none or invalid.
+    /// Time the intensity rises back through it (frames); NaN = none or invalid.
     pub leave: Vec<f32>,
     /// `|L(v_k) − L(v_{k+1})|` at the enter crossing (linear units per frame); NaN = none.
     pub enter_slope: Vec<f32>,
@@ -256,88 +252,6 @@ pub fn find_crossing(values: &[f32], threshold: f32, edge: Edge) -> Option<Cross
                 slope: (a - b).abs(),
             }
         })
-}
-
-/// The shortest distance (frames) from an edge's mid-level crossing to the
-/// sample whose level sets that edge's own threshold ([`find_edge_crossing`]).
-pub const EDGE_OUTSIDE_MIN: f32 = 2.0;
-
-/// How many times [`find_edge_crossing`] moves its outside sample out to the
-/// edge's ramp length.
-pub const EDGE_OUTSIDE_STEPS: usize = 4;
-
-/// An edge's crossing of its own threshold: halfway between the dip's
-/// darkest level and the level just outside that edge.
-///
-/// `values` are the `2m` linear samples of [`find_crossing`], `lit` and `dark`
-/// the dip's levels `L(hi)` and `L(lo)` (linear). The mid-level crossing
-/// `t0` (window index + fraction) of `(lit + dark) / 2` is found
-/// first, and the edge's slope `s`: the steepest step `|v_j − v_{j+1}|` of
-/// the crossing's pair and its two neighbours (the mid-level may be crossed
-/// on the slow dimming, just before the sharp step). The level `u(o)` is
-/// interpolated at `t0 − o` (enter) or `t0 + o` (leave) and clipped to
-/// `lit`; the edge's ramp from the dark level up to it, at the slope `s`,
-/// spans `D(o) = (u(o) − dark) / s` frames. `o`
-/// starts at [`EDGE_OUTSIDE_MIN`] and moves out to `D(o)` while `D(o) > o`
-/// (at most [`EDGE_OUTSIDE_STEPS`] times): on a linear ramp of `R` frames it
-/// stops at `o = R`, past the ramp's end, and on a sharp edge after a slow
-/// dimming (the indirect light of surfaces the shadow reaches first) at the
-/// sharp edge's own length, before the dimming has gone far. The edge's
-/// threshold is `(dark + u(o)) / 2`, and its crossing nearest the window's
-/// centre is returned. Where a sample needed is outside `known`, `u ≤ dark`,
-/// or the edge threshold is never crossed, the mid-level crossing is returned
-/// (the dip's overall mid-level, as without the rule). `None` only if the
-/// mid-level is not crossed. The crossing's slope is at the crossing
-/// returned (linear units per frame).
-///
-/// `known`: the window indices whose samples were seen at their own frame
-/// (the whole window in [`TemporalTracker::finish`]; the live watch's
-/// windows reach past the newest frame, whose clamped copies are not the
-/// level outside the edge).
-pub fn find_edge_crossing(
-    values: &[f32],
-    lit: f32,
-    dark: f32,
-    edge: Edge,
-    known: std::ops::Range<usize>,
-) -> Option<Crossing> {
-    let mid = (lit + dark) * 0.5;
-    let c0 = find_crossing(values, mid, edge)?;
-    let t0 = c0.index as f32 + c0.fraction;
-    // The edge's slope: the steepest step of the crossing's pair and its two
-    // neighbours (the mid-level may be crossed on the slow dimming, next to
-    // the sharp step).
-    let last_pair = values.len() - 2;
-    let steep = (c0.index.saturating_sub(1)..=(c0.index + 1).min(last_pair))
-        .map(|j| (values[j] - values[j + 1]).abs())
-        .fold(c0.slope, f32::max);
-    let first = known.start as f32;
-    let end = (known.end.min(values.len()) as f32) - 1.0;
-    let mut outside = EDGE_OUTSIDE_MIN;
-    let mut level = lit;
-    for step in 0..=EDGE_OUTSIDE_STEPS {
-        let at = match edge {
-            Edge::Enter => t0 - outside,
-            Edge::Leave => t0 + outside,
-        };
-        // false for NaN too
-        if !(at >= first && at <= end) {
-            return Some(c0);
-        }
-        let k = (at.floor() as usize).min(values.len() - 2);
-        let f = at - k as f32;
-        level = (values[k] + f * (values[k + 1] - values[k])).min(lit);
-        let ramp = (level - dark) / steep;
-        if step == EDGE_OUTSIDE_STEPS || ramp.is_nan() || ramp <= outside {
-            break;
-        }
-        outside = ramp;
-    }
-    if level.is_nan() || level <= dark {
-        return Some(c0);
-    }
-    let threshold = (dark + level) * 0.5;
-    Some(find_crossing(values, threshold, edge).unwrap_or(c0))
 }
 
 /// The last `slots` frames, frame `j` in slot `j % slots`.
@@ -1356,11 +1270,11 @@ fn resolve_second_row<T: Sample>(
         best_leave_slope: vec![f32::NAN; width],
     };
     let mut linear = vec![0.0f32; span];
-    let mut solve = |at: u32, window: &[T], levels: (f32, f32), edge: Edge| -> (f32, f32) {
+    let mut solve = |at: u32, window: &[T], threshold: f32, edge: Edge| -> (f32, f32) {
         for (l, v) in linear.iter_mut().zip(window) {
             *l = lut[v.index()];
         }
-        match find_edge_crossing(&linear, levels.0, levels.1, edge, 0..span) {
+        match find_crossing(&linear, threshold, edge) {
             Some(c) => {
                 let frame = at as i64 - half as i64 + c.index as i64;
                 ((frame as f64 + f64::from(c.fraction)) as f32, c.slope)
@@ -1371,13 +1285,13 @@ fn resolve_second_row<T: Sample>(
     for x in 0..width {
         let (hi, lo) = (state.hi[x], state.lo[x]);
         if state.enter_at[x] != NO_FRAME && hi > lo {
-            let levels = (lut[hi.index()], lut[lo.index()]);
+            let threshold = (lut[hi.index()] + lut[lo.index()]) * 0.5;
             let window = &state.enter_window[x * span..(x + 1) * span];
             (row.best_enter[x], row.best_enter_slope[x]) =
-                solve(state.enter_at[x], window, levels, Edge::Enter);
+                solve(state.enter_at[x], window, threshold, Edge::Enter);
             let window = &state.leave_window[x * span..(x + 1) * span];
             (row.best_leave[x], row.best_leave_slope[x]) =
-                solve(state.leave_at[x], window, levels, Edge::Leave);
+                solve(state.leave_at[x], window, threshold, Edge::Leave);
             // slopes in the light of the best dip, as in `finish`
             let centre = Intensity::dip_time(row.best_enter[x], row.best_leave[x]);
             let gain = intensity.gain_at(centre, fallback) as f32;
@@ -1389,11 +1303,10 @@ fn resolve_second_row<T: Sample>(
             continue;
         }
         let threshold = (lut[hi.index()] + lut[lo.index()]) * 0.5;
-        let levels = (lut[hi.index()], lut[lo.index()]);
         let window = &s.enter_window2[x * span..(x + 1) * span];
-        let (enter, enter_slope) = solve(s.enter_at2[x], window, levels, Edge::Enter);
+        let (enter, enter_slope) = solve(s.enter_at2[x], window, threshold, Edge::Enter);
         let window = &s.leave_window2[x * span..(x + 1) * span];
-        let (leave, leave_slope) = solve(s.leave_at2[x], window, levels, Edge::Leave);
+        let (leave, leave_slope) = solve(s.leave_at2[x], window, threshold, Edge::Leave);
         // reported in its own light, as the best dip in `finish`
         let gain = intensity.gain_at(Intensity::dip_time(enter, leave), fallback);
         let r = intensity.report(hi, lo, T::MIN, gain);
@@ -1599,11 +1512,11 @@ fn resolve_row<T: Sample>(
     let span = 2 * half;
     let mut linear = vec![0.0f32; span];
     // (time, slope, a sample interpolated is clipped)
-    let mut solve = |at: u32, window: &[T], levels: (f32, f32), edge: Edge| -> (f32, f32, bool) {
+    let mut solve = |at: u32, window: &[T], threshold: f32, edge: Edge| -> (f32, f32, bool) {
         for (l, v) in linear.iter_mut().zip(window) {
             *l = lut[v.index()];
         }
-        match find_edge_crossing(&linear, levels.0, levels.1, edge, 0..span) {
+        match find_crossing(&linear, threshold, edge) {
             Some(c) => {
                 let frame = at as i64 - half as i64 + c.index as i64;
                 // the frames of the two samples (clamped as when captured)
@@ -1626,14 +1539,16 @@ fn resolve_row<T: Sample>(
         let depth = hi.to_f32() - lo.to_f32();
         let unambiguous = has_dip && d2.to_f32() < params.ambiguity * depth;
         let threshold = (lut[hi.index()] + lut[lo.index()]) * 0.5;
-        let levels = (lut[hi.index()], lut[lo.index()]);
         let wanted = unambiguous && (normalised || depth >= light.min_contrast);
         let nan = (f32::NAN, f32::NAN, false);
         let (enter, leave) = if wanted {
             let window = &state.enter_window[x * span..(x + 1) * span];
-            let enter = solve(state.enter_at[x], window, levels, Edge::Enter);
+            let enter = solve(state.enter_at[x], window, threshold, Edge::Enter);
             let window = &state.leave_window[x * span..(x + 1) * span];
-            (enter, solve(state.leave_at[x], window, levels, Edge::Leave))
+            (
+                enter,
+                solve(state.leave_at[x], window, threshold, Edge::Leave),
+            )
         } else {
             (nan, nan)
         };

@@ -2,8 +2,8 @@
 //! direct (non-streaming) reference on random sequences.
 
 use gnomon_core::{
-    find_crossing, find_edge_crossing, Edge, KernelError, Sample, SecondDips, ShadowTimes,
-    SimdPath, TemporalTracker, TrackerParams,
+    find_crossing, Edge, KernelError, Sample, SecondDips, ShadowTimes, SimdPath, TemporalTracker,
+    TrackerParams,
 };
 
 /// Frames 0-9: 200; 10-13: 180 140 100 60; 14-23: 40; 24-27: 70 110 150 190;
@@ -335,39 +335,6 @@ fn crossing_nearest_the_centre_wins() {
     assert_eq!(find_crossing(&v, 5.0, Edge::Leave).unwrap().fraction, 1.0);
 }
 
-#[test]
-fn edge_crossing_uses_the_level_outside_its_own_edge() {
-    // Lit 10, dimmed slowly to 8 before a sharp fall to the dark level 0.
-    let v = [10.0, 9.0, 8.0, 8.0, 2.0, 0.0, 0.0, 0.0];
-    // Mid-level 5: crossed at 3 + (8 − 5)/(8 − 2) = 3.5, slope 6: D = 10/6 < 2, so the
-    // level 2 frames out (index 1.5: 8.5) sets the threshold 4.25, crossed at 3.625.
-    let c = find_edge_crossing(&v, 10.0, 0.0, Edge::Enter, 0..8).unwrap();
-    assert_eq!((c.index, c.fraction, c.slope), (3, 0.625, 6.0));
-    // That sample not seen (the live watch's newest frames), or outside the window:
-    // the mid-level crossing.
-    let mid = find_crossing(&v, 5.0, Edge::Enter).unwrap();
-    assert_eq!(
-        find_edge_crossing(&v, 10.0, 0.0, Edge::Enter, 2..8).unwrap(),
-        mid
-    );
-    // Rising: mirrored.
-    let r: Vec<f32> = v.iter().rev().copied().collect();
-    let c = find_edge_crossing(&r, 10.0, 0.0, Edge::Leave, 0..8).unwrap();
-    assert_eq!((c.index, c.fraction, c.slope), (3, 0.375, 6.0));
-    assert_eq!(
-        find_edge_crossing(&r, 10.0, 0.0, Edge::Leave, 0..6).unwrap(),
-        find_crossing(&r, 5.0, Edge::Leave).unwrap()
-    );
-    // A level outside above the lit level is clipped to it: the mid-level.
-    let w = [12.0, 12.0, 12.0, 10.0, 0.0, 0.0];
-    assert_eq!(
-        find_edge_crossing(&w, 10.0, 0.0, Edge::Enter, 0..6).unwrap(),
-        find_crossing(&w, 5.0, Edge::Enter).unwrap()
-    );
-    // No mid-level crossing: none.
-    assert!(find_edge_crossing(&[9.0, 9.0, 9.0, 9.0], 10.0, 0.0, Edge::Enter, 0..4).is_none());
-}
-
 // ---- Random sequences against a direct reference -------------------------
 
 struct XorShift(u64);
@@ -444,6 +411,7 @@ fn reference_second(profile: &[u16], p: TrackerParams, lut: &[f32]) -> Second {
     // The times of the dip whose darkest sample is at frame k.
     let times = |k: usize| -> (f32, f32) {
         let (hi, lo) = (depth[k].1, profile[k]);
+        let thr = (lut[hi as usize] + lut[lo as usize]) * 0.5;
         let bright = |c: usize| 2 * u32::from(profile[c]) >= u32::from(hi) + u32::from(lo);
         let b = k / w;
         let enter_at = (b.saturating_sub(1) * w..k)
@@ -459,14 +427,7 @@ fn reference_second(profile: &[u16], p: TrackerParams, lut: &[f32]) -> Second {
                     lut[profile[f as usize] as usize]
                 })
                 .collect();
-            find_edge_crossing(
-                &window,
-                lut[hi as usize],
-                lut[lo as usize],
-                edge,
-                0..2 * half,
-            )
-            .map_or(f32::NAN, |c| {
+            find_crossing(&window, thr, edge).map_or(f32::NAN, |c| {
                 let frame = j as i64 - half as i64 + c.index as i64;
                 (frame as f64 + f64::from(c.fraction)) as f32
             })
@@ -566,6 +527,7 @@ fn reference(profile: &[u16], p: TrackerParams, lut: &[f32], min_contrast: f32) 
     let deep = contrast >= min_contrast;
     let ambiguous = deep && f32::from(d2) >= p.ambiguity * contrast;
     let valid = deep && !ambiguous;
+    let thr = (lut[hi as usize] + lut[lo as usize]) * 0.5;
     let bright = |c: usize| 2 * u32::from(profile[c]) >= u32::from(hi) + u32::from(lo);
     let b = k1 / w;
     let enter_at = (b.saturating_sub(1) * w..k1)
@@ -581,13 +543,7 @@ fn reference(profile: &[u16], p: TrackerParams, lut: &[f32], min_contrast: f32) 
                 lut[profile[f as usize] as usize]
             })
             .collect();
-        match find_edge_crossing(
-            &window,
-            lut[hi as usize],
-            lut[lo as usize],
-            edge,
-            0..2 * half,
-        ) {
+        match find_crossing(&window, thr, edge) {
             Some(c) => {
                 let frame = j as i64 - half as i64 + c.index as i64;
                 ((frame as f64 + f64::from(c.fraction)) as f32, c.slope)
