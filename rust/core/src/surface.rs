@@ -461,7 +461,8 @@ mod tests {
         // A camera at world (1, 2, 3) turned 90° about z: X_cam = R·X_world + t with t = −R·c.
         let rotation = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
         let c = [1.0, 2.0, 3.0];
-        let t: [f64; 3] = std::array::from_fn(|i| -(0..3).map(|k| rotation[i][k] * c[k]).sum::<f64>());
+        let t: [f64; 3] =
+            std::array::from_fn(|i| -(0..3).map(|k| rotation[i][k] * c[k]).sum::<f64>());
         assert_eq!(t, [2.0, -1.0, -3.0]);
         let rays = [0.0, 0.0, 1.0, 0.6, 0.0, 0.8, 0.0, 0.6, 0.8, 1.0, 1.0, 1.0];
         let depth = [4.0f32, 8.0, 8.0, f32::NAN];
