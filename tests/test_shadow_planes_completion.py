@@ -122,3 +122,58 @@ def test_a_stick_moved_parallel_to_itself_completes_from_the_line() -> None:
     light = completion_light(truth, lines)
     assert light.errors_deg["line"] < 1e-4 and light.errors_deg["point"] < 1e-4
     assert light.model == "line" or light.errors_deg["point"] < light.errors_deg["line"]
+
+
+def _rotate_about(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues: ``v`` turned by ``angle`` (rad) about the unit ``axis``."""
+    return v * np.cos(angle) + np.cross(axis, v) * np.sin(angle) + axis * (axis @ v) * (1 - np.cos(angle))
+
+
+def test_completion_sigma_is_the_depth_change_of_the_plane_turned_about_its_line() -> None:
+    """A completed plane is exact along its line and off by a turn about it. Turning the plane by a small
+    angle about the line and intersecting each pixel's ray with both planes by hand gives the change of
+    camera Z that :func:`completion_depth_sigma` predicts for a 1σ of that angle, at every distance from
+    the line (first order: the second-order terms are ~angle·tan(ray-plane angle), under 1e-3 here), and
+    the interpolated plane between a completed and a measured row carries its weight's share."""
+    from gnomon.uncertainty import completion_depth_sigma
+
+    angle = 1e-4
+    p0 = np.array([0.0, 100.0, 1800.0])  # the completing line (camera frame, mm): a point and a direction
+    u = np.array([1.0, 0.2, 0.1]) / np.linalg.norm([1.0, 0.2, 0.1])
+    normal = np.cross(u, [0.3, -1.0, 0.4])
+    normal /= np.linalg.norm(normal)
+    turned = _rotate_about(normal, u, angle)
+    plane = np.array([*normal, normal @ p0])
+    planes = np.stack([plane, plane])
+    # pixels whose rays meet the plane 0–400 mm from the line on either side
+    along = np.cross(normal, u)
+    targets = [p0 + s * u + q * along for s in (-200.0, 0.0, 300.0) for q in (-400.0, -50.0, 0.0, 120.0, 400.0)]
+    rays = np.array([x / np.linalg.norm(x) for x in targets])[None]
+    depth = np.array([x[2] for x in targets])[None]
+    z_turned = (turned @ p0) * rays[..., 2] / (rays @ turned)
+    line_point, line_direction = np.stack([p0, np.full(3, np.nan)]), np.stack([u, np.full(3, np.nan)])
+    at_row = completion_depth_sigma(rays, np.zeros(depth.shape), depth, planes, line_point, line_direction, angle)
+    np.testing.assert_allclose(at_row, np.abs(z_turned - depth), rtol=1e-3, atol=1e-9)
+    assert at_row.max() > 0.02  # 400 mm off the line at 1e-4 rad: tens of microns, not nothing
+    between = completion_depth_sigma(rays, np.full(depth.shape, 0.25), depth, planes, line_point, line_direction,
+                                     angle)
+    np.testing.assert_allclose(between, 0.75 * at_row, rtol=1e-6)
+    measured_only = completion_depth_sigma(rays, np.zeros(depth.shape), depth, planes, np.full((2, 3), np.nan),
+                                           np.full((2, 3), np.nan), angle)
+    assert np.all(measured_only == 0)
+
+
+def test_a_point_light_measures_its_completion_error() -> None:
+    """When the two-plane frames fix the lamp as a point, the completion's error is measured all the same
+    (leave one out), so the completed planes' σ has a size: exact lines complete exactly (< 1e-4°)."""
+    from gnomon.shadow_planes import completion_light
+
+    desk = _plane([0.0, -0.9, -0.44], [0.0, 300.0, 1500.0])
+    wall = _plane([0.0, 0.2, -1.0], [0.0, 0.0, 2000.0])
+    lamp = np.array([600.0, -900.0, 1900.0])
+    normals = [np.array([np.cos(a), 0.3 * np.sin(2 * a), np.sin(a)]) for a in np.linspace(0.2, 1.3, 40)]
+    truth = np.array([[*(m / np.linalg.norm(m)), (m / np.linalg.norm(m)) @ lamp] for m in normals])
+    lines = [_lines(desk, truth, "desk"), _lines(wall, truth, "wall")]
+    light = completion_light(truth, lines)
+    assert light.model == "point" and not light_point_or_line(truth).degenerate
+    assert 0 <= light.errors_deg["point"] < 1e-4

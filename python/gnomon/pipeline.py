@@ -62,6 +62,7 @@ from gnomon.texture import LitColour, sample_indices
 from gnomon.tracking import ShadowTimes, TrackedSequence, contrast_floor, linear, track_source
 from gnomon.triangulation import triangulate
 from gnomon.uncertainty import (
+    completion_depth_sigma,
     depth_sigma,
     interpolation_time_sigma,
     linear_noise_at_threshold,
@@ -329,6 +330,11 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
         tri.depth[~screening.keep] = np.nan
     unc = depth_sigma(ray_map, scaled, planes.planes, tri.depth, edge.sigma_t * planes.time_scale,
                       planes.sigma_t_line)
+    sigma_z = unc.sigma_z
+    if planes.completion is not None:  # rows completed from one line: their plane's own error
+        c = planes.completion
+        sigma_z = np.hypot(sigma_z, completion_depth_sigma(ray_map, scaled, tri.depth, planes.planes,
+                                                           c.line_point, c.line_direction, c.sigma_rad))
     angles = ray_plane_angles(ray_map, scaled, planes.planes, np.isfinite(tri.depth))
     angles = angles[np.isfinite(angles)]
     spread = None
@@ -336,7 +342,7 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
         p10, p50, p90 = (float(a) for a in np.percentile(angles, [10, 50, 90]))
         spread = (p10, p50, p90)
     return EdgeResult(edge.name, edge.times, planes.lines, planes.planes, tri.depth,
-                      _with_typical_sigma(tri.depth, unc.sigma_z), planes.degenerate, edge.slope, planes.measured,
+                      _with_typical_sigma(tri.depth, sigma_z), planes.degenerate, edge.slope, planes.measured,
                       screening.rejected, screening.notes, spread)
 
 

@@ -17,8 +17,8 @@ from gnomon.fitting import fit_plane_robust
 from gnomon.reference_lines import ReferenceLines
 from gnomon.validity import light_point_or_line
 
-__all__ = ["MIN_LAMP_LINE_ANGLE_DEG", "CompletionLight", "complete_from_light", "completion_light",
-           "lamp_shadow_planes", "sun_shadow_planes", "two_plane_shadow_planes"]
+__all__ = ["MIN_LAMP_LINE_ANGLE_DEG", "CompletionLight", "complete_from_light", "completing_lines",
+           "completion_light", "lamp_shadow_planes", "sun_shadow_planes", "two_plane_shadow_planes"]
 
 # When the line, seen from the lamp, shrinks to an angle below this (S almost
 # on the line's own axis), the plane through S and the line is ill-defined.
@@ -167,6 +167,29 @@ def _plane_through_light(p: np.ndarray, d: np.ndarray, point: np.ndarray, direct
     return normal
 
 
+def _completing_line(lines: list[ReferenceLines], t: int) -> ReferenceLines | None:
+    """The line a one-line frame ``t`` is completed from: the best-supported one found in it."""
+    found = [ln for ln in lines if np.isfinite(ln.point[t, 0])]
+    return max(found, key=lambda ln: ln.count[t]) if found else None
+
+
+def completing_lines(measured: np.ndarray, completed: np.ndarray,
+                     lines: list[ReferenceLines]) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) point and (N, 3) unit direction (camera frame) of the line each completed frame's plane was
+    built from (:func:`complete_from_light`): the frames with a plane in ``completed`` but not in
+    ``measured``; NaN rows elsewhere. The completed plane contains that line, so its error is a rotation
+    about it (:func:`gnomon.uncertainty.completion_depth_sigma`)."""
+    n = len(measured)
+    point = np.full((n, 3), np.nan)
+    direction = np.full((n, 3), np.nan)
+    for t in np.flatnonzero(np.isfinite(completed[:, 0]) & ~np.isfinite(measured[:, 0])):
+        best = _completing_line(lines, int(t))
+        if best is not None:
+            point[t] = best.point[t]
+            direction[t] = best.direction[t] / np.linalg.norm(best.direction[t])
+    return point, direction
+
+
 def complete_from_light(planes: np.ndarray, lines: list[ReferenceLines], point: np.ndarray,
                         direction: np.ndarray | None,
                         min_angle_deg: float = MIN_LAMP_LINE_ANGLE_DEG) -> tuple[np.ndarray, int]:
@@ -191,10 +214,9 @@ def complete_from_light(planes: np.ndarray, lines: list[ReferenceLines], point: 
     for t in range(len(out)):
         if np.isfinite(out[t, 0]):
             continue
-        found = [ln for ln in lines if np.isfinite(ln.point[t, 0])]
-        if not found:
+        best = _completing_line(lines, t)
+        if best is None:
             continue
-        best = max(found, key=lambda ln: ln.count[t])
         p = best.point[t]
         normal = _plane_through_light(p, best.direction[t], point, direction, sin_min)
         if normal is None:
@@ -213,7 +235,7 @@ class CompletionLight:
     takes them; ``model`` "point" or "line"; ``errors_deg`` each candidate
     model's median angle (degrees) between a two-plane frame's measured plane
     and the plane completed from one of its lines alone (the light located
-    without that frame).
+    without that frame): only "point" when the planes fix a point light.
     """
 
     point: np.ndarray
@@ -245,19 +267,20 @@ def completion_light(planes: np.ndarray, lines: list[ReferenceLines],
     (entering / leaving edge) and the line by 0.26° / 0.24°.
     """
     est = light_point_or_line(planes)
-    if not est.degenerate:
-        return CompletionLight(est.point, None, "point", {})
     sin_min = np.sin(np.radians(min_angle_deg))
     frames = np.flatnonzero(np.all(np.isfinite(planes), axis=1))
-    errors: dict[str, list[float]] = {"point": [], "line": []}
+    errors: dict[str, list[float]] = {"point": [], "line": []} if est.degenerate else {"point": []}
     for t in frames:
         others = planes.copy()
         others[t] = np.nan
         if np.all(np.isfinite(others), axis=1).sum() < 3:
             continue
-        line_est = light_point_or_line(others)
-        models = {"point": (_least_squares_point(others), None),
-                  "line": (line_est.point, line_est.direction)}
+        if est.degenerate:
+            line_est = light_point_or_line(others)
+            models = {"point": (_least_squares_point(others), None),
+                      "line": (line_est.point, line_est.direction)}
+        else:
+            models = {"point": (_least_squares_point(others), None)}
         measured = planes[t, :3] / np.linalg.norm(planes[t, :3])
         for ln in lines:
             if not np.isfinite(ln.point[t, 0]):
@@ -267,6 +290,8 @@ def completion_light(planes: np.ndarray, lines: list[ReferenceLines],
                 if normal is not None:
                     errors[name].append(float(np.degrees(np.arccos(min(1.0, abs(float(normal @ measured)))))))
     median = {k: float(np.median(v)) if v else float("inf") for k, v in errors.items()}
+    if not est.degenerate:
+        return CompletionLight(est.point, None, "point", median)
     if median["point"] < median["line"]:
         return CompletionLight(_least_squares_point(planes), None, "point", median)
     return CompletionLight(est.point, est.direction, "line", median)

@@ -190,6 +190,50 @@ class DepthUncertainty:
     sigma_t_line: np.ndarray  # frames
 
 
+def completion_depth_sigma(ray_map: np.ndarray, times: np.ndarray, depth: np.ndarray, planes: np.ndarray,
+                           line_point: np.ndarray, line_direction: np.ndarray, sigma_rad: float) -> np.ndarray:
+    """(H, W) σZ (world units, camera Z) a completed plane's own error adds at each point.
+
+    A frame whose shadow crossed one reference plane only gets the plane containing that
+    line and the located light (:func:`gnomon.shadow_planes.complete_from_light`). If the
+    light is off, the plane is still exact along the line and turned about it: by an angle
+    of 1σ ``sigma_rad`` (the completion's measured error) a point at distance ``d`` from the
+    line moves by ``sigma_rad·d`` along the plane's normal, which its ray, at angle cosine
+    ``|n·r|`` to that normal, turns into ``sigma_rad·d·r_z/|n·r|`` of camera Z. A pixel's
+    plane is interpolated between rows ``floor(t)`` and ``floor(t) + 1`` with weights
+    ``1 − f`` and ``f``, and the two rows' errors come from one light (fully correlated), so
+    their terms add linearly with those weights; a measured row adds nothing.
+
+    ``ray_map`` (H, W, 3) unit camera rays; ``times`` (H, W) plane rows; ``depth`` (H, W)
+    camera Z (NaN: no point); ``planes`` (N, 4); ``line_point``, ``line_direction`` (N, 3) the
+    completing line of each completed row (NaN rows: measured; direction a unit vector,
+    :func:`gnomon.shadow_planes.completing_lines`). 0 where no completed row is involved.
+    """
+    n = len(planes)
+    sigma = np.zeros(depth.shape, dtype=np.float64)
+    ok = np.isfinite(depth) & np.isfinite(times)
+    completed = np.isfinite(line_point[:, 0])
+    if not completed.any() or not ok.any() or sigma_rad <= 0:
+        return sigma.astype(np.float32)
+    t = times[ok].astype(np.float64)
+    ray = ray_map[ok].astype(np.float64)
+    x = ray * (depth[ok] / ray[:, 2])[:, None]
+    k0 = np.clip(np.floor(t).astype(np.int64), 0, n - 1)
+    frac = t - k0
+    total = np.zeros(len(t))
+    for k, w in ((k0, 1.0 - frac), (np.minimum(k0 + 1, n - 1), frac)):
+        use = completed[k] & (w > 0)
+        if not use.any():
+            continue
+        kk = k[use]
+        dist = np.linalg.norm(np.cross(x[use] - line_point[kk], line_direction[kk]), axis=1)
+        normal = planes[kk, :3] / np.linalg.norm(planes[kk, :3], axis=1)[:, None]
+        cos = np.maximum(np.abs(np.sum(normal * ray[use], axis=1)), MIN_RAY_PLANE_COS)
+        total[use] += w[use] * sigma_rad * dist * np.abs(ray[use, 2]) / cos
+    sigma[ok] = total
+    return sigma.astype(np.float32)
+
+
 def depth_sigma(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray, depth: np.ndarray,
                 sigma_t_pixel: np.ndarray, sigma_t_line_per_frame: np.ndarray) -> DepthUncertainty:
     """First-order σZ for every pixel with a depth.

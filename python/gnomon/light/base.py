@@ -31,7 +31,7 @@ from gnomon.reference_lines import ReferenceLines, ReferencePlane, measure_refer
 from gnomon.tracking import ShadowTimes, TrackedSequence
 from gnomon.uncertainty import line_time_sigma
 
-__all__ = ["EdgePlanes", "EdgeTimes", "LightModel", "Recorder", "ReferenceGeometry", "Screening",
+__all__ = ["EdgePlanes", "EdgeTimes", "LightModel", "PlaneCompletion", "Recorder", "ReferenceGeometry", "Screening",
            "skipped_frames_warning"]
 
 
@@ -67,6 +67,8 @@ class EdgePlanes:
     row = none); row k is the plane at tracker time ``k / time_scale``.
     ``sigma_t_line`` (N,) the 1σ (in rows) each plane's own measurement adds to
     the pixel times. ``lines``: the reference lines they came from (may be empty).
+    ``completion``: the rows completed from one line and the located light, with
+    their lines and the completion's measured 1σ angle (None: every row measured).
     """
 
     planes: np.ndarray
@@ -75,6 +77,21 @@ class EdgePlanes:
     sigma_t_line: np.ndarray
     time_scale: int = 1
     measured: bool = True  # one plane per tracker frame, measured from the reference lines (else computed)
+    completion: PlaneCompletion | None = None
+
+
+@dataclass
+class PlaneCompletion:
+    """Rows of :class:`EdgePlanes` completed from one line and the located light (camera frame).
+
+    ``line_point``, ``line_direction`` (N, 3): each completed row's line (unit direction; NaN rows:
+    measured); ``sigma_rad``: the completion's 1σ angle, from its measured median error on the
+    two-plane rows (:func:`gnomon.shadow_planes.completion_light`) as a Gaussian's (median/0.6745).
+    """
+
+    line_point: np.ndarray
+    line_direction: np.ndarray
+    sigma_rad: float
 
 
 @dataclass

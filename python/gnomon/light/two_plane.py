@@ -14,15 +14,17 @@ from typing import Any
 import numpy as np
 
 from gnomon.camera import Pose
-from gnomon.light.base import LightModel
+from gnomon.light.base import EdgePlanes, EdgeTimes, LightModel, PlaneCompletion, ReferenceGeometry, best_line_sigma
 from gnomon.reference_lines import ReferenceLines
-from gnomon.shadow_planes import complete_from_light, completion_light, two_plane_shadow_planes
+from gnomon.shadow_planes import complete_from_light, completing_lines, completion_light, two_plane_shadow_planes
 from gnomon.validity import MIN_LAMP_CONDITIONING, light_point_or_line
 
 __all__ = ["TwoPlaneLight"]
 
 # Two-plane frames needed before the light they locate completes the frames with one line.
 MIN_PLANES_FOR_LIGHT = 10
+# The median of |x| over a Gaussian's σ: a median error to a 1σ.
+MEDIAN_TO_SIGMA = 0.6745
 
 
 class TwoPlaneLight(LightModel):
@@ -34,13 +36,28 @@ class TwoPlaneLight(LightModel):
         self.pose = pose
 
     def planes_from_lines(self, lines: list[ReferenceLines]) -> tuple[np.ndarray, int]:
-        planes, degenerate = two_plane_shadow_planes(lines)
-        if np.isfinite(planes[:, 0]).sum() >= MIN_PLANES_FOR_LIGHT:
-            # Frames whose shadow crossed one plane only: their plane from the light the others located
-            # (a point, or the line the planes nearly share: whichever completes the two-plane frames better).
-            light = completion_light(planes, lines)
-            planes, _ = complete_from_light(planes, lines, light.point, light.direction)
+        planes, degenerate, _ = self._planes_and_completion(lines)
         return planes, degenerate
+
+    def shadow_planes(self, edge: EdgeTimes, geometry: ReferenceGeometry) -> EdgePlanes:
+        lines = geometry.lines(edge.times)
+        planes, degenerate, completion = self._planes_and_completion(lines)
+        return EdgePlanes(planes, degenerate, lines, best_line_sigma(lines), completion=completion)
+
+    @staticmethod
+    def _planes_and_completion(lines: list[ReferenceLines]) -> tuple[np.ndarray, int, PlaneCompletion | None]:
+        measured, degenerate = two_plane_shadow_planes(lines)
+        if np.isfinite(measured[:, 0]).sum() < MIN_PLANES_FOR_LIGHT:
+            return measured, degenerate, None
+        # Frames whose shadow crossed one plane only: their plane from the light the others located
+        # (a point, or the line the planes nearly share: whichever completes the two-plane frames better).
+        light = completion_light(measured, lines)
+        planes, added = complete_from_light(measured, lines, light.point, light.direction)
+        error_deg = light.errors_deg.get(light.model, float("inf"))
+        if not added or not np.isfinite(error_deg):
+            return planes, degenerate, None
+        point, direction = completing_lines(measured, planes, lines)
+        return planes, degenerate, PlaneCompletion(point, direction, float(np.radians(error_deg)) / MEDIAN_TO_SIGMA)
 
     def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:
         light: dict[str, Any] = {"kind": self.kind, "position": None}
