@@ -250,7 +250,7 @@ def _least_squares_point(planes: np.ndarray) -> np.ndarray:
 
 
 def completion_light(planes: np.ndarray, lines: list[ReferenceLines],
-                     min_angle_deg: float = MIN_LAMP_LINE_ANGLE_DEG) -> CompletionLight:
+                     min_angle_deg: float = MIN_LAMP_LINE_ANGLE_DEG, measure: bool = True) -> CompletionLight:
     """Which light completes the one-line frames best: a point, or the line the planes nearly share.
 
     ``planes`` (N, 4): the two-plane frames' measured planes (NaN rows elsewhere).
@@ -264,9 +264,14 @@ def completion_light(planes: np.ndarray, lines: list[ReferenceLines],
     the smaller median angle wins (the line on a tie: exact for a stick moved
     parallel to itself). On the CMU frog (singular-value ratio 0.007, a
     hand-held stick whose tilt drifted) the point errs by 0.22° / 0.14°
-    (entering / leaving edge) and the line by 0.26° / 0.24°.
+    (entering / leaving edge) and the line by 0.26° / 0.24°. The same
+    measurement gives a point light's error (for the completed planes' σ);
+    ``measure=False`` skips it when only the planes are wanted (``errors_deg``
+    then empty for a point light; the choice between models is always measured).
     """
     est = light_point_or_line(planes)
+    if not est.degenerate and not measure:
+        return CompletionLight(est.point, None, "point", {})
     sin_min = np.sin(np.radians(min_angle_deg))
     frames = np.flatnonzero(np.all(np.isfinite(planes), axis=1))
     errors: dict[str, list[float]] = {"point": [], "line": []} if est.degenerate else {"point": []}

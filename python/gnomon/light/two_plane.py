@@ -36,25 +36,28 @@ class TwoPlaneLight(LightModel):
         self.pose = pose
 
     def planes_from_lines(self, lines: list[ReferenceLines]) -> tuple[np.ndarray, int]:
-        planes, degenerate, _ = self._planes_and_completion(lines)
+        planes, degenerate, _ = self._planes_and_completion(lines, with_sigma=False)
         return planes, degenerate
 
     def shadow_planes(self, edge: EdgeTimes, geometry: ReferenceGeometry) -> EdgePlanes:
         lines = geometry.lines(edge.times)
-        planes, degenerate, completion = self._planes_and_completion(lines)
+        planes, degenerate, completion = self._planes_and_completion(lines, with_sigma=True)
         return EdgePlanes(planes, degenerate, lines, best_line_sigma(lines), completion=completion)
 
     @staticmethod
-    def _planes_and_completion(lines: list[ReferenceLines]) -> tuple[np.ndarray, int, PlaneCompletion | None]:
+    def _planes_and_completion(lines: list[ReferenceLines],
+                               with_sigma: bool) -> tuple[np.ndarray, int, PlaneCompletion | None]:
+        """The planes, the frames dropped as degenerate and (``with_sigma``) the completed rows' lines and
+        measured error; the live watch wants the planes only."""
         measured, degenerate = two_plane_shadow_planes(lines)
         if np.isfinite(measured[:, 0]).sum() < MIN_PLANES_FOR_LIGHT:
             return measured, degenerate, None
         # Frames whose shadow crossed one plane only: their plane from the light the others located
         # (a point, or the line the planes nearly share: whichever completes the two-plane frames better).
-        light = completion_light(measured, lines)
+        light = completion_light(measured, lines, measure=with_sigma)
         planes, added = complete_from_light(measured, lines, light.point, light.direction)
         error_deg = light.errors_deg.get(light.model, float("inf"))
-        if not added or not np.isfinite(error_deg):
+        if not with_sigma or not added or not np.isfinite(error_deg):
             return planes, degenerate, None
         point, direction = completing_lines(measured, planes, lines)
         return planes, degenerate, PlaneCompletion(point, direction, float(np.radians(error_deg)) / MEDIAN_TO_SIGMA)
