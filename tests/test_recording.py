@@ -265,11 +265,24 @@ def test_points_bit_for_bit(scan):
     assert values.dtype == np.float32 and values.tobytes() == XYZ.tobytes()
     packed = np.array(one(data, ENTITY["points"], "Points3D:colors"), dtype=np.uint32)
     assert np.array_equal(packed >> 24, RGB[:, 0]) and np.array_equal((packed >> 16) & 255, RGB[:, 1])
+    assert np.array_equal((packed >> 8) & 255, RGB[:, 2]) and np.all(packed & 255 == 255)
     sigma = batch.column("GnomonPoints:sigma").flatten().to_numpy(zero_copy_only=False)
     assert sigma.dtype == np.float32 and sigma.tobytes() == SIGMA.tobytes()
     uv = batch.column("GnomonPoints:uv").flatten().to_numpy(zero_copy_only=False)
     assert uv.tobytes() == UV.tobytes()
     assert one(data, ENTITY["points"], "GnomonPoints:units") == ["mm"]
+
+
+def test_colours_packed_as_rerun_packs_them():
+    """The recorder packs colours itself (rerun's own packing is slow on millions): the same uint32s."""
+    from rerun._color_conversion import u8_array_to_rgba
+
+    from gnomon.recording import _packed_rgba
+
+    rgb = np.random.default_rng(3).integers(0, 256, (1000, 3), dtype=np.uint8)
+    rgb[0], rgb[1] = (0, 0, 0), (255, 255, 255)
+    assert np.array_equal(_packed_rgba(rgb), u8_array_to_rgba(rgb))
+    assert _packed_rgba(rgb).dtype == np.uint32
 
 
 def test_mesh(scan):
