@@ -102,6 +102,11 @@ FROG_OTHER_FACES = {"left box front": [(0, 228), (120, 228), (165, 497), (0, 497
                     "right box front": [(937, 212), (1024, 212), (1024, 485), (905, 485)],
                     "right box top": [(910, 172), (1024, 165), (1024, 212), (937, 212)],
                     "wall's folded right edge": [(935, 0), (956, 0), (952, 168), (933, 168)]}
+# The volume a user scanning the frog would crop to ([output] crop_box, the desk markers' frame, mm): the desk
+# markers' rectangle widened by 20-40 mm, from 60 mm in front of the first markers to just behind the wall
+# (409 mm away), up to 470 mm (the wall's markers end 395 mm up). The boxes beside the wall are outside it.
+FROG_VOLUME = ("the markers' volume (x -20..600, y -60..425, z -10..470 mm in the desk's frame)",
+               np.array([[-20.0, -60.0, -10.0], [600.0, 425.0, 470.0]]))
 PHONE = ["stand", "banana", "mug", "fruits", "candle-mug"]
 # The mug's npz clicks land on none of its crosses (they belong to another framing): rough pixels read off
 # its first frame by eye instead (bottom-left, bottom-right, top-right, top-left; full size).
@@ -166,7 +171,8 @@ def frog(mirror: Path, out: Path) -> None:
     toml_io.dump(log, log_path)
     scan = regions_preview_scan(log_path)
     extents = {"desk": (-20.0, 580.0, -60.0, 420.0), "wall": (-20.0, 580.0, -60.0, 360.0)}
-    score = score_scan("frog", scan, camera, extents, FROG_OUTLINE, [FROG_SHADOW], other_faces=FROG_OTHER_FACES)
+    score = score_scan("frog", scan, camera, extents, FROG_OUTLINE, [FROG_SHADOW], other_faces=FROG_OTHER_FACES,
+                       volume=FROG_VOLUME)
     print("\n".join(score.lines()), flush=True)
     if score.false_mask is not None:  # where the false points are, in red on the first frame
         first = cv2.imread(sorted(glob.glob(str(frames / "*.jpg")))[0])

@@ -88,6 +88,11 @@ class CaptureScore:
     notes: list[str] = field(default_factory=list)
     # (H, W) bool: the false points (for drawing where they are); None until scored
     false_mask: np.ndarray | None = None
+    # with a volume (score_scan's ``volume``): its description, the points inside it and those of them off
+    # both planes and outside the object (no face excused: what a scan cropped to it would output)
+    volume: str | None = None
+    volume_points: int = 0
+    volume_off: int = 0
 
     def lines(self) -> list[str]:
         out = [f"{self.name}"]
@@ -121,6 +126,9 @@ class CaptureScore:
                                                 + (f" ({100 * b / max(self.all_points, 1):.2f} beyond 5 sigma)"
                                                    if b is not None else "")
                                                 for place, n, b in self.false_where))
+        if self.volume is not None:
+            out.append(f"  within {self.volume}: {self.volume_points} points, off both planes by > 5 mm and outside "
+                       f"the object {100 * self.volume_off / max(self.volume_points, 1):.2f} %")
         out.extend(f"  note: {n}" for n in self.notes)
         return out
 
@@ -142,7 +150,8 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
                keep_out_px: int = 12, marker_keep_out_px: int = 40, false_mm: float = 5.0,
                region_masks: dict[str, np.ndarray] | None = None,
                other_faces: dict[str, list] | None = None, border_px: int = 60,
-               declared_planes: dict[str, tuple[np.ndarray, np.ndarray]] | None = None) -> CaptureScore:
+               declared_planes: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+               volume: tuple[str, np.ndarray] | None = None) -> CaptureScore:
     """Score one scan.
 
     ``extents``: per plane, (x0, x1, y0, y1) in the plane's own 2-D frame
@@ -156,6 +165,9 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
     the image's left and right sides (where the frog's desk board curls), elsewhere.
     ``declared_planes``: planes not measured from markers (absent from report.json's reference planes),
     name → (origin, 3×3 axes with the normal last), camera frame.
+    ``volume``: (description, (2, 3) min and max corners of a box in the first plane's frame): the points
+    inside it and those of them off both planes and outside the object, every face counted as off
+    (what a scan with that ``[output] crop_box`` would output, world = the first marked plane's frame).
     """
     report = json.loads((scan_dir / "report.json").read_text())
     depth = np.load(scan_dir / "depth.npy")
@@ -243,6 +255,13 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
         on_face |= inside & (to_face <= false_mm)
         nearest_surface = np.where(inside, np.fmin(nearest_surface, to_face), nearest_surface)
     result.on_faces = int((off & on_face).sum())
+    if volume is not None:
+        t0, R0 = frames[names[0]]
+        world = (pts_cam - t0) @ R0  # the first plane's frame: x, y along it, z along its normal
+        lo, hi = np.asarray(volume[1], dtype=np.float64)
+        with np.errstate(invalid="ignore"):
+            within = has & np.all((world >= lo) & (world <= hi), axis=-1)
+        result.volume, result.volume_points, result.volume_off = volume[0], int(within.sum()), int((off & within).sum())
     false = off & ~on_face
     result.false_points = int(false.sum())
     result.false_mask = false.copy()
