@@ -397,6 +397,17 @@ def retime_rows(
     times, the re-timed mask, and per re-timed pixel (row-major) its ``index`` value, the crossings'
     pixels (left, right), phases and rises, their gap and the pixel's fraction of it."""
 
+def average_across(
+    times: npt.NDArray[np.float32],
+    retimed: npt.NDArray[np.uint8],
+    across_rows: bool,
+    half: int,
+    bend: float,
+) -> npt.NDArray[np.float32]:
+    """(H, W) re-timed times averaged across the sweep, as :func:`gnomon.retiming.average_across_sweep`
+    defines it (f64 in numpy's order, rounded to f32): ``across_rows`` the pixels ``v ± d`` of a column,
+    else ``u ± d`` of a row; rows in parallel, GIL released."""
+
 def retime_rows_sigma(
     times: npt.NDArray[np.float64],
     index: npt.NDArray[np.int64],

@@ -410,13 +410,7 @@ def _check_plane_coverage(edges: list[EdgeResult], path: Path, warnings: list[st
         if span.size == 0:
             continue
         share = float(have[span].mean())
-        frames = np.flatnonzero(have)
-        # distance (frames) from each pixel time to the nearest frame with a plane
-        k = np.clip(np.searchsorted(frames, e.times), 1, max(len(frames) - 1, 1))
-        with np.errstate(invalid="ignore"):
-            gap = np.fmin(np.abs(e.times - frames[np.clip(k - 1, 0, len(frames) - 1)]),
-                          np.abs(e.times - frames[np.clip(k, 0, len(frames) - 1)]))
-            far = np.isfinite(e.depth) & ~(gap <= MAX_PLANE_GAP)
+        far = _far_from_planes(e.times, e.depth, have)
         if far.any():
             e.depth[far] = np.nan
             warnings.append(f"{e.name} edge: {int(far.sum())} points dropped: their shadow time is more than "
@@ -427,6 +421,42 @@ def _check_plane_coverage(edges: list[EdgeResult], path: Path, warnings: list[st
             raise FrameError(f"{path}: {msg}: too few to scan (check the regions are bare and swept)")
         if share < MIN_PLANE_SHARE_WARN:
             warnings.append(msg)
+
+
+def _plane_gap(times: np.ndarray, frames: np.ndarray) -> np.ndarray:
+    """Distance (frames) from each time to the nearest of ``frames`` (sorted, non-empty), NaN for NaN."""
+    k = np.clip(np.searchsorted(frames, times), 1, max(len(frames) - 1, 1))
+    with np.errstate(invalid="ignore"):
+        return np.fmin(np.abs(times - frames[np.clip(k - 1, 0, len(frames) - 1)]),
+                       np.abs(times - frames[np.clip(k, 0, len(frames) - 1)]))
+
+
+def _far_from_planes(times: np.ndarray, depth: np.ndarray, have: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels with a depth whose time (frames) is not within ``MAX_PLANE_GAP`` frames of a
+    frame with a plane (``have`` (N,) bool per frame, at least one).
+
+    The gap is measured (:func:`_plane_gap`) only where it may exceed the bound: a time ``t`` in ``[i, i + 1)``
+    is at most ``t − i < 1`` frame farther from the nearest plane than the integer frame ``i``, so the frames
+    ``i`` within ``MAX_PLANE_GAP − 1`` of a plane clear all of their times at once (a few comparisons per pixel
+    instead of a search).
+    """
+    frames = np.flatnonzero(have)
+    ints = np.arange(len(have), dtype=np.float64)
+    clear = _plane_gap(ints, frames) <= MAX_PLANE_GAP - 1.0
+    # runs [a, b) of integer frames that do not clear their times
+    edges = np.flatnonzero(np.diff(np.concatenate([[True], clear, [True]]).astype(np.int8)))
+    runs = edges.reshape(-1, 2)
+    check = np.isfinite(depth)
+    if len(runs) <= 8:
+        with np.errstate(invalid="ignore"):
+            cleared = (times >= 0) & (times < len(have))  # NaN: not cleared
+            for a, b in runs:
+                cleared &= ~((times >= a) & (times < b))
+        check &= ~cleared
+    far = np.zeros(np.shape(depth), dtype=bool)
+    if check.any():
+        far[check] = ~(_plane_gap(times[check], frames) <= MAX_PLANE_GAP)
+    return far
 
 
 def _check_line_residuals(edge: EdgeResult, residuals: list[Any], path: Path, warnings: list[str]) -> None:

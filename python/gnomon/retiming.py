@@ -220,7 +220,19 @@ def average_across_sweep(times: np.ndarray, retimed: np.ndarray, along_rows: boo
     staircase by a frame or more). ``times`` (H, W) frames (NaN = none),
     ``retimed`` (H, W) bool; ``along_rows``: the sweep runs along the rows
     (:func:`_sweep_axis`). Pixels not re-timed keep their time.
+
+    float32 times (the re-timed maps) are averaged by the kernel (``_kernel.average_across``, rows in
+    parallel, the same f64 arithmetic); :func:`_average_across_sweep_numpy` is the definition.
     """
+    if isinstance(times, np.ndarray) and times.dtype == np.float32 and times.ndim == 2 and times.size:
+        done = np.ascontiguousarray(retimed, dtype=bool).view(np.uint8)
+        return _kernel.average_across(np.ascontiguousarray(times), done, bool(along_rows), int(half), float(bend))
+    return _average_across_sweep_numpy(times, retimed, along_rows, half, bend)
+
+
+def _average_across_sweep_numpy(times: np.ndarray, retimed: np.ndarray, along_rows: bool,
+                                half: int = ACROSS_HALF_ROWS, bend: float = ACROSS_BEND_FRAMES) -> np.ndarray:
+    """:func:`average_across_sweep` in numpy (the kernel's ``average_across`` gives the same on float32 times)."""
     t = np.asarray(times, dtype=np.float64)
     ok = np.asarray(retimed, dtype=bool) & np.isfinite(t)
     if not along_rows:

@@ -10,6 +10,7 @@
 //! * [`isochrone_crossings`], [`frame_lines`]: where the shadow-time map crosses each frame, each
 //!   frame's robust shadow line on a reference plane;
 //! * [`retime_rows`], [`retime_rows_sigma`]: a fast sweep's shadow times between the isochrones (and their σ);
+//!   [`average_across`]: the re-timed times averaged across the sweep;
 //! * [`world_points`], [`grid_normals`], [`stl_records`]: the surface's world points and normals on the
 //!   pixel grid, a mesh's binary STL records;
 //! * [`ray_map`]: the unit ray of every pixel of OpenCV's 5-coefficient camera (Newton);
@@ -39,7 +40,9 @@ pub use intensity::NORMALISED_SCALE;
 pub use lines::{frame_lines, isochrone_crossings, Crossings, FrameLines, LineParams};
 pub use live::{FinishedPixel, WatchParams};
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
-pub use retime::{retime_rows, retime_rows_sigma, RetimeParams, Retimed, RetimedSigma};
+pub use retime::{
+    average_across, retime_rows, retime_rows_sigma, RetimeParams, Retimed, RetimedSigma,
+};
 pub use sample::Sample;
 pub use simd::SimdPath;
 pub use surface::{

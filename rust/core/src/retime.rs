@@ -192,6 +192,67 @@ pub fn retime_rows_sigma(
     Ok(out)
 }
 
+/// Re-timed times averaged across the sweep (`gnomon.retiming.average_across_sweep`, whose numpy
+/// definition this reproduces value for value).
+///
+/// `times` `H·W` frames (f32, NaN = none), `retimed` `H·W` (non-zero = re-timed), rows of `width`.
+/// `across_rows`: the pixels `v ± d` of a column are averaged (the sweep runs along the rows), else
+/// the pixels `u ± d` of a row. A re-timed pixel with a finite time `t` takes the mean of `t` and of
+/// every symmetric pair `d = 1 … half` (while the map is longer than `2d` along that axis) whose
+/// two pixels are re-timed and finite and which bends by at most `bend` frames
+/// (`|t₋ + t₊ − 2t| ≤ bend`); the other pixels keep their time. In f64 in numpy's order (the
+/// pair's sum added to the running total, 0 for a pair not taken), rounded to f32 at the end.
+/// Rows of the output in parallel.
+pub fn average_across(
+    times: &[f32],
+    retimed: &[u8],
+    width: usize,
+    across_rows: bool,
+    half: usize,
+    bend: f64,
+) -> Result<Vec<f32>, KernelError> {
+    let n = times.len();
+    KernelError::check_image(n, width, &[("retimed (one per pixel)", n, retimed.len())])?;
+    let height = n / width.max(1);
+    let ok = |i: usize| retimed[i] != 0 && times[i].is_finite();
+    // the length of the averaging axis, and the flat offset of one step along it
+    let (length, step) = if across_rows {
+        (height, width)
+    } else {
+        (width, 1)
+    };
+    let mut out = vec![0f32; n];
+    out.par_chunks_mut(width.max(1))
+        .enumerate()
+        .for_each(|(v, row)| {
+            for (u, o) in row.iter_mut().enumerate() {
+                let i = v * width + u;
+                let t = f64::from(times[i]);
+                if !ok(i) {
+                    *o = times[i];
+                    continue;
+                }
+                let p = if across_rows { v } else { u };
+                let (mut total, mut count) = (t, 1.0f64);
+                for d in 1..=half {
+                    if length <= 2 * d {
+                        break;
+                    }
+                    if p < d || p >= length - d {
+                        continue;
+                    }
+                    let (a, b) = (i - d * step, i + d * step);
+                    let (up, down) = (f64::from(times[a]), f64::from(times[b]));
+                    let pair = ok(a) && ok(b) && (up + down - 2.0 * t).abs() <= bend;
+                    total += if pair { up + down } else { 0.0 };
+                    count += if pair { 2.0 } else { 0.0 };
+                }
+                *o = (total / count.max(1.0)) as f32;
+            }
+        });
+    Ok(out)
+}
+
 /// The σ of a row's `k`-th re-timed pixel (see [`retime_rows_sigma`]).
 fn retimed_sigma(row: &Retimed, k: usize, sigma: &[f64]) -> f64 {
     let (w0, w1) = ((1.0 - row.f[k]) / row.gap[k], row.f[k] / row.gap[k]);
@@ -341,6 +402,30 @@ mod tests {
         }
         // index values must address sigma
         assert!(retime_rows_sigma(&t, &idx, &[1; 8], &sigma[..7], 8, P).is_err());
+    }
+
+    #[test]
+    fn averaged_across_the_sweep() {
+        // 3 rows × 2 columns, averaged across the rows: the middle pixel of column 0 takes its
+        // straight pair, column 1's pair bends by 1 frame (> 0.5) and is not taken.
+        let t = [1.0f32, 5.0, 2.0, 6.0, 3.0, 8.0];
+        let done = [1u8; 6];
+        let out = average_across(&t, &done, 2, true, 2, 0.5).unwrap();
+        assert_eq!(out, vec![1.0, 5.0, 2.0, 6.0, 3.0, 8.0]);
+        // bends of 0.4 and 0.5 frame: both pairs taken, the mean in f64 (the pixel, then its pair)
+        let t2 = [1.0f32, 5.0, 2.2, 6.0, 3.0, 7.5];
+        let out = average_across(&t2, &done, 2, true, 2, 0.5).unwrap();
+        assert_eq!(out[2], ((f64::from(2.2f32) + (1.0 + 3.0)) / 3.0) as f32);
+        assert_eq!(out[3], ((6.0f64 + (5.0 + 7.5)) / 3.0) as f32);
+        // the first and last rows have no pair
+        assert_eq!(out[0], 1.0);
+        // along the rows instead: a row of 3 is too short for d = 2, d = 1 is taken
+        let out = average_across(&[1.0, 2.0, 3.5], &[1, 1, 1], 3, false, 2, 0.5).unwrap();
+        assert_eq!(out[1], ((2.0f64 + (1.0 + 3.5)) / 3.0) as f32);
+        // a pixel not re-timed keeps its time, and is no partner
+        let out = average_across(&[1.0, 2.2, 3.0], &[1, 0, 1], 3, false, 2, 0.5).unwrap();
+        assert_eq!(out, vec![1.0, 2.2, 3.0]);
+        assert!(average_across(&t, &done[..5], 2, true, 2, 0.5).is_err());
     }
 
     #[test]

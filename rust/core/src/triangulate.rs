@@ -205,7 +205,11 @@ pub fn depth_sigma(
         }
     };
     let (h, h2) = (step as f32, (2.0 * step) as f32);
-    let z_at = |t: f32, ray: &[f64]| hit(&planes, t, ray, min_cos).map_or(f32::NAN, |p| p.z as f32);
+    // The depth at time `t` on a ray normalised once per pixel (`hit` on the same ray, value for value).
+    let z_at = |t: f32, ray: Option<Ray>| {
+        ray.and_then(|ray| plane_at(&planes, f64::from(t))?.intersect(&ray, min_cos))
+            .map_or(f32::NAN, |p| p.z as f32)
+    };
     let mut out = DepthSigma {
         sigma_z: vec![f32::NAN; n],
         dz_dt: vec![f32::NAN; n],
@@ -221,7 +225,13 @@ pub fn depth_sigma(
             for k in 0..sigma_z.len() {
                 let i = start + k;
                 let (t, z) = (times[i], depth[i]);
-                let ray = &rays[3 * i..3 * i + 3];
+                let r = &rays[3 * i..3 * i + 3];
+                // (a time that is not finite meets no plane: its ray is not needed)
+                let ray = if t.is_finite() {
+                    Ray::new(Vector3::new(r[0], r[1], r[2]))
+                } else {
+                    None
+                };
                 let (plus, minus) = (z_at(t + h, ray), z_at(t - h, ray));
                 let central = (plus - minus) / h2;
                 let forward = (plus - z) / h;

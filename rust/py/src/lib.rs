@@ -1249,6 +1249,44 @@ fn retime_rows_sigma<'py>(
     )
 }
 
+/// (H, W) float32: re-timed times averaged across the sweep (see `gnomon_core::average_across`);
+/// `retimed` (H, W) uint8 (non-zero = re-timed).
+#[pyfunction]
+#[pyo3(signature = (times, retimed, across_rows, half, bend))]
+fn average_across<'py>(
+    py: Python<'py>,
+    times: &Bound<'py, PyAny>,
+    retimed: &Bound<'py, PyAny>,
+    across_rows: bool,
+    half: usize,
+    bend: f64,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let times = borrow_array::<f32, Ix2>(
+        times,
+        "times",
+        "float32",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (times.shape()[0], times.shape()[1]);
+    let retimed = borrow_array::<u8, Ix2>(
+        retimed,
+        "retimed",
+        "uint8",
+        &[Extent::Exactly(h), Extent::Exactly(w)],
+    )?;
+    let (times, retimed) = (times.as_array(), retimed.as_array());
+    let out = py
+        .detach(|| {
+            with_slice(&times, |t| {
+                with_slice(&retimed, |r| {
+                    gnomon_core::average_across(t, r, w.max(1), across_rows, half, bend)
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    image(py, out, h, w)
+}
+
 /// Fused depth and σ of K estimates per pixel, neighbour-supported only, and each pixel's code
 /// (0 none, 1 kept, 2 conflict, 3 unsupported), each (H, W) (see `gnomon_core::fuse_supported`).
 #[pyfunction]
@@ -1524,6 +1562,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(stl_records, m)?)?;
     m.add_function(wrap_pyfunction!(retime_rows, m)?)?;
     m.add_function(wrap_pyfunction!(retime_rows_sigma, m)?)?;
+    m.add_function(wrap_pyfunction!(average_across, m)?)?;
     m.add_function(wrap_pyfunction!(world_points, m)?)?;
     m.add_function(wrap_pyfunction!(ray_map, m)?)?;
     m.add_function(wrap_pyfunction!(lit_median, m)?)?;
