@@ -173,7 +173,7 @@ def write_points_ply(
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             fh.write(header)
-            fh.write(table.tobytes())
+            fh.write(table.data)  # the packed table's own buffer: no copy of it as bytes
 
 
 def write_mesh_ply(
@@ -206,8 +206,8 @@ def write_mesh_ply(
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             fh.write(header)
-            fh.write(table.tobytes())
-            fh.write(face_table.tobytes())
+            fh.write(table.data)  # the packed tables' own buffers: no copy of them as bytes
+            fh.write(face_table.data)
 
 
 # --------------------------------------------------------------------------- reading
