@@ -98,3 +98,25 @@ def test_bad_inputs_raise_value_error():
         _kernel.triangulate(rays, times, np.zeros((2, 3)))
     with pytest.raises(ValueError, match="min_cos"):
         _kernel.triangulate(rays, times, planes, min_cos=2.0)
+
+
+def test_depth_only_is_the_points_z() -> None:
+    """triangulation.triangulate_depth (the kernel's Z only) is triangulate(...).depth bit for bit, and the
+    Z of the exact ray-plane points: interpolated planes, NaN times, missing planes, times outside."""
+    from gnomon.triangulation import triangulate, triangulate_depth
+
+    rng = np.random.default_rng(5)
+    rays = pinhole_rays(30, 40, f=60.0)
+    planes = np.stack([unit_plane(np.array([rng.normal(0, 0.3), rng.normal(0, 0.3), 1.0, 400.0 + 10 * k]))
+                       for k in range(12)])
+    planes[4] = np.nan
+    times = rng.uniform(-1.0, 12.0, (30, 40)).astype(np.float32)
+    times[rng.random(times.shape) < 0.1] = np.nan
+    times[0, :12] = np.arange(12)  # exact frames
+    depth = triangulate_depth(rays, times, planes)
+    ref = triangulate(rays, times, planes).depth
+    assert depth.dtype == np.float32 and depth.shape == (30, 40)
+    assert np.array_equal(depth.view(np.uint32), ref.view(np.uint32))
+    assert 0.5 < np.isfinite(depth).mean() < 0.95
+    expect = ray_plane(rays[0, 0], planes[0])[2]
+    np.testing.assert_allclose(depth[0, 0], expect, rtol=1e-6)

@@ -209,6 +209,15 @@ class TemporalTracker:
     @property
     def simd_path(self) -> Literal["avx2", "sse2", "portable"]: ...
 
+def triangulate_depth(
+    rays: npt.NDArray[np.float64],
+    times: npt.NDArray[np.float32],
+    planes: npt.NDArray[np.float64],
+    min_cos: float = 1e-3,
+) -> npt.NDArray[np.float32]:
+    """(H, W) camera Z of :func:`triangulate`'s points (the same intersections, value for value), NaN where
+    it gives none; without the points' x, y and the mask. Chunks of pixels in parallel, GIL released."""
+
 def triangulate(
     rays: npt.NDArray[np.float64],
     times: npt.NDArray[np.float32],

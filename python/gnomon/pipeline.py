@@ -60,7 +60,7 @@ from gnomon.retiming import ACROSS_HALF_ROWS, retime_with_sigma
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
 from gnomon.texture import LitColour, sample_indices
 from gnomon.tracking import ShadowTimes, TrackedSequence, contrast_floor, linear, track_source
-from gnomon.triangulation import triangulate
+from gnomon.triangulation import triangulate_depth
 from gnomon.uncertainty import (
     completion_depth_sigma,
     depth_sigma,
@@ -319,30 +319,30 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
                       tracked: TrackedSequence, levels: _Levels | None = None) -> EdgeResult:
     """Triangulate one edge against its shadow planes (keeping the points the light accepts), with σZ."""
     scaled = (edge.times * planes.time_scale).astype(np.float32)
-    tri = triangulate(ray_map, scaled, planes.planes)
+    depth = triangulate_depth(ray_map, scaled, planes.planes)  # triangulate(...).depth, without the points
     if type(setup.light).screen is LightModel.screen:
         screening = Screening()  # the default keeps every point: its inputs are not computed
     else:
-        screening = setup.light.screen(edge, points_from_depth(ray_map, tri.depth), tracked.times,
+        screening = setup.light.screen(edge, points_from_depth(ray_map, depth), tracked.times,
                                        tracked.n_frames, *(levels or _Levels(tracked)).relative_depth,
                                        levelled=tracked.levelled_frames)
     if screening.keep is not None:
-        tri.depth[~screening.keep] = np.nan
-    unc = depth_sigma(ray_map, scaled, planes.planes, tri.depth, edge.sigma_t * planes.time_scale,
+        depth[~screening.keep] = np.nan
+    unc = depth_sigma(ray_map, scaled, planes.planes, depth, edge.sigma_t * planes.time_scale,
                       planes.sigma_t_line)
     sigma_z = unc.sigma_z
     if planes.completion is not None:  # rows completed from one line: their plane's own error
         c = planes.completion
-        sigma_z = np.hypot(sigma_z, completion_depth_sigma(ray_map, scaled, tri.depth, planes.planes,
+        sigma_z = np.hypot(sigma_z, completion_depth_sigma(ray_map, scaled, depth, planes.planes,
                                                            c.line_point, c.line_direction, c.sigma_rad))
-    angles = ray_plane_angles(ray_map, scaled, planes.planes, np.isfinite(tri.depth))
+    angles = ray_plane_angles(ray_map, scaled, planes.planes, np.isfinite(depth))
     angles = angles[np.isfinite(angles)]
     spread = None
     if angles.size:
         p10, p50, p90 = (float(a) for a in np.percentile(angles, [10, 50, 90]))
         spread = (p10, p50, p90)
-    return EdgeResult(edge.name, edge.times, planes.lines, planes.planes, tri.depth,
-                      _with_typical_sigma(tri.depth, sigma_z), planes.degenerate, edge.slope, planes.measured,
+    return EdgeResult(edge.name, edge.times, planes.lines, planes.planes, depth,
+                      _with_typical_sigma(depth, sigma_z), planes.degenerate, edge.slope, planes.measured,
                       screening.rejected, screening.notes, spread)
 
 

@@ -46,6 +46,17 @@ def triangulate(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray) -> T
     return Triangulation(points, depth, valid)
 
 
+def triangulate_depth(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """``triangulate(ray_map, times, planes).depth`` (H, W) float32 camera Z, NaN = none, without the points:
+    the kernel's ``triangulate_depth`` (the same intersections)."""
+    return _kernel.triangulate_depth(
+        np.ascontiguousarray(ray_map, dtype=np.float64),
+        np.ascontiguousarray(times, dtype=np.float32),
+        np.ascontiguousarray(planes, dtype=np.float64),
+        MIN_RAY_PLANE_COS,
+    )
+
+
 NEIGHBOURS_8 = ((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))
 
 

@@ -5,7 +5,8 @@
 //!   grey frames, `O(pixels)` memory whatever the number of frames;
 //! * the live watch ([`TemporalTracker::watch`], [`live`]): pixels whose
 //!   shadow has passed, with provisional times, as soon as it has passed;
-//! * [`triangulate`]: camera rays ∩ interpolated shadow planes; [`depth_sigma`]: their σZ;
+//! * [`triangulate`]: camera rays ∩ interpolated shadow planes ([`triangulate_depth`]: their Z only);
+//!   [`depth_sigma`]: their σZ;
 //! * [`grid_faces`], [`clean_faces`], [`obj_text`]: the mesh on the pixel grid, its clean-up, its OBJ text;
 //! * [`isochrone_crossings`], [`frame_lines`]: where the shadow-time map crosses each frame, each
 //!   frame's robust shadow line on a reference plane;
@@ -51,4 +52,6 @@ pub use surface::{
 pub use tracker::{
     find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,
 };
-pub use triangulate::{depth_sigma, plane_at, ray_plane_angles, triangulate, DepthSigma};
+pub use triangulate::{
+    depth_sigma, plane_at, ray_plane_angles, triangulate, triangulate_depth, DepthSigma,
+};

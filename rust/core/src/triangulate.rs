@@ -114,6 +114,38 @@ pub fn triangulate(
     Ok((points, valid))
 }
 
+/// Camera Z of [`triangulate`]'s points (`H·W`, f32, NaN where it gives no point): the same
+/// intersections, value for value, without writing the points' x and y or a mask.
+pub fn triangulate_depth(
+    rays: &[f64],
+    times: &[f32],
+    planes: &[f64],
+    min_cos: f64,
+) -> Result<Vec<f32>, KernelError> {
+    if rays.len() != 3 * times.len() {
+        return Err(KernelError::LengthMismatch {
+            what: "rays (3 per shadow time)",
+            expected: 3 * times.len(),
+            got: rays.len(),
+        });
+    }
+    let planes = plane_rows(planes)?;
+    check_min_cos(min_cos)?;
+    let mut depth = vec![f32::NAN; times.len()];
+    depth
+        .par_chunks_mut(PIXELS_PER_TASK)
+        .zip(times.par_chunks(PIXELS_PER_TASK))
+        .zip(rays.par_chunks(3 * PIXELS_PER_TASK))
+        .for_each(|((depth, times), rays)| {
+            for ((z, &t), ray) in depth.iter_mut().zip(times).zip(rays.chunks_exact(3)) {
+                if let Some(p) = hit(&planes, t, ray, min_cos) {
+                    *z = p.z as f32;
+                }
+            }
+        });
+    Ok(depth)
+}
+
 fn check_min_cos(min_cos: f64) -> Result<(), KernelError> {
     if !(0.0..=1.0).contains(&min_cos) {
         return Err(KernelError::parameter(

@@ -730,6 +730,51 @@ fn triangulate<'py>(
     Ok((points, mask(py, valid, h, w)?))
 }
 
+/// (H, W) float32 camera Z of [`triangulate`]'s points, NaN where it gives none (see
+/// `gnomon_core::triangulate_depth`).
+#[pyfunction]
+#[pyo3(signature = (rays, times, planes, min_cos = 1e-3))]
+fn triangulate_depth<'py>(
+    py: Python<'py>,
+    rays: &Bound<'py, PyAny>,
+    times: &Bound<'py, PyAny>,
+    planes: &Bound<'py, PyAny>,
+    min_cos: f64,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let times = borrow_array::<f32, Ix2>(
+        times,
+        "times",
+        "float32",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (times.shape()[0], times.shape()[1]);
+    let rays = borrow_array::<f64, Ix3>(
+        rays,
+        "rays",
+        "float64",
+        &[Extent::Exactly(h), Extent::Exactly(w), Extent::Exactly(3)],
+    )?;
+    let planes = borrow_array::<f64, Ix2>(
+        planes,
+        "planes",
+        "float64",
+        &[Extent::Any("N"), Extent::Exactly(4)],
+    )?;
+    let (rays, times, planes) = (rays.as_array(), times.as_array(), planes.as_array());
+    let depth = py
+        .detach(|| {
+            with_slice(&rays, |rays| {
+                with_slice(&times, |times| {
+                    with_slice(&planes, |planes| {
+                        gnomon_core::triangulate_depth(rays, times, planes, min_cos)
+                    })
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    image(py, depth, h, w)
+}
+
 /// σZ, ∂Z/∂t and the line's time σ of every pixel, each (H, W) float32 (see
 /// `gnomon_core::depth_sigma`).
 #[pyfunction]
@@ -1563,6 +1608,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(retime_rows, m)?)?;
     m.add_function(wrap_pyfunction!(retime_rows_sigma, m)?)?;
     m.add_function(wrap_pyfunction!(average_across, m)?)?;
+    m.add_function(wrap_pyfunction!(triangulate_depth, m)?)?;
     m.add_function(wrap_pyfunction!(world_points, m)?)?;
     m.add_function(wrap_pyfunction!(ray_map, m)?)?;
     m.add_function(wrap_pyfunction!(lit_median, m)?)?;
