@@ -166,3 +166,30 @@ def test_the_live_watch_reports_in_finish_units_when_normalised() -> None:
     np.testing.assert_allclose(np.asarray(threshold), np.asarray(final.threshold)[0, px], rtol=1e-3)
     # the watch's lit level is the brightest sample before the dip, finish's the lower of both sides
     np.testing.assert_allclose(np.asarray(imax), np.asarray(final.imax)[0, px], rtol=0.01)
+
+
+def test_linear_levels_are_the_tables_interpolation() -> None:
+    """tracking.linear looks whole codes up directly: the same float32 values as np.interp over the decoding
+    table, bit for bit, for whole codes, fractional levels, NaN (→ code 0) and levels beyond the table."""
+    from gnomon.tracking import linear
+
+    rng = np.random.default_rng(2)
+    lut = (np.linspace(0.0, 1.0, 256) ** 2.2).astype(np.float32)
+
+    def reference(v: np.ndarray) -> np.ndarray:
+        dn = np.nan_to_num(np.asarray(v, dtype=np.float64))
+        return np.interp(dn, np.arange(256, dtype=np.float64), lut.astype(np.float64)).astype(np.float32)
+
+    whole = rng.integers(0, 256, (50, 60)).astype(np.float32)
+    whole[0, :2] = (0.0, 255.0)
+    fractional = whole + rng.uniform(0.0, 1.0, whole.shape).astype(np.float32)
+    with_nan = whole.copy()
+    with_nan[3, 4] = np.nan
+    beyond = whole.copy()
+    beyond[5, 5] = 300.0
+    below = whole.copy()
+    below[6, 6] = -2.0
+    for v in (whole, fractional, with_nan, beyond, below, whole.astype(np.float64)):
+        out = linear(v, lut)
+        assert out.dtype == np.float32
+        assert np.array_equal(out.view(np.uint32), reference(v).view(np.uint32))

@@ -185,9 +185,21 @@ def contrast_floor(min_contrast: float | None, noise_dn: float | None) -> float:
 def linear(values_dn: np.ndarray, lut: np.ndarray) -> np.ndarray:
     """Linear irradiance (float32) of per-pixel levels in DN of the input (``ShadowTimes.imax``,
     ``imin``: integers, or fractional with illumination normalisation), decoded by ``lut``
-    (:func:`decoding_lut`), linearly between its entries; NaN → 0."""
+    (:func:`decoding_lut`), linearly between its entries; NaN → 0.
+
+    Levels that are all whole codes within the table (the tracker's, without illumination normalisation)
+    are looked up directly: ``np.interp`` returns an entry itself at its own abscissa, so the values are
+    the same, without a binary search per pixel."""
+    values = np.asarray(values_dn)
+    fp = np.asarray(lut).astype(np.float64)
+    if values.dtype == np.float32 and values.size and len(fp) < 2**31:
+        with np.errstate(invalid="ignore"):
+            codes = values.astype(np.int32)  # NaN and out-of-range values fail the checks below
+            whole = bool(np.array_equal(codes, values)) and int(codes.min()) >= 0 and int(codes.max()) < len(fp)
+        if whole:
+            return fp[codes].astype(np.float32)
     dn = np.nan_to_num(np.asarray(values_dn, dtype=np.float64))
-    return np.interp(dn, np.arange(len(lut), dtype=np.float64), lut.astype(np.float64)).astype(np.float32)
+    return np.interp(dn, np.arange(len(lut), dtype=np.float64), fp).astype(np.float32)
 
 
 # A frame whose global level falls below the level its recent trend predicts by more than
