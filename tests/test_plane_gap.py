@@ -1,5 +1,6 @@
 """The scan drops points whose shadow time is far from every measured plane: the fast screen
-(pipeline._far_from_planes) against the distance to the nearest plane frame measured directly."""
+(pipeline._far_from_planes) against the distance to the nearest plane frame measured directly; and the
+lit colours' capture frames (pipeline._capture_frames) against np.interp."""
 
 from __future__ import annotations
 
@@ -39,3 +40,23 @@ def test_far_from_planes_matches_the_nearest_plane_distance(seed: int) -> None:
     assert np.array_equal(far, _direct(times, depth, have))
     if seed in (3, 4):
         assert far.any()  # the sparse planes leave far times to find
+
+
+@pytest.mark.parametrize("skipped", [False, True])
+def test_capture_frames_are_the_interpolated_indices(skipped: bool) -> None:
+    """pipeline._capture_frames (the lit colours' frame times) is np.interp over the kept frames' capture
+    indices bit for bit: with no frame skipped through its identity shortcut, else the interpolation;
+    NaN and ±inf give NaN, times beyond the kept frames clamp."""
+    from gnomon.pipeline import _capture_frames
+
+    rng = np.random.default_rng(1)
+    n = 50
+    used = np.arange(n) if not skipped else np.sort(rng.choice(80, n, replace=False))
+    times = rng.uniform(-2.0, n + 1.0, (30, 40)).astype(np.float32)
+    times[0, :4] = (np.nan, np.inf, -np.inf, float(n - 1))
+    times[1, :] = np.arange(40)  # whole kept frames
+    steps = np.arange(n, dtype=np.float64)
+    ref = np.where(np.isfinite(times), np.interp(np.nan_to_num(times), steps, used.astype(np.float64)), np.nan)
+    out = _capture_frames(times, used)
+    assert out.dtype == np.float64
+    assert np.array_equal(out.view(np.uint64), ref.view(np.uint64))

@@ -573,13 +573,23 @@ def _lit_colours(colour: LitColour, tracked: TrackedSequence) -> np.ndarray:
     """(H, W, 3) uint8: each pixel's colour from the kept frames it is lit in."""
     if not colour.indices.size or not colour.wants(int(colour.indices[0])):
         return _colors(tracked.first_color, tracked.first_grey)
-    used = tracked.used.astype(np.float64)
-    steps = np.arange(len(used), dtype=np.float64)
-    to_capture = lambda t: np.where(np.isfinite(t), np.interp(np.nan_to_num(t), steps, used), np.nan)  # noqa: E731
+    used = tracked.used
     try:
-        return colour.finish(to_capture(tracked.times.enter), to_capture(tracked.times.leave))
+        return colour.finish(_capture_frames(tracked.times.enter, used), _capture_frames(tracked.times.leave, used))
     except ValueError:  # no kept frame arrived (a video shorter than announced)
         return _colors(tracked.first_color, tracked.first_grey)
+
+
+def _capture_frames(times: np.ndarray, used: np.ndarray) -> np.ndarray:
+    """(H, W) float64 capture frame of each time in kept frames (NaN = none): linear between the kept
+    frames' capture indices ``used`` (``np.interp``, clamped at both ends). With no frame skipped that is
+    the time itself within ``[0, n − 1]`` (``np.interp`` is exact on the identity), without a search per pixel."""
+    used = np.asarray(used).astype(np.float64)
+    n = len(used)
+    if n and np.array_equal(used, np.arange(n)):
+        return np.where(np.isfinite(times), np.clip(np.asarray(times, dtype=np.float64), 0.0, n - 1.0), np.nan)
+    steps = np.arange(n, dtype=np.float64)
+    return np.where(np.isfinite(times), np.interp(np.nan_to_num(times), steps, used), np.nan)
 
 
 def _crop(fused: _Fused, setup: ScanSetup, ray_map: np.ndarray) -> np.ndarray:
