@@ -779,7 +779,10 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
             return
         rr = _rr()
         v = np.ascontiguousarray(np.asarray(vertices, dtype=np.float32).reshape(-1, 3))
-        f = np.ascontiguousarray(np.asarray(faces).reshape(-1, 3).astype(np.uint32))
+        f = np.asarray(faces).reshape(-1, 3)
+        # int32 indices (the scan's) are reinterpreted, the same bits astype gives, without a copy
+        f = np.ascontiguousarray(f).view(np.uint32) if f.dtype == np.int32 else np.ascontiguousarray(
+            f.astype(np.uint32))
         colours = None if rgb is None else _packed_rgba(rgb)
         self._rec.log(
             ENTITY["mesh"],
