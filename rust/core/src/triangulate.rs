@@ -79,15 +79,7 @@ pub fn triangulate(
     planes: &[f64],
     min_cos: f64,
 ) -> Result<(Vec<f32>, Vec<u8>), KernelError> {
-    if rays.len() != 3 * times.len() {
-        return Err(KernelError::LengthMismatch {
-            what: "rays (3 per shadow time)",
-            expected: 3 * times.len(),
-            got: rays.len(),
-        });
-    }
-    let planes = plane_rows(planes)?;
-    check_min_cos(min_cos)?;
+    let planes = checked_inputs(rays, times, planes, min_cos)?;
 
     let mut points = vec![f32::NAN; rays.len()];
     let mut valid = vec![0u8; times.len()];
@@ -122,15 +114,7 @@ pub fn triangulate_depth(
     planes: &[f64],
     min_cos: f64,
 ) -> Result<Vec<f32>, KernelError> {
-    if rays.len() != 3 * times.len() {
-        return Err(KernelError::LengthMismatch {
-            what: "rays (3 per shadow time)",
-            expected: 3 * times.len(),
-            got: rays.len(),
-        });
-    }
-    let planes = plane_rows(planes)?;
-    check_min_cos(min_cos)?;
+    let planes = checked_inputs(rays, times, planes, min_cos)?;
     let mut depth = vec![f32::NAN; times.len()];
     depth
         .par_chunks_mut(PIXELS_PER_TASK)
@@ -144,6 +128,26 @@ pub fn triangulate_depth(
             }
         });
     Ok(depth)
+}
+
+/// The inputs of [`triangulate`] and [`triangulate_depth`] checked: 3 ray components per time,
+/// the planes' rows, `min_cos`; the planes as rows.
+fn checked_inputs(
+    rays: &[f64],
+    times: &[f32],
+    planes: &[f64],
+    min_cos: f64,
+) -> Result<Vec<Option<Plane>>, KernelError> {
+    if rays.len() != 3 * times.len() {
+        return Err(KernelError::LengthMismatch {
+            what: "rays (3 per shadow time)",
+            expected: 3 * times.len(),
+            got: rays.len(),
+        });
+    }
+    let planes = plane_rows(planes)?;
+    check_min_cos(min_cos)?;
+    Ok(planes)
 }
 
 fn check_min_cos(min_cos: f64) -> Result<(), KernelError> {
