@@ -163,6 +163,40 @@ def test_completion_sigma_is_the_depth_change_of_the_plane_turned_about_its_line
     assert np.all(measured_only == 0)
 
 
+def test_kernel_completion_sigma_is_its_numpy_definition() -> None:
+    """The kernel's completion σ (``_kernel.completion_sigma``) equals the numpy definition value for value,
+    on rows completed and measured, times between them, at and beyond both ends and NaN, depths NaN, a
+    missing plane row and a ray grazing its plane (the cosine floor)."""
+    from gnomon.uncertainty import _completion_depth_sigma_numpy, completion_depth_sigma
+
+    rng = np.random.default_rng(11)
+    h, w, n = 37, 53, 9
+    rays = rng.normal([0.0, 0.0, 1.0], [0.3, 0.3, 0.05], size=(h, w, 3))
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    times = rng.uniform(-1.5, n + 0.5, size=(h, w)).astype(np.float32)
+    times[::5, ::3] = np.round(times[::5, ::3])  # whole rows
+    times[3, :7] = [np.nan, np.inf, -np.inf, 0.0, n - 1, n - 1.25, n + 3.0]
+    depth = rng.uniform(800.0, 2500.0, size=(h, w)).astype(np.float32)
+    depth[::7, ::4] = np.nan
+    normals = rng.normal(size=(n, 3)) * 2.0  # not unit: the definition normalises them
+    planes = np.column_stack([normals, rng.uniform(-500.0, 500.0, n)])
+    planes[4] = np.nan  # a missing row
+    rays[5, 5] = np.cross(normals[2], [0.0, 1.0, 0.0]) / np.linalg.norm(np.cross(normals[2], [0.0, 1.0, 0.0]))
+    times[5, 5] = 2.0  # its ray lies in row 2's plane: the cosine floor
+    line_point = rng.uniform(-300.0, 300.0, size=(n, 3)) + [0.0, 0.0, 1500.0]
+    line_direction = rng.normal(size=(n, 3))
+    line_direction /= np.linalg.norm(line_direction, axis=1, keepdims=True)
+    line_point[[1, 6, 7]] = np.nan  # measured rows
+    line_direction[[1, 6, 7]] = np.nan
+    kernel = completion_depth_sigma(rays, times, depth, planes, line_point, line_direction, 3e-3)
+    reference = _completion_depth_sigma_numpy(rays, times, depth, planes, line_point, line_direction, 3e-3)
+    assert kernel.dtype == np.float32 and kernel.shape == (h, w)
+    np.testing.assert_array_equal(kernel, reference)
+    assert np.count_nonzero(reference > 0) > h * w // 3  # most pixels involve a completed row
+    for args in ((np.full((n, 3), np.nan), np.full((n, 3), np.nan), 3e-3), (line_point, line_direction, 0.0)):
+        np.testing.assert_array_equal(completion_depth_sigma(rays, times, depth, planes, *args), 0.0)
+
+
 def test_a_point_light_measures_its_completion_error() -> None:
     """When the two-plane frames fix the lamp as a point, the completion's error is measured all the same
     (leave one out), so the completed planes' σ has a size: exact lines complete exactly (< 1e-4°)."""

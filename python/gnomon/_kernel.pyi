@@ -313,6 +313,22 @@ def depth_sigma(
     arithmetic of :func:`gnomon.uncertainty.depth_sigma`'s numpy definition; chunks of pixels in
     parallel."""
 
+def completion_sigma(
+    rays: npt.NDArray[np.float64],
+    times: npt.NDArray[np.float64],
+    depth: npt.NDArray[np.float64],
+    planes: npt.NDArray[np.float64],
+    line_point: npt.NDArray[np.float64],
+    line_direction: npt.NDArray[np.float64],
+    sigma_rad: float,
+    min_cos: float = 1e-3,
+) -> npt.NDArray[np.float32]:
+    """The σZ (H, W) float32 (world units, camera Z) a completed plane's error of ``sigma_rad`` (a turn
+    about its completing line, ``line_point``/``line_direction`` (N, 3), NaN rows measured) adds at each
+    pixel of ``rays`` (H, W, 3) with ``depth`` (H, W) at plane row ``times`` (H, W), ``planes`` (N, 4); 0
+    where none: :func:`gnomon.uncertainty.completion_depth_sigma`'s numpy definition, value for value;
+    chunks of pixels in parallel."""
+
 def isochrone_crossings(
     times: npt.NDArray[np.float32],
     n_frames: int,

@@ -208,7 +208,19 @@ def completion_depth_sigma(ray_map: np.ndarray, times: np.ndarray, depth: np.nda
     camera Z (NaN: no point); ``planes`` (N, 4); ``line_point``, ``line_direction`` (N, 3) the
     completing line of each completed row (NaN rows: measured; direction a unit vector,
     :func:`gnomon.shadow_planes.completing_lines`). 0 where no completed row is involved.
+    Computed by the kernel (``_kernel.completion_sigma``: chunks of pixels in parallel, the
+    arithmetic of :func:`_completion_depth_sigma_numpy`, value for value).
     """
+    return _kernel.completion_sigma(
+        np.ascontiguousarray(ray_map, dtype=np.float64), np.ascontiguousarray(times, dtype=np.float64),
+        np.ascontiguousarray(depth, dtype=np.float64), np.ascontiguousarray(planes, dtype=np.float64),
+        np.ascontiguousarray(line_point, dtype=np.float64), np.ascontiguousarray(line_direction, dtype=np.float64),
+        float(sigma_rad), MIN_RAY_PLANE_COS)
+
+
+def _completion_depth_sigma_numpy(ray_map: np.ndarray, times: np.ndarray, depth: np.ndarray, planes: np.ndarray,
+                                  line_point: np.ndarray, line_direction: np.ndarray, sigma_rad: float) -> np.ndarray:
+    """The definition of :func:`completion_depth_sigma` in numpy (the kernel's reference in the tests)."""
     n = len(planes)
     sigma = np.zeros(depth.shape, dtype=np.float64)
     ok = np.isfinite(depth) & np.isfinite(times)

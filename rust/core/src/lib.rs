@@ -53,5 +53,6 @@ pub use tracker::{
     find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,
 };
 pub use triangulate::{
-    depth_sigma, plane_at, ray_plane_angles, triangulate, triangulate_depth, DepthSigma,
+    completion_sigma, depth_sigma, plane_at, ray_plane_angles, triangulate, triangulate_depth,
+    DepthSigma,
 };

@@ -391,6 +391,128 @@ pub fn ray_plane_angles(
     Ok(parts.concat())
 }
 
+/// The σZ (world units, camera Z, `H·W` f32) a completed plane's own error adds at each pixel
+/// (`gnomon.uncertainty.completion_depth_sigma`, whose numpy definition this is, value for value).
+///
+/// A row completed from one line and the light is exact along its line and off by a turn
+/// about it: by `sigma_rad`, a point at distance `d` from the line moves `sigma_rad·d` along
+/// the plane's normal, `sigma_rad·d·|r_z|/max(|n̂·r|, min_cos)` of camera Z along its ray `r`.
+/// A pixel's plane is interpolated between rows `k0 = clamp(⌊t⌋, 0, N−1)` and
+/// `min(k0 + 1, N−1)` with weights `1 − f` and `f` (`f = t − k0`, f64); both rows' errors
+/// come from one light, so their terms add linearly with those weights; a measured row (its
+/// line point's x NaN) and a zero weight add nothing.
+///
+/// * `rays`: `H·W·3` camera rays (as the ray map); `times`: `H·W` plane rows;
+///   `depth`: `H·W` camera Z (NaN = no point);
+/// * `planes`: `N·4` rows `[nx, ny, nz, d]`; `line_point`, `line_direction`: `N·3` each, the
+///   completing line of each completed row (direction a unit vector);
+/// * `sigma_rad`: the completion's 1σ angle; `min_cos`: the floor of `|n̂·r|`, as [`triangulate`]'s.
+///
+/// 0 where the depth or time is not finite, no row is completed, or `sigma_rad ≤ 0`. The
+/// arithmetic is the numpy definition's, in f64 in its order, rounded to f32 at the end.
+/// Chunks of pixels in parallel.
+pub fn completion_sigma(
+    rays: &[f64],
+    times: &[f64],
+    depth: &[f64],
+    planes: &[f64],
+    line_point: &[f64],
+    line_direction: &[f64],
+    sigma_rad: f64,
+    min_cos: f64,
+) -> Result<Vec<f32>, KernelError> {
+    check_min_cos(min_cos)?;
+    let n = times.len();
+    if planes.is_empty() || planes.len() % 4 != 0 {
+        return Err(KernelError::parameter(
+            "planes",
+            format!(
+                "needs one or more rows of 4 values [nx, ny, nz, d], got {} values",
+                planes.len()
+            ),
+        ));
+    }
+    let rows = planes.len() / 4;
+    for (what, got, expected) in [
+        ("rays (3 per time)", rays.len(), 3 * n),
+        ("depth (one per time)", depth.len(), n),
+        ("line_point (3 per plane row)", line_point.len(), 3 * rows),
+        (
+            "line_direction (3 per plane row)",
+            line_direction.len(),
+            3 * rows,
+        ),
+    ] {
+        if got != expected {
+            return Err(KernelError::LengthMismatch {
+                what,
+                expected,
+                got,
+            });
+        }
+    }
+    let mut sigma = vec![0.0f32; n];
+    let completed: Vec<bool> = (0..rows).map(|k| line_point[3 * k].is_finite()).collect();
+    if !completed.iter().any(|&c| c) || sigma_rad.is_nan() || sigma_rad <= 0.0 {
+        return Ok(sigma);
+    }
+    let last = rows - 1;
+    // The term of row `k` with weight `w` for the camera point `x` on the unit-free ray `r`.
+    let term = |k: usize, w: f64, x: [f64; 3], r: &[f64]| -> f64 {
+        let p = &line_point[3 * k..3 * k + 3];
+        let d = &line_direction[3 * k..3 * k + 3];
+        let a = [x[0] - p[0], x[1] - p[1], x[2] - p[2]];
+        let c = [
+            a[1] * d[2] - a[2] * d[1],
+            a[2] * d[0] - a[0] * d[2],
+            a[0] * d[1] - a[1] * d[0],
+        ];
+        let dist = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+        let m = &planes[4 * k..4 * k + 3];
+        let norm = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+        let dot = (m[0] / norm) * r[0] + (m[1] / norm) * r[1] + (m[2] / norm) * r[2];
+        // numpy's maximum propagates a NaN where f64::max would drop it
+        let cos = if dot.is_nan() {
+            f64::NAN
+        } else {
+            dot.abs().max(min_cos)
+        };
+        w * sigma_rad * dist * r[2].abs() / cos
+    };
+    sigma
+        .par_chunks_mut(PIXELS_PER_TASK)
+        .enumerate()
+        .for_each(|(chunk, out)| {
+            let start = chunk * PIXELS_PER_TASK;
+            for (j, s) in out.iter_mut().enumerate() {
+                let i = start + j;
+                let (t, z) = (times[i], depth[i]);
+                if !(t.is_finite() && z.is_finite()) {
+                    continue;
+                }
+                let r = &rays[3 * i..3 * i + 3];
+                let scale = z / r[2];
+                let x = [r[0] * scale, r[1] * scale, r[2] * scale];
+                // numpy: the int64 cast of floor(t) (x86: out of range → i64::MIN), then clip to 0 … N − 1
+                let floor = t.floor();
+                let k0 = if floor.abs() < 9.0e18 {
+                    (floor as i64).clamp(0, last as i64) as usize
+                } else {
+                    0
+                };
+                let frac = t - k0 as f64;
+                let mut total = 0.0f64;
+                for (k, w) in [(k0, 1.0 - frac), ((k0 + 1).min(last), frac)] {
+                    if completed[k] && w > 0.0 {
+                        total += term(k, w, x, r);
+                    }
+                }
+                *s = total as f32;
+            }
+        });
+    Ok(sigma)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -501,6 +623,57 @@ mod tests {
         )
         .is_err());
         assert!(depth_sigma(&rays, &times, &planes, &depth, &sp, &line, 0.0, 0.0, 1e-3).is_err());
+    }
+
+    #[test]
+    fn completion_sigma_turns_about_the_line() {
+        // Row 0: the plane z = 2 completed from the line along x through (0, 0, 2); row 1 measured.
+        let planes = [0.0, 0.0, 1.0, 2.0, 0.0, 0.0, 1.0, 2.0];
+        let line_point = [0.0, 0.0, 2.0, f64::NAN, f64::NAN, f64::NAN];
+        let line_direction = [1.0, 0.0, 0.0, f64::NAN, f64::NAN, f64::NAN];
+        // The ray (0, 0.6, 0.8) meets z = 2 at (0, 1.5, 2): 1.5 from the line, |n·r| = 0.8.
+        let r = [0.0, 0.6, 0.8];
+        let rays: Vec<f64> = r.iter().cycle().take(12).copied().collect();
+        let s = 0.01;
+        let sigma = completion_sigma(
+            &rays,
+            &[0.0, 0.25, 1.0, f64::NAN],
+            &[2.0, 2.0, 2.0, 2.0],
+            &planes,
+            &line_point,
+            &line_direction,
+            s,
+            1e-3,
+        )
+        .unwrap();
+        // a turn by s moves the point s·1.5 along the normal (z): Z by s·1.5·0.8/0.8
+        let expect = [1.5 * s, 0.75 * 1.5 * s, 0.0, 0.0];
+        for (got, want) in sigma.iter().zip(expect) {
+            assert!((f64::from(*got) - want).abs() < 1e-7, "{sigma:?}");
+        }
+        let none = completion_sigma(
+            &rays[..3],
+            &[0.0],
+            &[f64::NAN],
+            &planes,
+            &line_point,
+            &line_direction,
+            s,
+            1e-3,
+        )
+        .unwrap();
+        assert_eq!(none, vec![0.0]);
+        assert!(completion_sigma(
+            &rays[..3],
+            &[0.0],
+            &[2.0],
+            &planes,
+            &line_point[..3],
+            &line_direction,
+            s,
+            1e-3
+        )
+        .is_err());
     }
 
     #[test]

@@ -854,6 +854,82 @@ fn depth_sigma<'py>(
     )
 }
 
+/// The σZ a completed plane's own error adds at each pixel, (H, W) float32 (see
+/// `gnomon_core::completion_sigma`).
+#[pyfunction]
+#[pyo3(signature = (rays, times, depth, planes, line_point, line_direction, sigma_rad, min_cos = 1e-3))]
+#[allow(clippy::too_many_arguments)]
+fn completion_sigma<'py>(
+    py: Python<'py>,
+    rays: &Bound<'py, PyAny>,
+    times: &Bound<'py, PyAny>,
+    depth: &Bound<'py, PyAny>,
+    planes: &Bound<'py, PyAny>,
+    line_point: &Bound<'py, PyAny>,
+    line_direction: &Bound<'py, PyAny>,
+    sigma_rad: f64,
+    min_cos: f64,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let times = borrow_array::<f64, Ix2>(
+        times,
+        "times",
+        "float64",
+        &[Extent::Any("H"), Extent::Any("W")],
+    )?;
+    let (h, w) = (times.shape()[0], times.shape()[1]);
+    let rays = borrow_array::<f64, Ix3>(
+        rays,
+        "rays",
+        "float64",
+        &[Extent::Exactly(h), Extent::Exactly(w), Extent::Exactly(3)],
+    )?;
+    let depth = borrow_array::<f64, Ix2>(
+        depth,
+        "depth",
+        "float64",
+        &[Extent::Exactly(h), Extent::Exactly(w)],
+    )?;
+    let planes = borrow_array::<f64, Ix2>(
+        planes,
+        "planes",
+        "float64",
+        &[Extent::Any("N"), Extent::Exactly(4)],
+    )?;
+    let rows = planes.shape()[0];
+    let lines = [Extent::Exactly(rows), Extent::Exactly(3)];
+    let line_point = borrow_array::<f64, Ix2>(line_point, "line_point", "float64", &lines)?;
+    let line_direction =
+        borrow_array::<f64, Ix2>(line_direction, "line_direction", "float64", &lines)?;
+    let (rays, times, depth, planes, line_point, line_direction) = (
+        rays.as_array(),
+        times.as_array(),
+        depth.as_array(),
+        planes.as_array(),
+        line_point.as_array(),
+        line_direction.as_array(),
+    );
+    let sigma = py
+        .detach(|| {
+            with_slice(&rays, |rays| {
+                with_slice(&times, |times| {
+                    with_slice(&depth, |depth| {
+                        with_slice(&planes, |planes| {
+                            with_slice(&line_point, |lp| {
+                                with_slice(&line_direction, |ld| {
+                                    gnomon_core::completion_sigma(
+                                        rays, times, depth, planes, lp, ld, sigma_rad, min_cos,
+                                    )
+                                })
+                            })
+                        })
+                    })
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    image(py, sigma, h, w)
+}
+
 /// Where a shadow-time map (H, W) float32 crosses each integer frame (see
 /// `gnomon_core::isochrone_crossings`): `(frame (K,) int64, u (K,), v (K,))`.
 #[pyfunction]
@@ -1598,6 +1674,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(triangulate, m)?)?;
     m.add_function(wrap_pyfunction!(ray_plane_angles, m)?)?;
     m.add_function(wrap_pyfunction!(depth_sigma, m)?)?;
+    m.add_function(wrap_pyfunction!(completion_sigma, m)?)?;
     m.add_function(wrap_pyfunction!(frame_lines, m)?)?;
     m.add_function(wrap_pyfunction!(isochrone_crossings, m)?)?;
     m.add_function(wrap_pyfunction!(grid_faces, m)?)?;
