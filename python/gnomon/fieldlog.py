@@ -257,6 +257,7 @@ class OutputSpec:
     ``crop_max_height``): heights above that plane, on the camera's side.
     ``mesh_formats`` the mesh's files: ``ply`` (always), ``obj`` (with its
     ``.mtl`` and ``.png`` texture), ``stl`` (:func:`mesh_formats`).
+    ``max_sigma`` the largest predicted depth σ (world units) a kept point may have.
     """
 
     crop_box: np.ndarray | None = None
@@ -264,10 +265,11 @@ class OutputSpec:
     crop_min_height: float = 0.0
     crop_max_height: float | None = None
     mesh_formats: tuple[str, ...] = ("ply",)  # the mesh's files (MESH_FORMATS); mesh.ply always
+    max_sigma: float | None = None
 
     @property
     def crops(self) -> bool:
-        return self.crop_box is not None or self.crop_above is not None
+        return self.crop_box is not None or self.crop_above is not None or self.max_sigma is not None
 
 
 @dataclass(frozen=True)
@@ -648,8 +650,9 @@ def _parse_output(t: _Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec
             raise t.error("crop_max_height", f"must exceed crop_min_height ({low})")
     elif "crop_min_height" in t.data or "crop_max_height" in t.data:
         raise t.error("crop_above", "crop_min_height/crop_max_height need crop_above (a [[planes]] name)")
+    max_sigma = t.number("max_sigma", positive=True) if "max_sigma" in t.data else None
     t.done()
-    return OutputSpec(box, above, low, high, formats)
+    return OutputSpec(box, above, low, high, formats, max_sigma)
 
 
 def load_field_log(path: str | Path) -> FieldLog:

@@ -593,12 +593,14 @@ def _capture_frames(times: np.ndarray, used: np.ndarray) -> np.ndarray:
 
 
 def _crop(fused: _Fused, setup: ScanSetup, ray_map: np.ndarray) -> np.ndarray:
-    """Apply ``[output] crop`` to the fused maps in place; returns the (H, W) pixels it removed."""
+    """Apply ``[output]``'s crop and ``max_sigma`` to the fused maps in place; returns the (H, W) pixels they
+    removed."""
     cropped = np.zeros(fused.keep.shape, dtype=bool)
     if setup.crop is None:
         return cropped
     points = points_from_depth(ray_map, fused.depth)[fused.keep].astype(np.float64)
-    inside = crop_mask(setup.pose.camera_to_world(points), setup.crop, setup.pose.camera_centre_world)
+    inside = crop_mask(setup.pose.camera_to_world(points), setup.crop, setup.pose.camera_centre_world,
+                       fused.sigma[fused.keep])
     cropped[fused.keep] = ~inside
     fused.keep &= ~cropped
     fused.depth[cropped] = np.nan

@@ -103,7 +103,7 @@ def crop_of(log: FieldLog) -> Crop | None:
                 plane_name=None if plane is None else plane.name,
                 plane_point=None if plane is None else np.asarray(plane.point, dtype=np.float64),
                 plane_normal=None if plane is None else np.asarray(plane.normal, dtype=np.float64),
-                min_height=out.crop_min_height, max_height=out.crop_max_height)
+                min_height=out.crop_min_height, max_height=out.crop_max_height, max_sigma=out.max_sigma)
 
 
 def tracker_settings(log: FieldLog) -> TrackerSettings:
