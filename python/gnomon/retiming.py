@@ -224,8 +224,7 @@ def average_across_sweep(times: np.ndarray, retimed: np.ndarray, along_rows: boo
     float32 times (the re-timed maps) are averaged by the kernel (``_kernel.average_across``, rows in
     parallel, the same f64 arithmetic); :func:`_average_across_sweep_numpy` is the definition.
     """
-    if (isinstance(times, np.ndarray) and times.dtype == np.float32 and times.ndim == 2 and times.size
-            and hasattr(_kernel, "average_across")):  # (a kernel built before it: the numpy definition)
+    if isinstance(times, np.ndarray) and times.dtype == np.float32 and times.ndim == 2 and times.size:
         done = np.ascontiguousarray(retimed, dtype=bool).view(np.uint8)
         return _kernel.average_across(np.ascontiguousarray(times), done, bool(along_rows), int(half), float(bend))
     return _average_across_sweep_numpy(times, retimed, along_rows, half, bend)

@@ -48,9 +48,7 @@ def triangulate(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray) -> T
 
 def triangulate_depth(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray) -> np.ndarray:
     """``triangulate(ray_map, times, planes).depth`` (H, W) float32 camera Z, NaN = none, without the points:
-    the kernel's ``triangulate_depth`` (the same intersections; a kernel built before it has only ``triangulate``)."""
-    if not hasattr(_kernel, "triangulate_depth"):
-        return triangulate(ray_map, times, planes).depth
+    the kernel's ``triangulate_depth`` (the same intersections)."""
     return _kernel.triangulate_depth(
         np.ascontiguousarray(ray_map, dtype=np.float64),
         np.ascontiguousarray(times, dtype=np.float32),
