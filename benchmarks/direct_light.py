@@ -37,7 +37,6 @@ the frog's field log (``OUT/frog/field_log.toml``).
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -45,13 +44,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon.fieldlog import load_field_log
 from gnomon.frames import FrameSource
 from gnomon.pipeline import ScanResult
-from gnomon.pipeline import scan as scan_in_memory
 from gnomon.preview import COVERAGE_CLASSES
-from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
+from gnomon.scan_setup import ScanSetup, frame_source
 from gnomon.tracking import decoding_lut
+from score import frog_arguments, scan_field_log
 
 #: Frames searched before the enter crossing and after the leave crossing.
 SPAN = 8
@@ -139,15 +137,9 @@ def frog_regions(shape: tuple[int, int]) -> dict[str, np.ndarray]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("field_log", type=Path)
-    ap.add_argument("--frog", action="store_true", help="the frog's regions (real_captures.py's outlines)")
-    args = ap.parse_args(argv)
-    log = load_field_log(args.field_log)
-    source = frame_source(log)
-    setup = resolve_scan(log, source)
-    result = scan_in_memory(setup, source)
-    skipped = np.flatnonzero(setup.light.skipped_frames(len(source.image_files)))
+    args = frog_arguments(__doc__, argv)
+    log, setup, result = scan_field_log(args.field_log)
+    skipped = np.flatnonzero(setup.light.skipped_frames(frame_source(log).count))
     if len(skipped):
         print(f"{args.field_log}: the light skips frames {skipped[:5].tolist()}...; this script assumes none")
         return 2

@@ -31,7 +31,6 @@ the frog's field log (``OUT/frog/field_log.toml``).
 
 from __future__ import annotations
 
-import argparse
 import sys
 import warnings
 from pathlib import Path
@@ -40,13 +39,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon.fieldlog import load_field_log
 from gnomon.fusion import CONFLICT_SIGMAS
 from gnomon.pipeline import EdgeResult
-from gnomon.pipeline import scan as scan_in_memory
-from gnomon.scan_setup import frame_source, resolve_scan
 from gnomon.tracking import decoding_lut, linear
 from gnomon.triangulation import triangulate
+from score import frog_arguments, scan_field_log
 
 
 def depth_rate(ray_map: np.ndarray, edge: EdgeResult) -> np.ndarray:
@@ -83,14 +80,8 @@ def frog_regions(shape: tuple[int, int]) -> dict[str, np.ndarray]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("field_log", type=Path)
-    ap.add_argument("--frog", action="store_true", help="the frog's regions (real_captures.py's outlines)")
-    args = ap.parse_args(argv)
-    log = load_field_log(args.field_log)
-    source = frame_source(log)
-    setup = resolve_scan(log, source)
-    result = scan_in_memory(setup, source)
+    args = frog_arguments(__doc__, argv)
+    log, setup, result = scan_field_log(args.field_log)
     edges = {e.name: e for e in result.edges}
     if set(edges) != {"enter", "leave"}:
         print(f"{args.field_log}: the scan has edges {sorted(edges)}, not enter and leave")

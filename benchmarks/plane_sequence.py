@@ -44,13 +44,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon.fieldlog import load_field_log
 from gnomon.pipeline import EdgeResult
-from gnomon.pipeline import scan as scan_in_memory
 from gnomon.reference_lines import ReferenceLines
-from gnomon.scan_setup import frame_source, resolve_scan
 from gnomon.shadow_planes import complete_from_light, completion_light, two_plane_shadow_planes
 from gnomon.triangulation import triangulate
+from score import scan_field_log
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -149,10 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--block", type=int, default=20, help="two-plane frames completed as if one-line")
     ap.add_argument("--ends", type=int, default=30, help="frames shown at each end of the sweep")
     args = ap.parse_args(argv)
-    log = load_field_log(args.field_log)
-    source = frame_source(log)
-    setup = resolve_scan(log, source)
-    result = scan_in_memory(setup, source)
+    log, setup, result = scan_field_log(args.field_log)
     edges = {e.name: e for e in result.edges}
     if set(edges) != {"enter", "leave"} or setup.light.kind != "two-plane":
         print(f"{args.field_log}: needs a two-plane scan with enter and leave edges")

@@ -21,6 +21,7 @@ off both planes, and those also off every outlined face.
 
 from __future__ import annotations
 
+import argparse
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,6 +31,26 @@ import numpy as np
 
 from gnomon.calibration import load_camera_file
 from gnomon.camera import Pose
+from gnomon.fieldlog import FieldLog, load_field_log
+from gnomon.pipeline import ScanResult
+from gnomon.pipeline import scan as scan_in_memory
+from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
+
+
+def frog_arguments(doc: str, argv: list[str] | None) -> argparse.Namespace:
+    """A measuring script's arguments: ``FIELD_LOG [--frog]`` (the frog's regions of real_captures.py)."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("field_log", type=Path)
+    ap.add_argument("--frog", action="store_true", help="the frog's regions (real_captures.py's outlines)")
+    return ap.parse_args(argv)
+
+
+def scan_field_log(path: Path) -> tuple[FieldLog, ScanSetup, ScanResult]:
+    """The field log at ``path`` loaded, resolved and scanned in memory (no files written)."""
+    log = load_field_log(path)
+    source = frame_source(log)
+    setup = resolve_scan(log, source)
+    return log, setup, scan_in_memory(setup, source)
 
 
 @dataclass

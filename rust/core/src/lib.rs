@@ -54,5 +54,5 @@ pub use tracker::{
 };
 pub use triangulate::{
     completion_sigma, depth_sigma, plane_at, ray_plane_angles, triangulate, triangulate_depth,
-    DepthSigma,
+    Completion, DepthSigma,
 };

@@ -313,6 +313,20 @@ pub fn depth_sigma(
     Ok(out)
 }
 
+/// The number of rows of `planes` (`N·4` values `[nx, ny, nz, d]`), at least one.
+fn plane_row_count(planes: &[f64]) -> Result<usize, KernelError> {
+    if planes.is_empty() || planes.len() % 4 != 0 {
+        return Err(KernelError::parameter(
+            "planes",
+            format!(
+                "needs one or more rows of 4 values [nx, ny, nz, d], got {} values",
+                planes.len()
+            ),
+        ));
+    }
+    Ok(planes.len() / 4)
+}
+
 /// The angle (degrees) between each selected pixel's ray and the shadow plane at its time
 /// (`gnomon.pipeline.ray_plane_angles`): a depth moves by a plane's error over its sine.
 ///
@@ -346,16 +360,7 @@ pub fn ray_plane_angles(
             got: selected.len(),
         });
     }
-    if planes.is_empty() || planes.len() % 4 != 0 {
-        return Err(KernelError::parameter(
-            "planes",
-            format!(
-                "needs one or more rows of 4 values [nx, ny, nz, d], got {} values",
-                planes.len()
-            ),
-        ));
-    }
-    let last = planes.len() / 4 - 1;
+    let last = plane_row_count(planes)? - 1;
     let normal = |k: usize| [planes[4 * k], planes[4 * k + 1], planes[4 * k + 2]];
     let angle = |t: f64, r: &[f64]| -> f64 {
         if t.is_nan() {
@@ -391,6 +396,17 @@ pub fn ray_plane_angles(
     Ok(parts.concat())
 }
 
+/// How the planes of a two-plane scan's one-line frames were completed, for [`completion_sigma`].
+#[derive(Debug, Clone, Copy)]
+pub struct Completion<'a> {
+    /// `N·3`: a point of the line each row was completed from (NaN x: a measured row).
+    pub line_point: &'a [f64],
+    /// `N·3`: that line's unit direction.
+    pub line_direction: &'a [f64],
+    /// The completion's 1σ error, an angle (radians) about the line.
+    pub sigma_rad: f64,
+}
+
 /// The σZ (world units, camera Z, `H·W` f32) a completed plane's own error adds at each pixel
 /// (`gnomon.uncertainty.completion_depth_sigma`, whose numpy definition this is, value for value).
 ///
@@ -404,9 +420,9 @@ pub fn ray_plane_angles(
 ///
 /// * `rays`: `H·W·3` camera rays (as the ray map); `times`: `H·W` plane rows;
 ///   `depth`: `H·W` camera Z (NaN = no point);
-/// * `planes`: `N·4` rows `[nx, ny, nz, d]`; `line_point`, `line_direction`: `N·3` each, the
-///   completing line of each completed row (direction a unit vector);
-/// * `sigma_rad`: the completion's 1σ angle; `min_cos`: the floor of `|n̂·r|`, as [`triangulate`]'s.
+/// * `planes`: `N·4` rows `[nx, ny, nz, d]`; `completion`: the completing lines of its rows
+///   and their error ([`Completion`]);
+/// * `min_cos`: the floor of `|n̂·r|`, as [`triangulate`]'s.
 ///
 /// 0 where the depth or time is not finite, no row is completed, or `sigma_rad ≤ 0`. The
 /// arithmetic is the numpy definition's, in f64 in its order, rounded to f32 at the end.
@@ -416,23 +432,17 @@ pub fn completion_sigma(
     times: &[f64],
     depth: &[f64],
     planes: &[f64],
-    line_point: &[f64],
-    line_direction: &[f64],
-    sigma_rad: f64,
+    completion: Completion<'_>,
     min_cos: f64,
 ) -> Result<Vec<f32>, KernelError> {
+    let Completion {
+        line_point,
+        line_direction,
+        sigma_rad,
+    } = completion;
     check_min_cos(min_cos)?;
     let n = times.len();
-    if planes.is_empty() || planes.len() % 4 != 0 {
-        return Err(KernelError::parameter(
-            "planes",
-            format!(
-                "needs one or more rows of 4 values [nx, ny, nz, d], got {} values",
-                planes.len()
-            ),
-        ));
-    }
-    let rows = planes.len() / 4;
+    let rows = plane_row_count(planes)?;
     for (what, got, expected) in [
         ("rays (3 per time)", rays.len(), 3 * n),
         ("depth (one per time)", depth.len(), n),
@@ -635,14 +645,17 @@ mod tests {
         let r = [0.0, 0.6, 0.8];
         let rays: Vec<f64> = r.iter().cycle().take(12).copied().collect();
         let s = 0.01;
+        let completion = Completion {
+            line_point: &line_point,
+            line_direction: &line_direction,
+            sigma_rad: s,
+        };
         let sigma = completion_sigma(
             &rays,
             &[0.0, 0.25, 1.0, f64::NAN],
             &[2.0, 2.0, 2.0, 2.0],
             &planes,
-            &line_point,
-            &line_direction,
-            s,
+            completion,
             1e-3,
         )
         .unwrap();
@@ -651,29 +664,14 @@ mod tests {
         for (got, want) in sigma.iter().zip(expect) {
             assert!((f64::from(*got) - want).abs() < 1e-7, "{sigma:?}");
         }
-        let none = completion_sigma(
-            &rays[..3],
-            &[0.0],
-            &[f64::NAN],
-            &planes,
-            &line_point,
-            &line_direction,
-            s,
-            1e-3,
-        )
-        .unwrap();
+        let none =
+            completion_sigma(&rays[..3], &[0.0], &[f64::NAN], &planes, completion, 1e-3).unwrap();
         assert_eq!(none, vec![0.0]);
-        assert!(completion_sigma(
-            &rays[..3],
-            &[0.0],
-            &[2.0],
-            &planes,
-            &line_point[..3],
-            &line_direction,
-            s,
-            1e-3
-        )
-        .is_err());
+        let short = Completion {
+            line_point: &line_point[..3],
+            ..completion
+        };
+        assert!(completion_sigma(&rays[..3], &[0.0], &[2.0], &planes, short, 1e-3).is_err());
     }
 
     #[test]

@@ -916,8 +916,13 @@ fn completion_sigma<'py>(
                         with_slice(&planes, |planes| {
                             with_slice(&line_point, |lp| {
                                 with_slice(&line_direction, |ld| {
+                                    let completion = gnomon_core::Completion {
+                                        line_point: lp,
+                                        line_direction: ld,
+                                        sigma_rad,
+                                    };
                                     gnomon_core::completion_sigma(
-                                        rays, times, depth, planes, lp, ld, sigma_rad, min_cos,
+                                        rays, times, depth, planes, completion, min_cos,
                                     )
                                 })
                             })
