@@ -6,7 +6,14 @@ import cv2
 import numpy as np
 
 from gnomon import _kernel
-from gnomon.camera import _UNDISTORT_CRITERIA, RAY_MAP_TOL_PX, OpenCVCamera, pixel_grid, ray_map_newton
+from gnomon.camera import (
+    _UNDISTORT_CRITERIA,
+    RAY_MAP_TOL_PX,
+    OpenCVCamera,
+    pixel_grid,
+    ray_map_newton,
+    undistort_points,
+)
 
 # Barrel distortion strong enough that the image corners sit near the fold of the lens
 # (distorted radius 0.64 of at most ~0.66 for these coefficients): a fisheye-like corner,
@@ -53,7 +60,7 @@ def test_unsolvable_pixels_are_flagged_not_guessed():
 def test_ordinary_camera_map_equals_undistort_points():
     rays = ORDINARY.ray_map()
     grid = pixel_grid(ORDINARY.width, ORDINARY.height).reshape(-1, 1, 2)
-    ref = cv2.undistortPoints(grid, ORDINARY.K, ORDINARY.dist_coeffs, criteria=_UNDISTORT_CRITERIA).reshape(-1, 2)
+    ref = undistort_points(grid, ORDINARY.K, ORDINARY.dist_coeffs, _UNDISTORT_CRITERIA).reshape(-1, 2)
     xy = (rays[..., :2] / rays[..., 2:]).reshape(-1, 2)
     diff_px = np.abs(xy - ref) * [ORDINARY.fx, ORDINARY.fy]
     assert diff_px.max() < 1e-9, diff_px.max()

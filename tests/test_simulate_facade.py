@@ -16,6 +16,7 @@ import pandas as pd
 import pytest
 from PIL import Image
 
+from gnomon.camera import undistort_points
 from gnomon.errors import GnomonError
 from gnomon.simulate.facade_sun import (
     GROUND,
@@ -366,8 +367,8 @@ def test_gnomon_observation_gives_the_heading(small):
     # Back-project onto z = 0.
     R, t = gt["R"], gt["t"]
     C = -R.T @ t
-    norm = cv2.undistortPoints(np.array([g["base_px"], g["shadow_px"]], np.float64).reshape(-1, 1, 2), K, dist,
-                               criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)).reshape(-1, 2)
+    norm = undistort_points(np.array([g["base_px"], g["shadow_px"]], np.float64).reshape(-1, 1, 2), K, dist,
+                            (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)).reshape(-1, 2)
     rays = np.column_stack([norm, np.ones(2)]) @ R
     G = C + (-C[2] / rays[:, 2])[:, None] * rays
     np.testing.assert_allclose(G[0], gt["pole_base"], atol=1e-3)

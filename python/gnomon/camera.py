@@ -27,6 +27,16 @@ from gnomon import _kernel
 # ~0.1 px at the corners of a strongly distorted lens. Metrology wants better.
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
 
+
+def undistort_points(pixels: np.ndarray, K: np.ndarray, dist: np.ndarray, criteria: tuple) -> np.ndarray:
+    """OpenCV's iterative undistortion of distorted pixels (N, 1, 2) to normalised coordinates (N, 1, 2),
+    stopped by ``criteria``: ``cv2.undistortPoints(..., criteria=)`` on OpenCV 5, which took over
+    OpenCV 4's ``cv2.undistortPointsIter`` (the same solver; 4.x's ``undistortPoints`` takes no criteria)."""
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
+        return np.asarray(cv2.undistortPointsIter(pixels, K, dist, None, None, criteria))
+    return np.asarray(cv2.undistortPoints(pixels, K, dist, criteria=criteria))
+
+
 # OpenCVCamera.ray_map: Newton's method in the kernel (_kernel.ray_map), pixel by pixel. A pixel
 # is solved when its ray reprojects within RAY_MAP_TOL_PX of it: rounding alone leaves ~1e-13 px
 # (a coordinate of ~1000 px has an ulp of 1.1e-13), undistortPoints above stops at 1e-12 px, and
@@ -102,8 +112,7 @@ class OpenCVCamera:
     def normalized(self, pixels: np.ndarray) -> np.ndarray:
         """Distorted pixels (N, 2) → undistorted normalised coordinates (x/z, y/z)."""
         pix = np.ascontiguousarray(np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2))
-        out = cv2.undistortPoints(pix, self.K, self.dist_coeffs, criteria=_UNDISTORT_CRITERIA)
-        return out.reshape(-1, 2)
+        return undistort_points(pix, self.K, self.dist_coeffs, _UNDISTORT_CRITERIA).reshape(-1, 2)
 
     def rays(self, pixels: np.ndarray) -> np.ndarray:
         """Distorted pixels (N, 2) → unit rays in the camera frame (N, 3)."""
