@@ -32,8 +32,8 @@ def undistort_points(pixels: np.ndarray, K: np.ndarray, dist: np.ndarray, criter
     """OpenCV's iterative undistortion of distorted pixels (N, 1, 2) to normalised coordinates (N, 1, 2),
     stopped by ``criteria``: ``cv2.undistortPoints(..., criteria=)`` on OpenCV 5, which took over
     OpenCV 4's ``cv2.undistortPointsIter`` (the same solver; 4.x's ``undistortPoints`` takes no criteria)."""
-    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
-        return np.asarray(cv2.undistortPointsIter(pixels, K, dist, None, None, criteria))
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x (identity R and P: normalised coordinates, as None)
+        return np.asarray(cv2.undistortPointsIter(pixels, K, dist, np.eye(3), np.eye(3), criteria))
     return np.asarray(cv2.undistortPoints(pixels, K, dist, criteria=criteria))
 
 
