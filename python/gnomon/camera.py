@@ -16,7 +16,7 @@ all the per-pixel pipeline ever asks of a model.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, TypeAlias
+from typing import Any, Protocol, TypeAlias
 
 import cv2
 import numpy as np
@@ -32,9 +32,11 @@ def undistort_points(pixels: np.ndarray, K: np.ndarray, dist: np.ndarray, criter
     """OpenCV's iterative undistortion of distorted pixels (N, 1, 2) to normalised coordinates (N, 1, 2),
     stopped by ``criteria``: ``cv2.undistortPoints(..., criteria=)`` on OpenCV 5, which took over
     OpenCV 4's ``cv2.undistortPointsIter`` (the same solver; 4.x's ``undistortPoints`` takes no criteria)."""
-    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x (identity R and P: normalised coordinates, as None)
-        return np.asarray(cv2.undistortPointsIter(pixels, K, dist, np.eye(3), np.eye(3), criteria))
-    return np.asarray(cv2.undistortPoints(pixels, K, dist, criteria=criteria))
+    iterate: Any = getattr(cv2, "undistortPointsIter", None)  # OpenCV 4.x; typed loosely: each version's
+    undistort: Any = cv2.undistortPoints  # stubs know only its own API
+    if iterate is not None:  # identity R and P: normalised coordinates, as None gives
+        return np.asarray(iterate(pixels, K, dist, np.eye(3), np.eye(3), criteria))
+    return np.asarray(undistort(pixels, K, dist, criteria=criteria))
 
 
 # OpenCVCamera.ray_map: Newton's method in the kernel (_kernel.ray_map), pixel by pixel. A pixel
