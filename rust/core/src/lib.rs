@@ -40,7 +40,7 @@ pub use geometry::{Plane, Ray};
 pub use intensity::NORMALISED_SCALE;
 pub use lines::{frame_lines, isochrone_crossings, Crossings, FrameLines, LineParams};
 pub use live::{FinishedPixel, WatchParams};
-pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, CleanMesh};
+pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, triangles, CleanMesh};
 pub use retime::{
     average_across, retime_rows, retime_rows_sigma, RetimeParams, Retimed, RetimedSigma,
 };

@@ -38,6 +38,16 @@ impl UnionFind {
         x
     }
 
+    /// Every element's root, in its own slot: the parent table, each entry set to its root
+    /// (a full path compression, which leaves every set as it was).
+    fn into_roots(mut self) -> Vec<u32> {
+        for i in 0..self.parent.len() as u32 {
+            let root = self.find(i);
+            self.parent[i as usize] = root;
+        }
+        self.parent
+    }
+
     fn union(&mut self, a: u32, b: u32) {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra != rb {
@@ -68,15 +78,18 @@ impl EdgeBuckets {
         for i in 0..n {
             start[i + 1] += start[i];
         }
-        let mut fill = start.clone();
+        // Filled through `start[lo]` as the next free place of bucket `lo` (faces in order), which
+        // moves each one to where bucket `lo + 1` starts; shifted back one place after.
         let mut slot = vec![(0u32, 0u32); 3 * faces.len()];
         for (i, f) in faces.iter().enumerate() {
             for (a, b) in edges(f) {
                 let lo = a.min(b) as usize;
-                slot[fill[lo] as usize] = (a.max(b) as u32, i as u32);
-                fill[lo] += 1;
+                slot[start[lo] as usize] = (a.max(b) as u32, i as u32);
+                start[lo] += 1;
             }
         }
+        start.copy_within(0..n, 1);
+        start[0] = 0;
         EdgeBuckets { start, slot }
     }
 
@@ -243,6 +256,20 @@ pub fn grid_faces(
     Ok(faces)
 }
 
+/// `flat` (3·F vertex indices, row-major) as its F triangles, without a copy; an error when its
+/// length is not a multiple of 3.
+pub fn triangles(flat: &[i32]) -> Result<&[[i32; 3]], KernelError> {
+    if flat.len() % 3 != 0 {
+        return Err(KernelError::parameter(
+            "faces",
+            format!("{} vertex indices are not whole triangles", flat.len()),
+        ));
+    }
+    // SAFETY: `[i32; 3]` is three `i32` with their alignment and no padding, so the
+    // `flat.len() / 3` triangles cover exactly the values of `flat`, borrowed for as long.
+    Ok(unsafe { std::slice::from_raw_parts(flat.as_ptr().cast::<[i32; 3]>(), flat.len() / 3) })
+}
+
 /// A cleaned mesh: `faces` into the new vertex list, `source[i]` the input
 /// vertex that new vertex `i` copies.
 #[derive(Debug, Clone, PartialEq)]
@@ -285,21 +312,24 @@ pub fn clean_faces(
     let buckets = EdgeBuckets::new(n_vertices, faces);
     let mut sets = UnionFind::new(faces.len());
     buckets.link(&mut sets);
-    let root: Vec<u32> = (0..faces.len() as u32).map(|i| sets.find(i)).collect();
+    let root = sets.into_roots();
     let mut vertex_piece = vec![u32::MAX; n_vertices];
     for (f, &r) in faces.iter().zip(&root) {
         for &v in f {
             vertex_piece[v as usize] = r;
         }
     }
-    let mut size = vec![0usize; faces.len()];
+    // A piece's vertices, at most `n_vertices` (< 2^31: they are i32 indices).
+    let mut size = vec![0u32; faces.len()];
     for &r in vertex_piece.iter().filter(|&&r| r != u32::MAX) {
         size[r as usize] += 1;
     }
+    drop(vertex_piece);
     let keep: Vec<bool> = root
         .iter()
-        .map(|&r| size[r as usize] >= min_vertices)
+        .map(|&r| size[r as usize] as usize >= min_vertices)
         .collect();
+    drop((root, size));
     let interior = buckets.interior(&keep);
     drop(buckets);
     Ok(split_fans(n_vertices, faces, &keep, &interior))
@@ -319,9 +349,10 @@ fn split_fans(n_vertices: usize, faces: &[[i32; 3]], keep: &[bool], interior: &[
         }
     }
     let mut remap = vec![-1i32; n_vertices];
-    let mut source: Vec<i64> = Vec::new();
+    let used = degree.iter().filter(|&&d| d > 0).count();
+    let mut source: Vec<i64> = Vec::with_capacity(used);
     // A vertex with two or more open fans has more faces than interior edges plus one.
-    let mut several_fans: Vec<bool> = Vec::new();
+    let mut several_fans: Vec<bool> = Vec::with_capacity(used);
     for (v, &d) in degree.iter().enumerate() {
         if d > 0 {
             remap[v] = source.len() as i32;
@@ -330,12 +361,15 @@ fn split_fans(n_vertices: usize, faces: &[[i32; 3]], keep: &[bool], interior: &[
         }
     }
     drop(degree);
-    let mut out: Vec<[i32; 3]> = faces
-        .par_iter()
-        .zip(keep.par_iter())
-        .filter(|(_, &k)| k)
-        .map(|(f, _)| f.map(|v| remap[v as usize]))
-        .collect();
+    // Into one vector of the exact length (a parallel filter collects pieces, then copies them).
+    let mut out: Vec<[i32; 3]> = Vec::with_capacity(keep.iter().filter(|&&k| k).count());
+    out.extend(
+        faces
+            .iter()
+            .zip(keep)
+            .filter(|(_, &k)| k)
+            .map(|(f, _)| f.map(|v| remap[v as usize])),
+    );
     drop(remap);
     let corners: Vec<usize> = (0..3 * out.len())
         .into_par_iter()
@@ -665,6 +699,113 @@ mod tests {
             .all(|f| f.iter().all(|&v| v % 6 < 3) || f.iter().all(|&v| v % 6 >= 3)));
         assert_eq!(clean_faces(h * w, &faces, 10).unwrap().faces.len(), 0);
         assert_eq!(clean_faces(h * w, &faces, 9).unwrap().faces.len(), 16);
+    }
+
+    /// A deterministic pseudo-random sequence (a 64-bit LCG's high bits), for test meshes.
+    fn lcg(seed: u64) -> impl FnMut(u32) -> u32 {
+        let mut state = seed;
+        move |below| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 33) % u64::from(below)) as u32
+        }
+    }
+
+    fn random_faces(n_vertices: u32, n_faces: usize, seed: u64) -> Vec<[i32; 3]> {
+        let mut next = lcg(seed);
+        (0..n_faces)
+            .map(|_| [0; 3].map(|_: i32| next(n_vertices) as i32))
+            .collect()
+    }
+
+    #[test]
+    fn edge_buckets_are_the_counting_sort_with_a_separate_cursor() {
+        for seed in 0..4 {
+            let n = 40;
+            let faces = random_faces(n as u32, 150, seed);
+            let buckets = EdgeBuckets::new(n, &faces);
+            // the definition: bucket starts by counting, a copy of them as the fill cursors
+            let edges = |f: &[i32; 3]| [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])];
+            let mut start = vec![0u32; n + 1];
+            for f in &faces {
+                for (a, b) in edges(f) {
+                    start[a.min(b) as usize + 1] += 1;
+                }
+            }
+            for i in 0..n {
+                start[i + 1] += start[i];
+            }
+            let mut fill = start.clone();
+            let mut slot = vec![(0u32, 0u32); 3 * faces.len()];
+            for (i, f) in faces.iter().enumerate() {
+                for (a, b) in edges(f) {
+                    let lo = a.min(b) as usize;
+                    slot[fill[lo] as usize] = (a.max(b) as u32, i as u32);
+                    fill[lo] += 1;
+                }
+            }
+            assert_eq!(buckets.start, start);
+            assert_eq!(buckets.slot, slot);
+        }
+    }
+
+    #[test]
+    fn roots_in_place_are_each_elements_find() {
+        let mut next = lcg(7);
+        let mut sets = UnionFind::new(200);
+        for _ in 0..150 {
+            let (a, b) = (next(200), next(200));
+            sets.union(a, b);
+        }
+        let mut reference = sets.parent.clone();
+        let mut copy = UnionFind {
+            parent: std::mem::take(&mut reference),
+        };
+        let expected: Vec<u32> = (0..200).map(|i| copy.find(i)).collect();
+        assert_eq!(sets.into_roots(), expected);
+    }
+
+    #[test]
+    fn triangles_view_the_flat_indices_in_place() {
+        let flat: Vec<i32> = (0..12).collect();
+        let tris = triangles(&flat).unwrap();
+        let copied: Vec<[i32; 3]> = flat.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+        assert_eq!(tris, copied.as_slice());
+        assert_eq!(tris.as_ptr().cast::<i32>(), flat.as_ptr());
+        assert!(triangles(&flat[..11]).is_err());
+        assert!(triangles(&[]).unwrap().is_empty());
+    }
+
+    #[test]
+    fn random_meshes_clean_like_the_copying_version() {
+        // pieces' sizes, kept faces and split fans against a build that keeps every step's copy
+        for (seed, min_vertices) in [(1, 1), (2, 3), (3, 5), (4, 8)] {
+            let n = 60;
+            let faces = random_faces(n as u32, 90, seed);
+            let clean = clean_faces(n, &faces, min_vertices).unwrap();
+            let buckets = EdgeBuckets::new(n, &faces);
+            let mut sets = UnionFind::new(faces.len());
+            buckets.link(&mut sets);
+            let root: Vec<u32> = (0..faces.len() as u32).map(|i| sets.find(i)).collect();
+            let mut vertex_piece = vec![u32::MAX; n];
+            for (f, &r) in faces.iter().zip(&root) {
+                for &v in f {
+                    vertex_piece[v as usize] = r;
+                }
+            }
+            let mut size = vec![0usize; faces.len()];
+            for &r in vertex_piece.iter().filter(|&&r| r != u32::MAX) {
+                size[r as usize] += 1;
+            }
+            let keep: Vec<bool> = root
+                .iter()
+                .map(|&r| size[r as usize] >= min_vertices)
+                .collect();
+            let expected = split_fans(n, &faces, &keep, &buckets.interior(&keep));
+            assert_eq!(clean, expected);
+            assert_eq!(clean.faces.len(), keep.iter().filter(|&&k| k).count());
+        }
     }
 
     #[test]

@@ -1156,9 +1156,7 @@ fn clean_faces<'py>(
     let clean = py
         .detach(|| {
             with_slice(&faces, |flat| {
-                let tris: Vec<[i32; 3]> =
-                    flat.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-                gnomon_core::clean_faces(n_vertices, &tris, min_vertices)
+                gnomon_core::clean_faces(n_vertices, gnomon_core::triangles(flat)?, min_vertices)
             })
         })
         .map_err(kernel_error)?;
