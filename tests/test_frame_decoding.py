@@ -131,3 +131,71 @@ def test_the_colour_frames_asked_for_come_with_their_colour(tmp_path: Path) -> N
     assert [i for i, f in enumerate(frames) if f.color is not None] == [0, 5, 9]
     assert np.array_equal(frames[5].color, cv2.imread(str(paths[5]), cv2.IMREAD_COLOR))
     assert np.array_equal(frames[7].grey, cv2.cvtColor(cv2.imread(str(paths[7])), cv2.COLOR_BGR2GRAY))
+
+
+# --------------------------------------------------------------------------- per-file checks' fast paths
+
+
+def _encoded_images() -> list[bytes]:
+    """JPEGs as OpenCV writes them (no APP1), as Pillow writes them with EXIF (each orientation) and
+    with XMP only, a PNG, and bytes that are no image."""
+    import io
+
+    from PIL import Image
+
+    rng = np.random.default_rng(3)
+    grey = rng.integers(0, 256, (37, 53), dtype=np.uint8)
+    colour = rng.integers(0, 256, (29, 41, 3), dtype=np.uint8)
+    out = [cv2.imencode(".jpg", grey)[1].tobytes(), cv2.imencode(".jpg", colour)[1].tobytes(),
+           cv2.imencode(".png", grey)[1].tobytes(), b"", b"\xff\xd8", b"\xff\xd8\xff\xd9", b"GIF89a not really"]
+    for orientation in range(1, 9):
+        exif = Image.Exif()
+        exif[0x0112] = orientation
+        buf = io.BytesIO()
+        Image.fromarray(colour).save(buf, "JPEG", exif=exif, quality=90)
+        out.append(buf.getvalue())
+    xmp = (b'<x:xmpmeta xmlns:x="adobe:ns:meta/"><rdf:RDF xmlns:rdf="http://www.w3.org/1999/02/22-rdf-syntax-ns#">'
+           b'<rdf:Description xmlns:tiff="http://ns.adobe.com/tiff/1.0/" tiff:Orientation="6"/></rdf:RDF></x:xmpmeta>')
+    buf = io.BytesIO()
+    Image.fromarray(grey).save(buf, "JPEG", xmp=xmp)
+    out.append(buf.getvalue())
+    return out
+
+
+def _variants(raw: bytes) -> list[bytes]:
+    """The file, cut at many places (within the headers too), and with bytes after its end."""
+    cuts = sorted({*range(0, min(len(raw), 700), 7), *np.linspace(0, len(raw), 40).astype(int).tolist(),
+                   *range(max(len(raw) - 6, 0), len(raw) + 1)})
+    return [raw[:c] for c in cuts] + [raw + b"\x00", raw + b"\xff", raw + b"\xff\xda\x00\x08", raw + b"\xff\xd9"]
+
+
+def test_truncation_verdicts_are_the_definitions() -> None:
+    from gnomon.frames import _truncation_problem_scan, truncation_problem
+
+    checked = 0
+    for raw in _encoded_images():
+        for variant in _variants(raw):
+            assert truncation_problem(variant) == _truncation_problem_scan(variant), (raw[:4], len(variant))
+            checked += 1
+    assert checked > 500
+    # SOS as the very last bytes before EOI, and EOI overlapping the SOS marker's bytes
+    edge_cases = (b"\xff\xd8\xff\xda\xff\xd9", b"\xff\xd8\xff\xda\xd9", b"\xff\xd8\x00\xff\xda",
+                  b"\xff\xd8\xff\xd9\xff\xd9")
+    for raw in edge_cases:
+        assert truncation_problem(raw) == _truncation_problem_scan(raw)
+
+
+def test_exif_orientation_is_pillows_and_skips_it_without_app1() -> None:
+    from gnomon.frames import _exif_orientation_pillow, _jpeg_has_app1, exif_orientation
+
+    images = _encoded_images()
+    assert not _jpeg_has_app1(images[0]) and not _jpeg_has_app1(images[1])  # OpenCV's: the fast path
+    assert [exif_orientation(raw) for raw in images[7:15]] == list(range(1, 9))  # Pillow's EXIF
+    assert exif_orientation(images[15]) == _exif_orientation_pillow(images[15])  # XMP only
+    for raw in images:
+        for variant in _variants(raw)[::3]:
+            assert exif_orientation(variant) == _exif_orientation_pillow(variant), (raw[:4], len(variant))
+    # fill bytes and standalone markers before the segments, and a malformed length
+    jpeg = images[0]
+    for raw in (jpeg[:2] + b"\xff\xff" + jpeg[2:], jpeg[:2] + b"\xff\xd0" + jpeg[2:], jpeg[:2] + b"\xff\xe0\x00\x01"):
+        assert exif_orientation(raw) == _exif_orientation_pillow(raw)
