@@ -325,3 +325,58 @@ def test_contrast_floor_from_the_noise_unless_given(tmp_path: Path) -> None:
     assert noise == pytest.approx(np.sqrt(4 + 1 / 12), rel=0.15)
     assert s["min_contrast_dn"] == pytest.approx(MIN_CONTRAST_SIGMAS * noise)
     assert result.report["coverage"]["points"] > 0.5 * 48 * 36
+
+
+def _noise_cases():
+    """Frame pairs of every kind the noise estimate meets: u8 and u16, float, gain drifts, shadows,
+    clipped and saturated samples, large flat regions (many equal differences), tiny images."""
+    rng = np.random.default_rng(11)
+    for seed in range(6):
+        yield noisy_pair(rng.uniform(0.4, 3.0), seed=seed, gain=rng.uniform(0.95, 1.05), moved_rows=seed * 12)
+    for _ in range(4):
+        top = 65535
+        scene = rng.uniform(500.0, 60000.0, (int(rng.integers(20, 90)), int(rng.integers(20, 90))))
+        sigma = rng.uniform(50.0, 400.0)
+        a = np.clip(np.rint(scene + sigma * rng.standard_normal(scene.shape)), 0, top).astype(np.uint16)
+        b = np.clip(np.rint(1.01 * scene + sigma * rng.standard_normal(scene.shape)), 0, top).astype(np.uint16)
+        yield a, b
+    a, b = noisy_pair(1.5, seed=21)
+    a[:100], b[:100] = 255, 0  # saturated in one frame, black in the other
+    yield a, b
+    flat = np.full((200, 300), 128, np.uint8)
+    yield flat, flat + (rng.random(flat.shape) < 0.01).astype(np.uint8)  # nearly every difference 0
+    yield noisy_pair(1.0, seed=5)[0].astype(np.float32) * 1.37, noisy_pair(1.0, seed=5)[1].astype(np.float64)
+    yield np.full((4, 5), 9, np.uint8), np.full((4, 5), 9, np.uint8)  # fewer than 16 samples
+
+
+def test_noise_estimate_is_the_numpy_definition_to_the_last_bit() -> None:
+    from gnomon.uncertainty import _image_noise_dn_numpy
+
+    for a, b in _noise_cases():
+        for clip, iterations in ((4.0, 6), (2.5, 12), (6.0, 1)):
+            got = image_noise_dn(a, b, clip_sigmas=clip, iterations=iterations)
+            assert got == _image_noise_dn_numpy(a, b, clip_sigmas=clip, iterations=iterations), (a.shape, clip)
+
+
+def test_a_clipped_fit_step_is_numpys_float32_arithmetic() -> None:
+    """The kernel's step against the numpy expressions it stands for, on sizes around numpy's summation
+    blocks (8, 128) and beyond, where the order of a float32 sum shows."""
+    from gnomon import _kernel
+
+    rng = np.random.default_rng(5)
+    for n in (16, 17, 127, 128, 129, 1000, 4099, 100_003):
+        diff = np.rint(rng.normal(0.3, 2.0, n)).astype(np.float32)
+        level = (rng.uniform(-120.0, 120.0, n) + 0.25).astype(np.float32)
+        offset, gain, limit = 0.5, 0.003, 5.5
+        resid = diff - offset - gain * level
+        keep = np.abs(resid) <= limit
+        x, y = level[keep], diff[keep]
+        x_mean, y_mean = x.mean(), y.mean()
+        dx = x - x_mean
+        var_x = float(np.mean(dx**2))
+        new_gain = float(np.mean(dx * (y - y_mean)) / var_x)
+        new_offset = float(y_mean - new_gain * x_mean)
+        rms = float(np.sqrt(np.mean((y - new_offset - new_gain * x) ** 2)))
+        assert _kernel.clipped_fit_step(diff, level, offset, gain, limit, 16) == (int(keep.sum()), new_offset,
+                                                                                 new_gain, rms), n
+    assert _kernel.clipped_fit_step(np.zeros(5, np.float32), np.zeros(5, np.float32), 0.0, 0.0, 1.0, 16) is None

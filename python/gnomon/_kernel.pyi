@@ -370,6 +370,18 @@ def fuse_supported(
     (:func:`gnomon.triangulation.supported_by_neighbours`): (depth, σ) (H, W) NaN where not kept, and per
     pixel 0 no estimate, 1 kept, 2 conflict, 3 unsupported; rows in parallel."""
 
+def clipped_fit_step(
+    diff: npt.NDArray[np.float32],
+    level: npt.NDArray[np.float32],
+    offset: float,
+    gain: float,
+    limit: float,
+    min_kept: int,
+) -> tuple[int, float, float, float] | None:
+    """One step of :func:`gnomon.uncertainty.image_noise_dn`'s clipped fit of ``diff`` against ``level`` (N,):
+    ``(kept, offset, gain, rms)`` of the pixels within ``limit`` of ``offset + gain·level`` (float32 values, as
+    floats), each float32 operation and mean numpy's, in its order; None when fewer than ``min_kept`` are kept."""
+
 def lit_median(stack: npt.NDArray[np.uint8], lit: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     """(H, W, 3): per pixel and channel the median of the ``stack`` (K, H, W, 3) samples it is ``lit`` (K, H, W)
     in (all K where it is lit in none), ``(s[(n−1)//2] + s[n//2] + 1) // 2`` of the n sorted samples, as

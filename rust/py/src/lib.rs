@@ -1455,6 +1455,43 @@ fn fuse_supported<'py>(
     )
 }
 
+/// One step of the image-noise estimate's clipped fit (see `gnomon_core::clipped_fit_step`):
+/// `(kept, offset, gain, rms)` (the three float32 values as floats), or None when fewer than
+/// `min_kept` pixels are kept.
+#[pyfunction]
+#[pyo3(signature = (diff, level, offset, gain, limit, min_kept))]
+fn clipped_fit_step<'py>(
+    py: Python<'py>,
+    diff: &Bound<'py, PyAny>,
+    level: &Bound<'py, PyAny>,
+    offset: f64,
+    gain: f64,
+    limit: f64,
+    min_kept: usize,
+) -> PyResult<Option<(usize, f64, f64, f64)>> {
+    let diff = borrow_array::<f32, Ix1>(diff, "diff", "float32", &[Extent::Any("N")])?;
+    let n = diff.len();
+    let level = borrow_array::<f32, Ix1>(level, "level", "float32", &[Extent::Exactly(n)])?;
+    let (diff, level) = (diff.as_array(), level.as_array());
+    let fit = py
+        .detach(|| {
+            with_slice(&diff, |diff| {
+                with_slice(&level, |level| {
+                    gnomon_core::clipped_fit_step(diff, level, offset, gain, limit, min_kept)
+                })
+            })
+        })
+        .map_err(kernel_error)?;
+    Ok(fit.map(|f| {
+        (
+            f.kept,
+            f64::from(f.offset),
+            f64::from(f.gain),
+            f64::from(f.rms),
+        )
+    }))
+}
+
 /// Per pixel and channel, the median of the frames it is lit in: (H, W, 3) uint8 (see
 /// `gnomon_core::lit_median`).
 #[pyfunction]
@@ -1692,6 +1729,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(world_points, m)?)?;
     m.add_function(wrap_pyfunction!(ray_map, m)?)?;
     m.add_function(wrap_pyfunction!(lit_median, m)?)?;
+    m.add_function(wrap_pyfunction!(clipped_fit_step, m)?)?;
     m.add_function(wrap_pyfunction!(fuse_supported, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
