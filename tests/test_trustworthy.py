@@ -347,6 +347,12 @@ def _noise_cases():
     yield flat, flat + (rng.random(flat.shape) < 0.01).astype(np.uint8)  # nearly every difference 0
     yield noisy_pair(1.0, seed=5)[0].astype(np.float32) * 1.37, noisy_pair(1.0, seed=5)[1].astype(np.float64)
     yield np.full((4, 5), 9, np.uint8), np.full((4, 5), 9, np.uint8)  # fewer than 16 samples
+    a, b = noisy_pair(2.0, seed=8)
+    yield a, (b.astype(np.uint16) * 3)  # two integer types: the float path, inside the first one's range
+    yield a[::2, 1::3], b[::2, 1::3]  # strided views
+    big = rng.uniform(2.0, 250.0, (300, 700))
+    yield (np.rint(big + rng.normal(0, 1.2, big.shape)).clip(0, 255).astype(np.uint8),
+           np.rint(big + 40 + rng.normal(0, 1.2, big.shape)).clip(0, 255).astype(np.uint8))  # a large offset
 
 
 def test_noise_estimate_is_the_numpy_definition_to_the_last_bit() -> None:
@@ -380,3 +386,34 @@ def test_a_clipped_fit_step_is_numpys_float32_arithmetic() -> None:
         assert _kernel.clipped_fit_step(diff, level, offset, gain, limit, 16) == (int(keep.sum()), new_offset,
                                                                                  new_gain, rms), n
     assert _kernel.clipped_fit_step(np.zeros(5, np.float32), np.zeros(5, np.float32), 0.0, 0.0, 1.0, 16) is None
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_the_noise_samples_are_the_numpy_ones(dtype) -> None:
+    """The kernel's samples, centred levels and starting median and MAD against numpy's steps."""
+    from gnomon import _kernel
+    from gnomon.uncertainty import _median_of_integers
+
+    rng = np.random.default_rng(2)
+    top = np.iinfo(dtype).max
+    for n in (16, 17, 999, 50_001):
+        a = rng.integers(0, top + 1, n).astype(dtype)
+        b = np.clip(a.astype(np.int64) + rng.integers(-9, 12, n), 0, top).astype(dtype)
+        inside = (a > 0) & (b > 0) & (a < top) & (b < top)
+        ai, bi = a[inside], b[inside]
+        whole = ai.astype(np.int32) - bi.astype(np.int32)
+        af, bf = ai.astype(np.float32), bi.astype(np.float32)
+        level = 0.5 * (af + bf)
+        med = _median_of_integers(whole)
+        mad = _median_of_integers(np.abs(2 * whole - round(2 * med))) / 2
+        got = _kernel.noise_samples(a, b, 16)
+        if inside.sum() < 16:
+            assert got is None
+            continue
+        diff, lev, got_med, got_mad = got
+        assert np.array_equal(diff, af - bf) and diff.dtype == np.float32
+        assert np.array_equal(lev, level - float(level.mean()))
+        assert (got_med, got_mad) == (med, mad)
+    assert _kernel.noise_samples(np.zeros(20, dtype), np.zeros(20, dtype), 16) is None
+    with pytest.raises(ValueError):
+        _kernel.noise_samples(np.zeros(20, np.int16), np.zeros(20, np.int16), 16)

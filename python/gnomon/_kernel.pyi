@@ -370,6 +370,16 @@ def fuse_supported(
     (:func:`gnomon.triangulation.supported_by_neighbours`): (depth, σ) (H, W) NaN where not kept, and per
     pixel 0 no estimate, 1 kept, 2 conflict, 3 unsupported; rows in parallel."""
 
+def noise_samples(
+    a: npt.NDArray[np.uint8] | npt.NDArray[np.uint16],
+    b: npt.NDArray[np.uint8] | npt.NDArray[np.uint16],
+    min_inside: int,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], float, float] | None:
+    """The pixels of two flat frames of one integer dtype that :func:`gnomon.uncertainty.image_noise_dn` fits
+    (both inside the range, neither 0 nor the maximum), in order: ``(diff, level, median, mad)``, ``diff = a − b``
+    and ``level = ½(a + b) − mean`` in float32 as numpy computes them, the differences' median and MAD from their
+    histogram; None when fewer than ``min_inside`` pixels are inside."""
+
 def clipped_fit_step(
     diff: npt.NDArray[np.float32],
     level: npt.NDArray[np.float32],

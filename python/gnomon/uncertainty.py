@@ -56,39 +56,35 @@ def image_noise_dn(frame_a: np.ndarray, frame_b: np.ndarray, *, clip_sigmas: flo
     saturated) are excluded: their noise is hidden by the clipping.
     Returns ≥ 1/√12 DN (the quantisation floor).
 
-    Each step of the clipped fit runs in the kernel (``_kernel.clipped_fit_step``: the kept pixels
-    gathered in one pass, then their means; ≈ 20 passes of numpy temporaries over the frame less per
-    step), equal to the last bit to :func:`_image_noise_dn_numpy`, the definition.
+    uint8/uint16 frames (a scan's) are read in the kernel: the samples inside the range, their
+    differences, centred levels and starting median and MAD in one pass (``_kernel.noise_samples``);
+    and each step of the clipped fit runs there (``_kernel.clipped_fit_step``: the kept pixels gathered
+    in one pass, then their means), instead of ≈ 20 passes of numpy temporaries over the frame per
+    step. Equal to the last bit to :func:`_image_noise_dn_numpy`, the definition.
     """
     a = np.asarray(frame_a)
     b = np.asarray(frame_b)
     if a.shape != b.shape:
         raise ValueError(f"frames differ in shape: {a.shape} vs {b.shape}")
-    top = np.iinfo(a.dtype).max if np.issubdtype(a.dtype, np.integer) else np.inf
-    # uint8/uint16 frames (a scan's): the samples are selected on the integers and the starting medians
-    # taken from histograms, giving exactly what the float32 path gives, in less time.
-    integers = a.dtype == b.dtype and a.dtype in (np.uint8, np.uint16)
-    if integers:
-        a, b = a.ravel(), b.ravel()
+    floor = 1.0 / np.sqrt(12.0)
+    if a.dtype == b.dtype and a.dtype in (np.uint8, np.uint16):
+        # a scan's frames: the samples, their differences and the starting medians in the kernel
+        samples = _kernel.noise_samples(np.ravel(a), np.ravel(b), MIN_FIT_PIXELS)
+        if samples is None:
+            return float(floor)
+        diff, level, med, mad = samples
     else:
+        top = np.iinfo(a.dtype).max if np.issubdtype(a.dtype, np.integer) else np.inf
         a = a.astype(np.float32).ravel()
         b = b.astype(np.float32).ravel()
-    inside = (a > 0) & (b > 0) & (a < top) & (b < top)
-    floor = 1.0 / np.sqrt(12.0)
-    if np.count_nonzero(inside) < 16:
-        return float(floor)
-    a, b = a[inside], b[inside]
-    if integers:
-        whole = a.astype(np.int32) - b.astype(np.int32)
-        a, b = a.astype(np.float32), b.astype(np.float32)
-    diff = a - b
-    level = 0.5 * (a + b)
-    level = level - float(level.mean())
-    # Starting scale: the MAD (integer on 8-bit data, only a start), at least one quantisation step.
-    if integers:
-        med = _median_of_integers(whole)
-        mad = _median_of_integers(np.abs(2 * whole - round(2 * med))) / 2  # |diff − med|, counted in half DN
-    else:
+        inside = (a > 0) & (b > 0) & (a < top) & (b < top)
+        if np.count_nonzero(inside) < MIN_FIT_PIXELS:
+            return float(floor)
+        a, b = a[inside], b[inside]
+        diff = a - b
+        level = 0.5 * (a + b)
+        level = level - float(level.mean())
+        # Starting scale: the MAD, at least one quantisation step.
         med = float(np.median(diff))
         mad = float(np.median(np.abs(diff - med)))
     scale = max(1.4826 * mad, 1.0)

@@ -14,7 +14,8 @@
 //!   [`average_across`]: the re-timed times averaged across the sweep;
 //! * [`world_points`], [`grid_normals`], [`stl_records`]: the surface's world points and normals on the
 //!   pixel grid, a mesh's binary STL records;
-//! * [`clipped_fit_step`]: one step of the image-noise estimate's clipped fit, in numpy's float32 order;
+//! * [`noise_samples`], [`clipped_fit_step`]: the image-noise estimate's samples and the steps of its
+//!   clipped fit, in numpy's float32 order;
 //! * [`ray_map`]: the unit ray of every pixel of OpenCV's 5-coefficient camera (Newton);
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
@@ -43,7 +44,7 @@ pub use intensity::NORMALISED_SCALE;
 pub use lines::{frame_lines, isochrone_crossings, Crossings, FrameLines, LineParams};
 pub use live::{FinishedPixel, WatchParams};
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, triangles, CleanMesh};
-pub use noise::{clipped_fit_step, pairwise_sum, ClipFit};
+pub use noise::{clipped_fit_step, noise_samples, pairwise_sum, ClipFit, NoiseSamples};
 pub use retime::{
     average_across, retime_rows, retime_rows_sigma, RetimeParams, Retimed, RetimedSigma,
 };

@@ -10,6 +10,7 @@
 //! ([`pairwise_sum`]), so that every float32 it produces is numpy's.
 
 use crate::error::KernelError;
+use crate::sample::Sample;
 
 /// Elements summed by 8 running accumulators before numpy's sum splits in halves.
 const PAIRWISE_BLOCK: usize = 128;
@@ -139,6 +140,86 @@ pub fn clipped_fit_step(
     }))
 }
 
+/// The samples of a frame pair the noise estimate fits, with its starting line: for the pixels
+/// where both frames are strictly inside their range (neither 0 nor the type's maximum), in
+/// order, `diff = a − b` and `level = ½(a + b) − mean` (float32, numpy's arithmetic and mean),
+/// and the median of the differences and of their distances from it (the MAD).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoiseSamples {
+    pub diff: Vec<f32>,
+    pub level: Vec<f32>,
+    pub median: f64,
+    pub mad: f64,
+}
+
+/// numpy's median of integers given by their histogram (`counts[v]` of the value `low + v`,
+/// `n` in all, `n > 0`): the mean of its sorted elements `(n − 1) / 2` and `n / 2`, as
+/// `gnomon.uncertainty._median_of_integers` computes it.
+fn histogram_median(counts: &[u32], low: i64, n: usize) -> f64 {
+    let nth = |k: usize| {
+        let mut seen = 0usize;
+        for (v, &c) in counts.iter().enumerate() {
+            seen += c as usize;
+            if seen > k {
+                return v as i64;
+            }
+        }
+        counts.len() as i64 - 1
+    };
+    (nth((n - 1) / 2) + nth(n / 2)) as f64 / 2.0 + low as f64
+}
+
+/// The samples of frames `a` and `b` (one per pixel, the same length) that the noise estimate
+/// fits ([`NoiseSamples`]); None when fewer than `min_inside` pixels are inside the range.
+/// Equal to the integer path of `gnomon.uncertainty._image_noise_dn_numpy` before its fit.
+pub fn noise_samples<T: Sample>(
+    a: &[T],
+    b: &[T],
+    min_inside: usize,
+) -> Result<Option<NoiseSamples>, KernelError> {
+    if a.len() != b.len() {
+        return Err(KernelError::LengthMismatch {
+            what: "frame b (one sample per pixel of a)",
+            expected: a.len(),
+            got: b.len(),
+        });
+    }
+    let inside = |p: T, q: T| p > T::MIN && q > T::MIN && p < T::MAX && q < T::MAX;
+    let n = a.iter().zip(b).filter(|(&p, &q)| inside(p, q)).count();
+    if n < min_inside.max(1) {
+        return Ok(None);
+    }
+    let (mut diff, mut level) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    // Differences of samples inside the range: within ±(MAX − 2), counted from −MAX.
+    let top = T::MAX.index() as i64;
+    let mut counts = vec![0u32; 2 * top as usize + 1];
+    for (&p, &q) in a.iter().zip(b).filter(|(&p, &q)| inside(p, q)) {
+        let (x, y) = (p.to_f32(), q.to_f32());
+        diff.push(x - y);
+        level.push(0.5 * (x + y));
+        counts[(p.index() as i64 - q.index() as i64 + top) as usize] += 1;
+    }
+    let level_mean = mean(&level);
+    for l in &mut level {
+        *l -= level_mean;
+    }
+    let median = histogram_median(&counts, -top, n);
+    // |2·diff − round(2·median)|: in half DN, on the integers (2·median is one).
+    let centre = (2.0 * median) as i64;
+    let mut half = vec![0u32; 4 * top as usize + 1];
+    for (v, &c) in counts.iter().enumerate().filter(|(_, &c)| c > 0) {
+        let d = 2 * (v as i64 - top) - centre;
+        half[d.unsigned_abs() as usize] += c;
+    }
+    let mad = histogram_median(&half, 0, n) / 2.0;
+    Ok(Some(NoiseSamples {
+        diff,
+        level,
+        median,
+        mad,
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -171,6 +252,44 @@ mod tests {
             let computed = pairwise_sum_of(0, n, &|i| ((i * 7919) % 1013) as f32 * 0.37 - 150.0);
             assert_eq!(computed.to_bits(), pairwise_sum(&terms).to_bits(), "{n}");
         }
+    }
+
+    #[test]
+    fn histogram_median_is_the_middle_of_the_sorted_values() {
+        for values in [
+            vec![3i64],
+            vec![5, -2],
+            vec![4, 4, 9],
+            vec![-7, 0, 2, 2, 8, 11],
+            vec![1, 1, 1, 6],
+        ] {
+            let low = *values.iter().min().unwrap();
+            let mut counts = vec![0u32; 30];
+            for &v in &values {
+                counts[(v - low) as usize] += 1;
+            }
+            let mut sorted = values.clone();
+            sorted.sort();
+            let n = sorted.len();
+            let expected = (sorted[(n - 1) / 2] + sorted[n / 2]) as f64 / 2.0;
+            assert_eq!(histogram_median(&counts, low, n), expected, "{values:?}");
+        }
+    }
+
+    #[test]
+    fn noise_samples_keep_the_pixels_inside_the_range() {
+        // pixel 1 is black in a, pixel 3 saturated in b: left out
+        let a: Vec<u8> = vec![10, 0, 200, 30, 7, 9];
+        let b: Vec<u8> = vec![12, 5, 190, 255, 7, 10];
+        let s = noise_samples(&a, &b, 1).unwrap().unwrap();
+        assert_eq!(s.diff, vec![-2.0, 10.0, 0.0, -1.0]);
+        let level = [11.0f32, 195.0, 7.0, 9.5];
+        let centre = ((11.0f32 + 195.0) + (7.0 + 9.5)) / 4.0;
+        assert_eq!(s.level, level.map(|l| l - centre).to_vec());
+        // differences -2, 10, 0, -1: median -0.5; |2·d + 1| = 3, 21, 1, 1 → 2, halved 1
+        assert_eq!((s.median, s.mad), (-0.5, 1.0));
+        assert!(noise_samples(&a, &b, 5).unwrap().is_none());
+        assert!(noise_samples(&a, &b[1..], 1).is_err());
     }
 
     #[test]

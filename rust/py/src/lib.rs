@@ -1455,6 +1455,62 @@ fn fuse_supported<'py>(
     )
 }
 
+/// What `noise_samples` returns: the differences and centred levels (float32), the median and MAD.
+type NoiseSamplesResult<'py> = Option<(
+    Bound<'py, PyArray1<f32>>,
+    Bound<'py, PyArray1<f32>>,
+    f64,
+    f64,
+)>;
+
+fn noise_samples_of<'py, T: Sample + Element>(
+    py: Python<'py>,
+    a: &Bound<'py, PyAny>,
+    b: &Bound<'py, PyAny>,
+    min_inside: usize,
+) -> PyResult<NoiseSamplesResult<'py>> {
+    let a = borrow_array::<T, Ix1>(a, "a", T::DTYPE, &[Extent::Any("N")])?;
+    let n = a.len();
+    let b = borrow_array::<T, Ix1>(b, "b", T::DTYPE, &[Extent::Exactly(n)])?;
+    let (a, b) = (a.as_array(), b.as_array());
+    let samples = py
+        .detach(|| {
+            with_slice(&a, |a| {
+                with_slice(&b, |b| gnomon_core::noise_samples(a, b, min_inside))
+            })
+        })
+        .map_err(kernel_error)?;
+    Ok(samples.map(|s| {
+        (
+            s.diff.into_pyarray(py),
+            s.level.into_pyarray(py),
+            s.median,
+            s.mad,
+        )
+    }))
+}
+
+/// The samples of a uint8 or uint16 frame pair (flat, one dtype) the noise estimate fits, and
+/// its starting median and MAD (see `gnomon_core::noise_samples`); None when fewer than
+/// `min_inside` pixels are inside the range.
+#[pyfunction]
+#[pyo3(signature = (a, b, min_inside))]
+fn noise_samples<'py>(
+    py: Python<'py>,
+    a: &Bound<'py, PyAny>,
+    b: &Bound<'py, PyAny>,
+    min_inside: usize,
+) -> PyResult<NoiseSamplesResult<'py>> {
+    let dtype: String = a.getattr("dtype")?.getattr("name")?.extract()?;
+    match dtype.as_str() {
+        "uint8" => noise_samples_of::<u8>(py, a, b, min_inside),
+        "uint16" => noise_samples_of::<u16>(py, a, b, min_inside),
+        other => Err(KernelParameterError::new_err(format!(
+            "a: expected uint8 or uint16 samples, got {other:?}"
+        ))),
+    }
+}
+
 /// One step of the image-noise estimate's clipped fit (see `gnomon_core::clipped_fit_step`):
 /// `(kept, offset, gain, rms)` (the three float32 values as floats), or None when fewer than
 /// `min_kept` pixels are kept.
@@ -1730,6 +1786,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(ray_map, m)?)?;
     m.add_function(wrap_pyfunction!(lit_median, m)?)?;
     m.add_function(wrap_pyfunction!(clipped_fit_step, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_samples, m)?)?;
     m.add_function(wrap_pyfunction!(fuse_supported, m)?)?;
     m.add_function(wrap_pyfunction!(simd_path, m)?)?;
     m.add_function(wrap_pyfunction!(simd_paths, m)?)?;
