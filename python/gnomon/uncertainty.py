@@ -96,11 +96,7 @@ def image_noise_dn(frame_a: np.ndarray, frame_b: np.ndarray, *, clip_sigmas: flo
         if step is None:
             break
         _, offset, gain, new_scale = step
-        # A Gaussian clipped at k·σ has a std smaller by this factor.
-        k = clip_sigmas * scale / max(new_scale, 1e-12)
-        new_scale /= _clipped_std_factor(min(k, 10.0))
-        converged = abs(new_scale - scale) <= 1e-3 * scale
-        scale = max(new_scale, 1e-6)
+        scale, converged = _clipped_scale(scale, new_scale, clip_sigmas)
         if converged:
             break
     return float(max(scale / np.sqrt(2.0), floor))
@@ -155,14 +151,19 @@ def _image_noise_dn_numpy(frame_a: np.ndarray, frame_b: np.ndarray, *, clip_sigm
         offset = float(y_mean - gain * x_mean)
         resid = y - offset - gain * x
         new_scale = float(np.sqrt(np.mean(resid**2)))
-        # A Gaussian clipped at k·σ has a std smaller by this factor.
-        k = clip_sigmas * scale / max(new_scale, 1e-12)
-        new_scale /= _clipped_std_factor(min(k, 10.0))
-        converged = abs(new_scale - scale) <= 1e-3 * scale
-        scale = max(new_scale, 1e-6)
+        scale, converged = _clipped_scale(scale, new_scale, clip_sigmas)
         if converged:
             break
     return float(max(scale / np.sqrt(2.0), floor))
+
+
+def _clipped_scale(scale: float, clipped_rms: float, clip_sigmas: float) -> tuple[float, bool]:
+    """The next scale of the clipped fit from its inliers' residual RMS (DN): unbiased for a Gaussian
+    clipped at ``clip_sigmas`` times the current ``scale``, and whether it moved by at most 0.1 %."""
+    # A Gaussian clipped at k·σ has a std smaller by this factor.
+    k = clip_sigmas * scale / max(clipped_rms, 1e-12)
+    new_scale = clipped_rms / _clipped_std_factor(min(k, 10.0))
+    return max(new_scale, 1e-6), abs(new_scale - scale) <= 1e-3 * scale
 
 
 def _median_of_integers(values: np.ndarray) -> float:
