@@ -131,9 +131,15 @@ def test_init_writes_a_template_that_loads_once_filled(two_plane_small: Path, tm
         plane["regions"] = filled["regions"]
         plane.update(point=filled["point"], normal=filled["normal"], x_axis=filled["x_axis"])
     data["camera"]["pose"] = pose
+    # the commented [output] keys, uncommented, are valid
+    block = text[text.index("# [output]"):].split("\n\n")[0]
+    output = tomllib.loads("\n".join(line[2:] for line in block.splitlines()))["output"]
+    assert set(output) == {"crop_above", "crop_min_height", "max_sigma"}
+    data["output"] = output
     toml_io.dump(data, out)
     log = load_field_log(out)
     assert len(log.capture.image_files) == len(frames) and [p.name for p in log.planes] == ["desk", "wall"]
+    assert log.output.crop_above == "desk" and log.output.max_sigma == 1.5
     # an existing log is kept
     assert main(["init", *map(str, sorted((work / "frames").glob("*")))]) == 2
 

@@ -66,6 +66,11 @@ kind = "two-plane"  # the shadow planes from the lines on the two planes; or "la
 # min_contrast = 20  # DN: pixels whose lit and shadowed values differ less are left out
                     # (without it: 8 σ of the image noise measured between the first frames)
 edge = "both"  # triangulate the entering and the leaving shadow edge and fuse them
+
+# [output]  # what the written files keep (all optional)
+# crop_above = "desk"
+# crop_min_height = 2.0  # the object without the desk: points at least this high above it
+# max_sigma = 1.5  # drop the points whose predicted depth sigma exceeds this: fewer points, fewer wrong ones
 '''
 
 INLINE_CAMERA = '''\
