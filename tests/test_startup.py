@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 import gnomon
 from gnomon.cli import build_parser
@@ -89,3 +92,44 @@ def test_the_command_line_skips_the_teardown_collections() -> None:
     collections; main(argv) called by a program does not touch the program's collector."""
     assert _frozen_at_exit("main()")
     assert not _frozen_at_exit("main(['--version'])")
+
+
+ARENAS = """
+import ctypes, sys, threading
+import numpy as np
+from gnomon import cli
+took = cli.one_malloc_arena() if sys.argv[1] == "one" else False
+barrier = threading.Barrier(4)
+def work():
+    barrier.wait()  # all four alive at once: none can take over an exited thread's arena
+    keep = [np.ones(100) for _ in range(64)]  # small blocks: from the thread's arena
+    barrier.wait()
+    del keep
+threads = [threading.Thread(target=work) for _ in range(4)]
+for t in threads:
+    t.start()
+for t in threads:
+    t.join()
+print(took, flush=True)
+ctypes.CDLL(None).malloc_stats()  # glibc: one "Arena N:" block per arena, on stderr
+"""
+
+
+def _arenas(mode: str, **env: str) -> tuple[str, int]:
+    """(one_malloc_arena's result, the arenas glibc reports) after four threads allocated at once."""
+    full_env = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
+    full_env.update(env, PYTHONPATH=os.pathsep.join([str(PACKAGE_ROOT), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, "-c", ARENAS, mode], capture_output=True, text=True, env=full_env,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout.strip(), sum(line.startswith("Arena ") for line in proc.stderr.splitlines())
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or platform.libc_ver()[0] != "glibc",
+                    reason="glibc's malloc arenas")
+def test_command_line_process_allocates_from_one_arena() -> None:
+    """The `gnomon` process's threads share glibc's main arena (cli.one_malloc_arena); by default
+    glibc gives concurrent threads arenas of their own; MALLOC_ARENA_MAX set by the user is left alone."""
+    assert _arenas("default")[1] > 1
+    assert _arenas("one") == ("True", 1)
+    assert _arenas("one", MALLOC_ARENA_MAX="4")[0] == "False"
