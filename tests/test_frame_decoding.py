@@ -133,6 +133,36 @@ def test_the_colour_frames_asked_for_come_with_their_colour(tmp_path: Path) -> N
     assert np.array_equal(frames[7].grey, cv2.cvtColor(cv2.imread(str(paths[7])), cv2.COLOR_BGR2GRAY))
 
 
+def test_a_jpeg_captures_grey_is_its_luma_in_every_frame(tmp_path: Path) -> None:
+    """Colour JPEG frames: every frame's grey is the luma channel as coded (OpenCV's grey decode of the
+    file), the frames kept in colour included, within JPEG's error of the BT.601 luma of the image
+    that was encoded; a kept frame's colour is OpenCV's colour decode."""
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    yy, xx = np.mgrid[0:48, 0:64]
+    paths, lumas = [], []
+    for i in range(6):
+        # smooth colour patterns, some channels clipped (where luma and the colour round trip differ)
+        bgr = np.stack([127.5 + 160 * np.sin(xx / 9.0 + k + i) * np.cos(yy / 7.0 - k) for k in (0, 2, 4)], -1)
+        bgr = np.clip(bgr, 0, 255).round().astype(np.uint8)
+        lumas.append(bgr @ np.array([0.114, 0.587, 0.299]))
+        paths.append(folder / f"f_{i:02d}.jpg")
+        cv2.imwrite(str(paths[-1]), bgr, [cv2.IMWRITE_JPEG_QUALITY, 95])
+    source = FrameSource(tuple(paths))
+    source.color_frames = frozenset({0, 3})
+    frames = list(source)
+    round_trip_differs = 0
+    for f, p, luma in zip(frames, paths, lumas, strict=True):
+        assert np.array_equal(f.grey, cv2.imread(str(p), cv2.IMREAD_GRAYSCALE))
+        # q95 JPEG of 8-bit samples: well under 1 DN RMS, a few DN at most
+        assert np.sqrt(np.mean((f.grey - luma) ** 2)) < 1.0
+        colour = cv2.imread(str(p), cv2.IMREAD_COLOR)
+        round_trip_differs += int(np.count_nonzero(f.grey != cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY)))
+    assert [i for i, f in enumerate(frames) if f.color is not None] == [0, 3]
+    assert np.array_equal(frames[3].color, cv2.imread(str(paths[3]), cv2.IMREAD_COLOR))
+    assert round_trip_differs > 0  # the frames do tell the luma from the colour round trip
+
+
 # --------------------------------------------------------------------------- per-file checks' fast paths
 
 

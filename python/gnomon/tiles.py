@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from gnomon.errors import GnomonError
-from gnomon.frames import Frame, FrameSource, decode_image_file, to_grey
+from gnomon.frames import Frame, FrameSource, decode_frame_file
 from gnomon.tracking import SecondDips, ShadowTimes, TrackedSequence, TrackerSettings, track_source
 
 __all__ = ["TileGrid", "TileResult", "TiledTracker", "current_rss_bytes", "peak_rss_bytes", "reset_peak_rss", "stitch",
@@ -233,6 +233,5 @@ class TiledTracker:
         wanted = set(range(0, n, max(self.frame_stride, 1))) | {i for i in source.color_frames if i < n}
         for i in sorted(wanted):
             path = source.image_files[i]
-            image, _ = decode_image_file(path)
-            color = image[:, :, :3] if (i in source.color_frames and image.ndim == 3) else None
-            on_frame(Frame(i, to_grey(image), color, path.name))
+            grey, color, _ = decode_frame_file(path, i in source.color_frames)
+            on_frame(Frame(i, grey, color, path.name))
