@@ -18,6 +18,7 @@ import numpy as np
 from gnomon.aruco import plane_pose_from_aruco, plane_pose_from_charuco
 from gnomon.calibration import fit_camera_to_frames, read_grey
 from gnomon.camera import CalibratedCamera, CameraModel, OpenCVCamera, Pose
+from gnomon.chi2 import chi2_isf
 from gnomon.crop import Crop
 from gnomon.errors import FieldLogError, FrameError, GnomonError
 from gnomon.fieldlog import FieldLog, PlaneSpec, check_geometry
@@ -343,8 +344,6 @@ def check_plane_markers(log: FieldLog, plane: PlaneSpec, pp: PlanePose, declared
     at the markers' localisation σ (p = :data:`MARKER_CHECK_P`); a :class:`FieldLogError` naming the
     plane and its worst marker when the plane they give would be meaningless (tilted more than
     :data:`MAX_PLANE_TILT_DEG` from the declared plane, or that uncertain on its own)."""
-    from scipy.stats import chi2
-
     n = len(pp.pixels)
     dof = 2 * n - 6
     if dof <= 0:
@@ -352,7 +351,7 @@ def check_plane_markers(log: FieldLog, plane: PlaneSpec, pp: PlanePose, declared
     sigmas = _marker_sigmas(plane, n)
     lengths = np.linalg.norm(pp.residuals_px, axis=1)
     statistic = float(np.sum((lengths / sigmas) ** 2))
-    limit = float(chi2.ppf(1.0 - MARKER_CHECK_P, dof))
+    limit = chi2_isf(MARKER_CHECK_P, dof)
     # the culprit: with a declared pose, the marker farthest from where the declared plane puts it
     # (a swapped pair fits a wrong plane with every residual alike); else the largest residual
     offsets = lengths

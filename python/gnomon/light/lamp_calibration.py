@@ -65,6 +65,7 @@ import numpy as np
 
 from gnomon import toml_io
 from gnomon.camera import CameraModel, Pose
+from gnomon.chi2 import chi2_sf
 from gnomon.errors import FieldLogError, GnomonError
 from gnomon.fieldlog import UNITS, _parse_camera, _Table
 from gnomon.reference_lines import PlaneInCamera
@@ -285,9 +286,7 @@ def calibrate_lamp_from_pencil(
             f"distance to the pencils ({distance:.4g}); add photos with the pencil spread further apart"
         )
     if math.isfinite(chi2):
-        from scipy.stats import chi2 as chi2_dist
-
-        p_value = float(chi2_dist.sf(chi2, dof))
+        p_value = chi2_sf(chi2, dof)
         if p_value < MIN_CHI2_P:
             warnings.append(
                 f"the lines miss each other by more than σ_px = {sigma_px:g} px explains (χ² = {chi2:.3g} for "
