@@ -1,10 +1,14 @@
-"""Robust total-least-squares fits of lines and planes (iterative MAD rejection)."""
+"""Robust total-least-squares fits of lines and planes (iterative MAD rejection), and a small
+Levenberg–Marquardt solver for a few parameters (a plane's pose from its markers)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 import numpy as np
 
-__all__ = ["fit_line_robust", "fit_plane_robust", "fit_subspace_robust"]
+__all__ = ["LeastSquares", "fit_line_robust", "fit_plane_robust", "fit_subspace_robust", "levenberg_marquardt"]
 
 
 def fit_subspace_robust(points: np.ndarray, k: float = 3.0,
@@ -45,3 +49,62 @@ def fit_plane_robust(points: np.ndarray, k: float = 3.0,
     """Robust 3-D plane (see :func:`fit_subspace_robust`): (centroid, unit normal, inlier mask)."""
     centre, axes, mask = fit_subspace_robust(points, k, iterations)
     return centre, axes[-1], mask
+
+
+@dataclass(frozen=True)
+class LeastSquares:
+    """A nonlinear least-squares solution: the parameters ``x``, the residuals ``fun`` there and their
+    Jacobian ``jac`` (M, N) at ``x`` (central differences), ``iterations`` taken."""
+
+    x: np.ndarray
+    fun: np.ndarray
+    jac: np.ndarray
+    iterations: int
+
+
+def _jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
+    """Central differences, steps of ε^(1/3) relative to each parameter (at least ε^(1/3))."""
+    step = np.finfo(float).eps ** (1.0 / 3.0) * np.maximum(1.0, np.abs(x))
+    cols = []
+    for i in range(len(x)):
+        dx = np.zeros_like(x)
+        dx[i] = step[i]
+        cols.append((fun(x + dx) - fun(x - dx)) / (2.0 * step[i]))
+    return np.stack(cols, axis=1)
+
+
+def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, *, max_iterations: int = 100,
+                        xtol: float = 1e-12, ftol: float = 1e-12) -> LeastSquares:
+    """Minimise ``sum(fun(x)**2)`` from ``x0`` (N,) for residuals ``fun(x)`` (M,), M ≥ N: Levenberg–Marquardt
+    with Marquardt's scaling (the damping proportional to diag(JᵀJ), so the parameters' units do not matter).
+
+    For a handful of parameters started near the minimum (a pose refined from a closed-form one): it stops
+    when a step changes no parameter by more than ``xtol`` relative or lowers the sum of squares by less
+    than ``ftol`` relative, or after ``max_iterations``. A step never raises the sum of squares.
+    """
+    x = np.asarray(x0, dtype=np.float64).copy()
+    r = np.asarray(fun(x), dtype=np.float64)
+    cost = float(r @ r)
+    jac = _jacobian(fun, x)
+    damping = 1e-3
+    iterations = 0
+    while iterations < max_iterations:
+        iterations += 1
+        a = jac.T @ jac
+        g = jac.T @ r
+        scale = np.maximum(np.diag(a), 1e-300)
+        while damping < 1e16:
+            step = np.linalg.solve(a + damping * np.diag(scale), -g)
+            r_new = np.asarray(fun(x + step), dtype=np.float64)
+            cost_new = float(r_new @ r_new)
+            if cost_new <= cost:
+                break
+            damping *= 10.0
+        else:
+            break  # no step lowers the sum of squares: a minimum to machine precision
+        x, r, gain, cost = x + step, r_new, cost - cost_new, cost_new
+        damping = max(damping / 10.0, 1e-12)
+        jac = _jacobian(fun, x)
+        if np.all(np.abs(step) <= xtol * (np.abs(x) + xtol)) or gain <= ftol * (cost + gain):
+            break
+    return LeastSquares(x, r, jac, iterations)
