@@ -155,7 +155,8 @@ def regions_preview_scan(log_path: Path) -> Path:
     return folder / "scan"
 
 
-def frog(mirror: Path, out: Path) -> None:
+def frog(mirror: Path, out: Path, max_sigmas: tuple[float, ...] = ()) -> None:
+    """The frog, scanned and scored; then once per bound in ``max_sigmas`` (mm) with ``[output] max_sigma``."""
     folder = out / "frog"
     folder.mkdir(parents=True, exist_ok=True)
     frames = folder / "frames"
@@ -178,6 +179,16 @@ def frog(mirror: Path, out: Path) -> None:
         first = cv2.imread(sorted(glob.glob(str(frames / "*.jpg")))[0])
         first[score.false_mask] = (0, 0, 255)
         cv2.imwrite(str(folder / "false_points.png"), first)
+    for bound in max_sigmas:  # the trade of coverage for trust a user makes with [output] max_sigma
+        bounded = toml_io.load(log_path)
+        bounded["output"] = {"max_sigma": bound}
+        bounded_path = folder / f"field_log_max_sigma_{bound:g}.toml"
+        toml_io.dump(bounded, bounded_path)
+        bounded_scan = folder / f"scan_max_sigma_{bound:g}"
+        run(["scan", str(bounded_path), "--out", str(bounded_scan), "--no-rrd", "--quiet"])
+        s = score_scan("frog", bounded_scan, camera, extents, FROG_OUTLINE, [FROG_SHADOW],
+                       other_faces=FROG_OTHER_FACES, volume=FROG_VOLUME)
+        print(f"frog with [output] max_sigma = {bound:g} mm: {s.summary()}", flush=True)
 
 
 def phone_camera(mirror: Path, out: Path) -> Path:
@@ -472,12 +483,14 @@ def main_(argv: list[str] | None = None) -> int:
     ap.add_argument("mirror", type=Path, help="checkout of AnirudhaRamesh/15663-Computational-Photography-Assignment6")
     ap.add_argument("--out", type=Path, default=Path("real_captures"))
     ap.add_argument("--only", default="frog," + ",".join(PHONE))
+    ap.add_argument("--max-sigma", default="", metavar="LIST",
+                    help="also scan the frog with [output] max_sigma at each of these bounds (mm, comma-separated)")
     args = ap.parse_args(argv)
     wanted = args.only.split(",")
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     if "frog" in wanted:
-        frog(args.mirror, args.out)
+        frog(args.mirror, args.out, tuple(float(b) for b in args.max_sigma.split(",") if b))
     phones = [n for n in PHONE if n in wanted]
     if phones:
         camera = phone_camera(args.mirror, args.out)

@@ -115,6 +115,14 @@ class CaptureScore:
     volume_points: int = 0
     volume_off: int = 0
 
+    def summary(self) -> str:
+        """One line: each plane's planarity and coverage, the object's coverage, the false points."""
+        planes = "; ".join(f"{p.name} {p.median_abs:.3f} / {p.rms:.3f} mm on {100 * p.coverage:.1f} %"
+                           for p in self.planes)
+        obj = (f"; object {100 * self.object_points / self.object_pixels:.1f} %" if self.object_pixels else "")
+        return (f"{planes}{obj}; false points {100 * self.false_points / max(self.all_points, 1):.2f} % "
+                f"of {self.all_points}")
+
     def lines(self) -> list[str]:
         out = [f"{self.name}"]
         for p in self.planes:
