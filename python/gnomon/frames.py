@@ -463,9 +463,9 @@ class FrameSource:
                             break
                     hasher.submit(digest.update, decoded.raw)  # one thread: in the files' order
                     if first is None:
-                        first = (decoded.shape, decoded.dtype)
+                        first = (decoded.grey.shape, decoded.grey.dtype)
                     else:
-                        _check_like(decoded.index, decoded.name, decoded.shape, decoded.dtype, *first)
+                        _check_like(decoded.index, decoded.name, decoded.grey.shape, decoded.grey.dtype, *first)
                     yield Frame(decoded.index, decoded.grey, decoded.color, decoded.name)
             finally:
                 for job in pending:
@@ -500,16 +500,14 @@ class _Decoded:
 
     index: int
     name: str
-    grey: np.ndarray
+    grey: np.ndarray  # its size and sample type are the file's
     color: np.ndarray | None
-    shape: tuple[int, ...]  # the decoded image's (H, W[, C])
-    dtype: np.dtype
     raw: bytes  # the file's bytes, for the input digest
 
 
 def _decode_file(index: int, path: Path, keep_colour: bool) -> _Decoded:
     grey, color, raw = decode_frame_file(path, keep_colour)
-    return _Decoded(index, path.name, grey, color, grey.shape, grey.dtype, raw)
+    return _Decoded(index, path.name, grey, color, raw)
 
 
 def _check_like(index: int, name: str, shape: tuple[int, ...], dtype: np.dtype,
