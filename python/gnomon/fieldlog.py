@@ -226,6 +226,7 @@ class ScanSettings:
     edge: str = "both"
     max_depth_jump: float = 0.02
     normalize_illumination: bool = False
+    max_dip_frames: int | None = None  # the widest dip (frames); None: "auto", widened as the capture needs
 
 
 # The mesh's file formats: mesh.ply is always written (load_scan, merge and the recording's readers
@@ -612,7 +613,9 @@ def _parse_scan(t: _Table | None) -> ScanSettings:
         edge=t.string("edge", "both", EDGES),
         max_depth_jump=t.number("max_depth_jump", 0.02, positive=True),
         normalize_illumination=_boolean(t, "normalize_illumination", False),
+        max_dip_frames=None if t.data.get("max_dip_frames", "auto") == "auto" else t.integer("max_dip_frames"),
     )
+    t.take("max_dip_frames", None)  # "auto"
     t.done()
     return s
 

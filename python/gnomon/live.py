@@ -898,7 +898,8 @@ def run_live(field_log: str | Path, out_dir: str | Path, options: LiveOptions | 
     base = frame_source(log)
     size = (log.camera.width, log.camera.height)
     source = open_source(opts.source, base, opts.max_frames, size)
-    setup = resolve_scan(log, base)
+    # A live pass is not read twice: its dips keep the field log's width (a warning says when they reach it).
+    setup = replace(resolve_scan(log, base), widen_dips=False)
     if isinstance(source, CaptureSource):
         stop_when_complete = True if opts.stop_when_complete is None else opts.stop_when_complete
     else:

@@ -59,7 +59,7 @@ from gnomon.reference_lines import ReferenceLines
 from gnomon.retiming import ACROSS_HALF_ROWS, retime_with_sigma
 from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
 from gnomon.texture import LitColour, sample_indices
-from gnomon.tracking import ShadowTimes, TrackedSequence, contrast_floor, linear, track_source
+from gnomon.tracking import ShadowTimes, TrackedSequence, contrast_floor, linear, track_source, track_widening
 from gnomon.triangulation import triangulate_depth
 from gnomon.uncertainty import (
     completion_depth_sigma,
@@ -653,9 +653,12 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-ray-map") as pool:
         rays = pool.submit(setup.camera.ray_map)
         with _timed(timings, "tracking_s", cpu):
-            tracked = track(source, setup.tracker, (setup.camera.height, setup.camera.width),
-                            skip=skip, on_frame=on_frame,
-                            progress=progress, where=f"{setup.inputs.field_log}: [camera]")
+            tracked, tracker, notes = track_widening(track, source, setup.tracker,
+                                                     (setup.camera.height, setup.camera.width),
+                                                     widen=setup.widen_dips, skip=skip, on_frame=on_frame,
+                                                     progress=progress, where=f"{setup.inputs.field_log}: [camera]")
+        setup = dataclasses.replace(setup, tracker=tracker)  # the dip width tracked with
+        warnings += notes
         with _timed(timings, "ray_map_s"):  # what is left of it after tracking
             ray_map = rays.result()
     _check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
@@ -1211,7 +1214,8 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
             "min_contrast_dn": _min_contrast_dn(tr.min_contrast, tracked.noise_dn),
             "min_contrast_from": ("field log" if tr.min_contrast is not None
                                   and tr.min_contrast >= MIN_CONTRAST_SIGMAS * tracked.noise_dn else "image noise"),
-            "window": tr.window, "edge": setup.edge,
+            "window": tr.window, "max_dip_frames": tr.max_width,
+            "max_dip_frames_from": "auto" if setup.widen_dips else "field log", "edge": setup.edge,
             "max_depth_jump": setup.max_depth_jump, "gamma": tr.gamma,
         },
         "noise": {"image_noise_dn": tracked.noise_dn,

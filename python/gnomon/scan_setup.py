@@ -26,7 +26,7 @@ from gnomon.frames import FrameSource, to_grey
 from gnomon.light import LightModel, light_from_field_log
 from gnomon.markers import PlanePose, fit_plane_pose, plane_pose_from_chessboard, plane_pose_from_markers
 from gnomon.reference_lines import PlaneInCamera, ReferencePlane
-from gnomon.tracking import TrackerSettings, decoding_lut
+from gnomon.tracking import DEFAULT_DIP_FRAMES, TrackerSettings, decoding_lut
 
 __all__ = ["FocalFit", "ScanInputs", "ScanSetup", "crop_of", "first_frame", "fit_focal", "focal_diagnosis",
            "frame_source", "marked_points",
@@ -64,6 +64,7 @@ class ScanSetup:
     warnings: tuple[str, ...] = ()
     crop: Crop | None = None  # [output] crop (world frame)
     mesh_formats: tuple[str, ...] = ("ply",)  # [output] mesh_formats: the mesh's files (fieldlog.MESH_FORMATS)
+    widen_dips: bool = True  # [scan] max_dip_frames "auto": tracked again wider when the shadows last as long
 
 
 def frame_source(log: FieldLog) -> FrameSource:
@@ -90,7 +91,7 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
     tracker = dataclasses.replace(tracker_settings(log), second_dips=light.chooses_dips)
     inputs = ScanInputs(log.path, log.camera_file, dict(log.calibration), planes_report)
     return ScanSetup(log.camera, pose, planes, tracker, light, s.edge, s.max_depth_jump, log.capture.units,
-                     inputs, tuple(warnings), crop_of(log), log.output.mesh_formats)
+                     inputs, tuple(warnings), crop_of(log), log.output.mesh_formats, s.max_dip_frames is None)
 
 
 def crop_of(log: FieldLog) -> Crop | None:
@@ -110,7 +111,8 @@ def crop_of(log: FieldLog) -> Crop | None:
 def tracker_settings(log: FieldLog) -> TrackerSettings:
     """How the field log's frames become shadow times."""
     s = log.scan
-    return TrackerSettings(log.capture.gamma, s.min_contrast, s.window, s.normalize_illumination)
+    return TrackerSettings(log.capture.gamma, s.min_contrast, s.window, s.normalize_illumination,
+                           DEFAULT_DIP_FRAMES if s.max_dip_frames is None else s.max_dip_frames)
 
 
 def first_frame(source: FrameSource) -> np.ndarray:

@@ -64,6 +64,7 @@ from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, Kerne
 from gnomon.frames import Frame, FrameSource
 from gnomon.progress import Progress
 from gnomon.uncertainty import image_noise_dn
+from gnomon.validate import MAX_DIP_FRAMES
 from gnomon.validity import MIN_CONTRAST_SIGMAS
 
 SUPPORTED_DTYPES = (np.dtype(np.uint8), np.dtype(np.uint16))
@@ -556,6 +557,109 @@ def track_source(
     return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, tracker.lut,
                            second=tracker.second_dips() if settings.second_dips else None,
                            levelled=list(tracker.levelled))
+
+
+# The width (TrackerSettings.max_width, frames) a scan starts from; the kernel's widest is MAX_DIP_FRAMES.
+DEFAULT_DIP_FRAMES = 32
+# A pass's dips are at its width's limit when more than LONG_DWELL_SHARE of its tracked pixels stayed in
+# shadow (leave − enter) longer than LONG_DWELL times the width: a shadow that stays longer than the width
+# is cut in two events, and its pixel is left out as ambiguous (two comparable dips) or gets no time.
+LONG_DWELL = 0.75
+LONG_DWELL_SHARE = 0.02
+# Passes of one capture at most (the first, then each wider one).
+WIDENING_PASSES = 3
+
+
+@dataclass(frozen=True)
+class Dwell:
+    """How long a pass's tracked pixels stayed in shadow (``leave − enter``, frames), against its dip width.
+
+    ``width``: the pass's widest dip (frames); ``pixels``: tracked pixels with both times;
+    ``p99``: the 99th percentile of their dwell (frames; NaN without pixels); ``long_share``: the share of
+    them that stayed longer than ``LONG_DWELL · width``.
+    """
+
+    width: int
+    pixels: int
+    p99: float
+    long_share: float
+
+    @property
+    def at_limit(self) -> bool:
+        """The pass's dips reach its width: longer shadows were cut in two (see ``LONG_DWELL_SHARE``)."""
+        return self.long_share > LONG_DWELL_SHARE
+
+    def wider(self) -> int | None:
+        """The width to track again with when the dips are at the limit (at least double, and 1.5 times the
+        99th percentile dwell, a multiple of 16, at most ``MAX_DIP_FRAMES``); None when they are not, or the
+        width is already the widest."""
+        if not self.at_limit or self.width >= MAX_DIP_FRAMES:
+            return None
+        want = max(2.0 * self.width, 1.5 * self.p99 if np.isfinite(self.p99) else 0.0)
+        return int(min(MAX_DIP_FRAMES, 16 * np.ceil(want / 16.0)))
+
+    def describe(self) -> str:
+        return (f"{self.long_share:.0%} of the tracked pixels stayed in shadow longer than "
+                f"{LONG_DWELL * self.width:.0f} of the {self.width} frames a dip may last "
+                f"(99th percentile {self.p99:.0f} frames)")
+
+
+def dwell(times: ShadowTimes, width: int) -> Dwell:
+    """:class:`Dwell` of ``times`` (a pass of widest dip ``width`` frames) over its valid pixels."""
+    both = times.valid & np.isfinite(times.enter) & np.isfinite(times.leave)
+    d = (times.leave[both] - times.enter[both]).astype(np.float64)
+    if d.size == 0:
+        return Dwell(int(width), 0, float("nan"), 0.0)
+    return Dwell(int(width), int(d.size), float(np.percentile(d, 99)), float(np.mean(d > LONG_DWELL * width)))
+
+
+def track_widening(
+    track_pass: Callable[..., TrackedSequence],
+    source: FrameSource,
+    settings: TrackerSettings,
+    shape: tuple[int, int],
+    *,
+    widen: bool,
+    **kwargs: object,
+) -> tuple[TrackedSequence, TrackerSettings, list[str]]:
+    """``track_pass(source, settings, shape, **kwargs)`` (:func:`track_source` or a drop-in), then, when the
+    shadow stayed on many pixels nearly as long as the widest dip (:class:`Dwell`) and ``widen``, again with
+    a wider one (at most ``WIDENING_PASSES`` passes, ``MAX_DIP_FRAMES`` frames): the source is read again,
+    without ``on_frame`` (the first pass saw every frame) and without colour.
+
+    Returns the last pass, its settings and what to tell the user: a note for each widening, a warning when
+    the dips are still at the limit (``widen`` false: the width was given; or the widest reached).
+    """
+    tracked = track_pass(source, settings, shape, **kwargs)
+    notes: list[str] = []
+    again = {**kwargs, "on_frame": None}
+    for _ in range(WIDENING_PASSES - 1):
+        d = dwell(tracked.times, settings.max_width)
+        wider = d.wider() if widen else None
+        if wider is None:
+            break
+        notes.append(f"{d.describe()}: longer shadows are cut in two; tracked again with dips of up to {wider} "
+                     f"frames ([scan] max_dip_frames = {wider} skips the first pass)")
+        settings = replace(settings, max_width=wider)
+        colour = getattr(source, "color_frames", None)
+        if colour is not None:
+            source.color_frames = frozenset()  # the colour samples came with the first pass
+        try:
+            tracked = track_pass(source, settings, shape, **again)
+        finally:
+            if colour is not None:
+                source.color_frames = colour
+    d = dwell(tracked.times, settings.max_width)
+    if d.at_limit:
+        if settings.max_width >= MAX_DIP_FRAMES:
+            fix = (f"the tracker finds no dip wider than {MAX_DIP_FRAMES} frames: keep fewer frames (every second "
+                   "one) or sweep faster")
+        elif not widen:
+            fix = f"set [scan] max_dip_frames = {d.wider()}"
+        else:
+            fix = "the last pass was the widest this scan tracks"
+        notes.append(f"{d.describe()}: longer shadows are cut in two and left out as ambiguous; {fix}")
+    return tracked, settings, notes
 
 
 def _check_first(frame: Frame, shape: tuple[int, int], where: str) -> None:

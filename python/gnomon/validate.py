@@ -45,6 +45,9 @@ __all__ = [
 MAX_WINDOW = 64
 """The kernel tracker's largest window half-width (``rust/core/src/tracker.rs``: ``MAX_WINDOW``)."""
 
+MAX_DIP_FRAMES = 128
+"""The kernel tracker's widest dip, frames (``rust/core/src/tracker.rs``: ``TrackerConfig::MAX_WIDTH``)."""
+
 MIN_FOV_DEG, MAX_FOV_DEG = 0.05, 175.0
 MIN_FPS, MAX_FPS = 1.0 / 86400.0, 10_000.0
 MIN_POLE_ELEVATION_DEG = 20.0
@@ -205,6 +208,10 @@ def check_field_log(log) -> None:
     p = log.path
     if log.scan.window > MAX_WINDOW:
         raise FieldLogError(f"{p}: [scan] window: must be ≤ {MAX_WINDOW} frames, got {log.scan.window}")
+    dip = log.scan.max_dip_frames
+    if dip is not None and not max(2, log.scan.window) <= dip <= MAX_DIP_FRAMES:
+        raise FieldLogError(f"{p}: [scan] max_dip_frames: must be in {max(2, log.scan.window)}..{MAX_DIP_FRAMES} "
+                            f"frames (window to the widest dip the tracker finds), got {dip}")
     gamma = log.capture.gamma
     if not isinstance(gamma, str) and not 0.1 <= gamma <= 10.0:
         raise FieldLogError(f"{p}: [capture] gamma: {gamma:g} is not a camera gamma (0.1 … 10, or 'srgb')")

@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     from gnomon.reference_lines import PlaneInCamera
     from gnomon.regions import hull_mask, propose_regions
     from gnomon.scan_setup import frame_source, resolve_reference_planes, tracker_settings
-    from gnomon.tracking import track_source
+    from gnomon.tracking import track_source, track_widening
 
     if args.out is not None:
         check_output_folder(args.out)
@@ -101,8 +101,11 @@ def run(args: argparse.Namespace) -> int:
         else:
             raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: nothing to start from; give it markers, "
                                 "a chessboard or rough regions")
-    tracked = track_source(source, tracker_settings(log), shape, progress=not args.quiet,
-                           where=f"{log.path}: [camera]")
+    tracked, _, notes = track_widening(track_source, source, tracker_settings(log), shape,
+                                       widen=log.scan.max_dip_frames is None, progress=not args.quiet,
+                                       where=f"{log.path}: [camera]")
+    for note in notes:
+        print(f"warning: {note}")
     # The scan's own times: a compressed video's block times interpolated between their centres, a fast
     # sweep's staircase re-timed between its isochrones (gnomon.pipeline.edge_time_maps).
     maps = edge_time_maps(tracked, log.scan.edge)
