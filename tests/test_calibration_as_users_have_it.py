@@ -8,6 +8,8 @@ own ``ImageOps.exif_transpose``.
 
 from __future__ import annotations
 
+import tomllib
+
 import cv2
 import numpy as np
 import pytest
@@ -105,6 +107,25 @@ def test_intrinsics_of_another_aspect_are_refused_in_one_line(make):
     assert "crop" in msg and "calibrate the camera from frames" in msg
 
 
+@pytest.mark.parametrize("make", [_opencv, _tsai])
+@pytest.mark.parametrize("size, origin", [
+    ((1920, 1080), (0.0, 120.0)),  # 16:9 video from 4:3 stills: 1280x720 rows 120..840, x1.5
+    ((1080, 1080), (160.0, 0.0)),  # a square crop: columns 160..1120, x1.125
+])
+def test_intrinsics_taken_as_the_centred_crop(make, size, origin):
+    cam = make()
+    fitted, note = calibration.fit_camera_to_frames(cam, *size, "cam.toml", crop="centre")
+    assert (fitted.width, fitted.height) == size and "centred" in note
+    scale = size[0] / (1280 - 2 * origin[0])
+    assert scale == pytest.approx(size[1] / (960 - 2 * origin[1]))
+    pts = np.random.default_rng(1).uniform([-200, -150, 400], [200, 150, 900], (200, 3))
+    # the calibrated image's pixels (edges at integers + ½) cut at the crop's origin, then resampled
+    expected = (cam.project(pts) + 0.5 - np.array(origin)) * scale - 0.5
+    assert np.max(np.abs(fitted.project(pts) - expected)) < 1e-9
+    with pytest.raises(GnomonError, match="crop: expected"):
+        calibration.fit_camera_to_frames(cam, *size, "cam.toml", crop="left")
+
+
 def test_field_log_camera_file_from_stills_is_rescaled(tmp_path):
     log_path = write_tiny_capture(tmp_path / "cap")  # 48x36 frames, fx = 60
     cam = OpenCVCamera(96, 72, 120.0, 120.0, 47.5, 35.5, (0.0,) * 5)
@@ -122,6 +143,26 @@ def test_field_log_camera_file_from_stills_is_rescaled(tmp_path):
                                   OpenCVCamera(96, 54, 120.0, 120.0, 47.5, 26.5, (0.0,) * 5))
     with pytest.raises(GnomonError, match=r"frame 0 \(frame_0000\.png\) is 48x36 but the camera's 96x54 .*stills|crop"):
         load_field_log(log_path)
+    # ... unless the field log says the frames are its centred crop: 72x54 columns 12..84, x2/3.
+    data["camera"]["crop"] = "centre"
+    toml_io.dump(data, log_path)
+    log = load_field_log(log_path)
+    assert (log.camera.fx, log.camera.cx, log.camera.cy) == pytest.approx((80.0, 23.5, 17.5))
+    assert log.calibration["rescaled_from"] == [96, 54] and log.calibration["crop"] == "centre"
+
+
+def test_init_takes_frames_of_another_aspect_as_the_centred_crop(tmp_path, capsys):
+    from gnomon.cli import main
+
+    write_tiny_capture(tmp_path / "cap")  # 48x36 frames
+    frames = sorted(str(p) for p in (tmp_path / "cap" / "frames").glob("*.png"))
+    for name, size, crop in (("stills.toml", (96, 54), "centre"), ("same.toml", (96, 72), None)):
+        calibration.write_camera_file(tmp_path / name, OpenCVCamera(*size, 120.0, 120.0, 47.5, 26.5, (0.0,) * 5))
+        out = tmp_path / f"{name}.field_log.toml"
+        assert main(["init", *frames, "--camera", str(tmp_path / name), "--out", str(out)]) == 0
+        assert tomllib.loads(out.read_text())["camera"].get("crop") == crop
+        said = capsys.readouterr().out
+        assert ("96x54 (aspect 1.778), the frames are 48x36 (1.333)" in said) == (crop is not None)
 
 
 # --------------------------------------------------------------------------- EXIF and suffixes

@@ -117,8 +117,13 @@ def read_grey(path: str | os.PathLike) -> np.ndarray:
     return apply_exif_orientation(img, exif_orientation(raw))
 
 
+CROPS = ("centre", "center")
+"""``[camera] crop`` values: the frames are the sensor's largest centred crop of their aspect ratio."""
+
+
 def fit_camera_to_frames(
-    camera: OpenCVCamera | TsaiCamera, width: int, height: int, where: str, frame_name: str = "frame 0"
+    camera: OpenCVCamera | TsaiCamera, width: int, height: int, where: str, frame_name: str = "frame 0",
+    crop: str | None = None,
 ) -> tuple[OpenCVCamera | TsaiCamera, str | None]:
     """The camera for frames of ``width × height`` pixels: as it is, or rescaled from its own size.
 
@@ -128,29 +133,49 @@ def fit_camera_to_frames(
     coordinates (``c' = (c + ½)·s − ½``); distortion is unchanged (it acts on
     normalised or sensor coordinates). Returns (camera, a note saying so, or
     None). Another aspect ratio means the video is a crop of the sensor, which
-    no rescaling fixes: GnomonError, one line naming the frame and ``where``.
+    no rescaling fixes: GnomonError, one line naming the frame and ``where``,
+    unless ``crop`` is ``"centre"``: the frames are then taken as the largest
+    centred crop of the calibrated image with their aspect ratio (a phone's
+    16:9 video against its 3:2 or 4:3 photos), scaled to their size: the crop's
+    origin ``o`` (pixel edges, calibrated pixels) moves the centre,
+    ``c' = (c + ½ − o)·s − ½``. That is an assumption about the camera (some
+    phones crop further to stabilise): the marks' fit checks it
+    (``gnomon preview``, ``gnomon calibrate focal``).
     """
     w0, h0 = int(camera.width), int(camera.height)
     if (w0, h0) == (int(width), int(height)):
         return camera, None
+    if crop is not None and crop not in CROPS:
+        raise GnomonError(f"{where}: crop: expected \"centre\", got {crop!r}")
     sw, sh = width / w0, height / h0
+    ox = oy = 0.0
     if abs(sw / sh - 1.0) > 0.01:
-        raise GnomonError(
-            f"{frame_name} is {width}x{height} but the camera's {w0}x{h0} ({where}) has another aspect ratio "
-            f"({w0 / h0:.3f} vs {width / height:.3f}): the frames are a crop of the sensor, which rescaling "
-            "cannot fix; calibrate the camera from frames of the capture itself"
-        )
+        if crop is None:
+            raise GnomonError(
+                f"{frame_name} is {width}x{height} but the camera's {w0}x{h0} ({where}) has another aspect ratio "
+                f"({w0 / h0:.3f} vs {width / height:.3f}): the frames are a crop of the sensor, which rescaling "
+                "cannot fix; calibrate the camera from frames of the capture itself, or, if they are its centred "
+                "crop (a phone's video against its photos), add crop = \"centre\" to [camera] and check the "
+                "marks' fit (gnomon preview)"
+            )
+        # the largest centred crop of the calibrated image with the frames' aspect ratio
+        cw, ch = (w0, w0 * height / width) if width / height > w0 / h0 else (h0 * width / height, h0)
+        ox, oy = (w0 - cw) / 2.0, (h0 - ch) / 2.0
+        sw = sh = width / cw
     if isinstance(camera, OpenCVCamera):
         new: OpenCVCamera | TsaiCamera = OpenCVCamera(
             width=int(width), height=int(height), fx=camera.fx * sw, fy=camera.fy * sh,
-            cx=(camera.cx + 0.5) * sw - 0.5, cy=(camera.cy + 0.5) * sh - 0.5, dist=camera.dist,
+            cx=(camera.cx + 0.5 - ox) * sw - 0.5, cy=(camera.cy + 0.5 - oy) * sh - 0.5, dist=camera.dist,
         )
     else:
         new = TsaiCamera(
             width=int(width), height=int(height), f_mm=camera.f_mm, kappa1=camera.kappa1,
-            cx=(camera.cx + 0.5) * sw - 0.5, cy=(camera.cy + 0.5) * sh - 0.5,
+            cx=(camera.cx + 0.5 - ox) * sw - 0.5, cy=(camera.cy + 0.5 - oy) * sh - 0.5,
             dx_mm=camera.dx_mm / sw, dy_mm=camera.dy_mm / sh, sx=camera.sx,
         )
+    if ox or oy:
+        return new, (f"{where}: camera calibrated at {w0}x{h0}, taken as its centred {w0 - 2 * ox:.0f}x"
+                     f"{h0 - 2 * oy:.0f} crop scaled to the frames' {width}x{height}")
     return new, f"{where}: camera calibrated at {w0}x{h0}, rescaled to the frames' {width}x{height}"
 
 

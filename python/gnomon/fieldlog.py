@@ -374,10 +374,13 @@ def _parse_capture(t: _Table, base: Path) -> CaptureSpec:
     return spec(files, None)
 
 
-def _parse_camera(t: _Table, base: Path) -> tuple[CalibratedCamera, Pose | None, Path | None, dict]:
-    """[camera]: a camera file (``file = ...``) or inline keys (OpenCV or Tsai model), and [camera.pose]."""
-    from gnomon.calibration import camera_from_table, load_calibration_info, load_camera_file
+def _parse_camera(t: _Table, base: Path) -> tuple[CalibratedCamera, Pose | None, Path | None, dict, str | None]:
+    """[camera]: a camera file (``file = ...``) or inline keys (OpenCV or Tsai model), [camera.pose], and
+    ``crop`` (``"centre"``: the frames are the calibrated image's centred crop, see
+    :func:`gnomon.calibration.fit_camera_to_frames`)."""
+    from gnomon.calibration import CROPS, camera_from_table, load_calibration_info, load_camera_file
 
+    crop = t.string("crop", None, CROPS) if "crop" in t.data else None
     pose_table = t.subtable("pose")
     pose = None
     if pose_table is not None:
@@ -388,25 +391,29 @@ def _parse_camera(t: _Table, base: Path) -> tuple[CalibratedCamera, Pose | None,
         t.done()
         if not camera_file.is_file():
             raise FieldLogError(f"{t.where('file')}: camera file {camera_file} not found")
-        return load_camera_file(camera_file), pose, camera_file, load_calibration_info(camera_file)
+        return load_camera_file(camera_file), pose, camera_file, load_calibration_info(camera_file), crop
     table = dict(t.data)
     t.data.clear()
     calibration = table.get("calibration", {}) if isinstance(table.get("calibration"), dict) else {}
-    return camera_from_table(table, f"{t.path}: [camera]"), pose, None, calibration
+    return camera_from_table(table, f"{t.path}: [camera]"), pose, None, calibration, crop
 
 
 def _fit_camera(camera: CalibratedCamera, calibration: dict, capture: CaptureSpec,
-                where: str) -> tuple[CalibratedCamera, dict]:
-    """The camera rescaled to the frames' size when it was calibrated at another one (same aspect)."""
+                where: str, crop: str | None = None) -> tuple[CalibratedCamera, dict]:
+    """The camera rescaled to the frames' size when it was calibrated at another one (same aspect, or with
+    ``crop``, their centred crop)."""
     from gnomon.calibration import fit_camera_to_frames
 
     first = capture.video if capture.video is not None else capture.image_files[0]
     size = video_size(first) if capture.video is not None else image_size(first)
     fitted, note = fit_camera_to_frames(camera, size[0], size[1], where,
-                                        frame_name=f"frame 0 ({first.name})")
+                                        frame_name=f"frame 0 ({first.name})", crop=crop)
     if note is None:
         return camera, calibration
-    return fitted, {**calibration, "rescaled_from": [int(camera.width), int(camera.height)]}
+    more = {"rescaled_from": [int(camera.width), int(camera.height)]}
+    if crop is not None and abs(camera.width / camera.height - size[0] / size[1]) > 0.01 * size[0] / size[1]:
+        more["crop"] = "centre"
+    return fitted, {**calibration, **more}
 
 
 def _parse_plane(t: _Table, index: int, width: int, height: int) -> PlaneSpec:
@@ -676,8 +683,8 @@ def load_field_log(path: str | Path) -> FieldLog:
         return table
 
     capture = _parse_capture(section("capture"), base)
-    camera, pose, camera_file, calibration = _parse_camera(section("camera"), base)
-    camera, calibration = _fit_camera(camera, calibration, capture, f"{p}: [camera]")
+    camera, pose, camera_file, calibration, crop = _parse_camera(section("camera"), base)
+    camera, calibration = _fit_camera(camera, calibration, capture, f"{p}: [camera]", crop)
     raw_planes = root.data.pop("planes", None)
     if not isinstance(raw_planes, list) or not raw_planes:
         raise FieldLogError(f"{p}: missing required [[planes]] (at least one reference plane)")

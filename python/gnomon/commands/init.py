@@ -139,8 +139,18 @@ def run(args: argparse.Namespace) -> int:
     if args.camera is not None:
         if not args.camera.is_file():
             raise GnomonError(f"{args.camera}: camera file not found")
+        from gnomon.calibration import load_camera_file
+
         rel = Path(os.path.relpath(os.path.abspath(args.camera), base)).as_posix()
         camera = f'file = "{rel}"  # from `gnomon calibrate camera`\n'
+        cal = load_camera_file(args.camera)
+        if abs((cal.width / cal.height) / (width / height) - 1.0) > 0.01:
+            note = (f"the camera was calibrated at {cal.width}x{cal.height} (aspect {cal.width / cal.height:.3f}), "
+                    f"the {what} are {width}x{height} ({width / height:.3f})")
+            camera += (f"# {note}: taken as the sensor's centred crop (a phone's video against its photos).\n"
+                       "# Check the marks' fit with `gnomon preview`; if they are another crop, calibrate from "
+                       "frames of the capture.\ncrop = \"centre\"\n")
+            print(f"note: {note}; the field log takes them as its centred crop (crop = \"centre\")")
     else:
         import math
 

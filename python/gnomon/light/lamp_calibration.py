@@ -350,7 +350,7 @@ def load_pencil_log(path: str | Path) -> PencilLog:
 
     if "camera" not in root.data:
         raise FieldLogError(f"{p}: missing required table [camera]")
-    camera, pose, _, _ = _parse_camera(_Table(p, "camera", root.data.pop("camera")), base)
+    camera, pose, _, _, _ = _parse_camera(_Table(p, "camera", root.data.pop("camera")), base)
     if pose is None:
         raise FieldLogError(f"{p}: missing required table [camera.pose] (the world → camera transform)")
 
