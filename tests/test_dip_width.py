@@ -111,3 +111,16 @@ def test_a_width_the_field_log_fixes_is_kept_and_its_limit_named(tmp_path: Path)
                for w in report["warnings"])
     # Cut dips: a fifth of the pixels lost (ambiguous, or their edges' depths disagree).
     assert np.isfinite(depth).mean() < 0.9
+
+
+def test_who_sets_the_width(tmp_path: Path) -> None:
+    from gnomon.fieldlog import load_field_log
+    from gnomon.scan_setup import dip_width_policy
+
+    assert dip_width_policy(load_field_log(write_tiny_capture(tmp_path / "a"))) == "auto"
+    fixed = write_tiny_capture(tmp_path / "b", extra={"scan": {"max_dip_frames": 48}})
+    assert dip_width_policy(load_field_log(fixed)) == "field log"
+    assert load_field_log(fixed).scan.max_dip_frames == 48
+    # under a changing light the width tells the shadow from a cloud: not widened, not checked
+    sunlike = write_tiny_capture(tmp_path / "c", extra={"scan": {"normalize_illumination": True}})
+    assert dip_width_policy(load_field_log(sunlike)) == "sun"

@@ -410,7 +410,7 @@ def _fit_camera(camera: CalibratedCamera, calibration: dict, capture: CaptureSpe
                                         frame_name=f"frame 0 ({first.name})", crop=crop)
     if note is None:
         return camera, calibration
-    more = {"rescaled_from": [int(camera.width), int(camera.height)]}
+    more: dict[str, Any] = {"rescaled_from": [int(camera.width), int(camera.height)]}
     if crop is not None and abs(camera.width / camera.height - size[0] / size[1]) > 0.01 * size[0] / size[1]:
         more["crop"] = "centre"
     return fitted, {**calibration, **more}

@@ -899,7 +899,9 @@ def run_live(field_log: str | Path, out_dir: str | Path, options: LiveOptions | 
     size = (log.camera.width, log.camera.height)
     source = open_source(opts.source, base, opts.max_frames, size)
     # A live pass is not read twice: its dips keep the field log's width (a warning says when they reach it).
-    setup = replace(resolve_scan(log, base), widen_dips=False)
+    setup = resolve_scan(log, base)
+    if setup.dip_width == "auto":
+        setup = replace(setup, dip_width="live")
     if isinstance(source, CaptureSource):
         stop_when_complete = True if opts.stop_when_complete is None else opts.stop_when_complete
     else:

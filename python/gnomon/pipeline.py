@@ -655,7 +655,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
         with _timed(timings, "tracking_s", cpu):
             tracked, tracker, notes = track_widening(track, source, setup.tracker,
                                                      (setup.camera.height, setup.camera.width),
-                                                     widen=setup.widen_dips, skip=skip, on_frame=on_frame,
+                                                     widen=setup.dip_width == "auto",
+                                                     check=setup.dip_width != "sun", skip=skip, on_frame=on_frame,
                                                      progress=progress, where=f"{setup.inputs.field_log}: [camera]")
         setup = dataclasses.replace(setup, tracker=tracker)  # the dip width tracked with
         warnings += notes
@@ -1215,7 +1216,7 @@ def _report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence, edg
             "min_contrast_from": ("field log" if tr.min_contrast is not None
                                   and tr.min_contrast >= MIN_CONTRAST_SIGMAS * tracked.noise_dn else "image noise"),
             "window": tr.window, "max_dip_frames": tr.max_width,
-            "max_dip_frames_from": "auto" if setup.widen_dips else "field log", "edge": setup.edge,
+            "max_dip_frames_from": setup.dip_width, "edge": setup.edge,
             "max_depth_jump": setup.max_depth_jump, "gamma": tr.gamma,
         },
         "noise": {"image_noise_dn": tracked.noise_dn,

@@ -30,7 +30,7 @@ from gnomon.tracking import DEFAULT_DIP_FRAMES, TrackerSettings, decoding_lut
 
 __all__ = ["FocalFit", "ScanInputs", "ScanSetup", "crop_of", "first_frame", "fit_focal", "focal_diagnosis",
            "frame_source", "marked_points",
-           "resolve_reference_planes", "resolve_scan", "tracker_settings"]
+           "dip_width_policy", "resolve_reference_planes", "resolve_scan", "tracker_settings"]
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,7 @@ class ScanSetup:
     warnings: tuple[str, ...] = ()
     crop: Crop | None = None  # [output] crop (world frame)
     mesh_formats: tuple[str, ...] = ("ply",)  # [output] mesh_formats: the mesh's files (fieldlog.MESH_FORMATS)
-    widen_dips: bool = True  # [scan] max_dip_frames "auto": tracked again wider when the shadows last as long
+    dip_width: str = "auto"  # how the dip width was set: see dip_width_policy
 
 
 def frame_source(log: FieldLog) -> FrameSource:
@@ -91,7 +91,7 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
     tracker = dataclasses.replace(tracker_settings(log), second_dips=light.chooses_dips)
     inputs = ScanInputs(log.path, log.camera_file, dict(log.calibration), planes_report)
     return ScanSetup(log.camera, pose, planes, tracker, light, s.edge, s.max_depth_jump, log.capture.units,
-                     inputs, tuple(warnings), crop_of(log), log.output.mesh_formats, s.max_dip_frames is None)
+                     inputs, tuple(warnings), crop_of(log), log.output.mesh_formats, dip_width_policy(log))
 
 
 def crop_of(log: FieldLog) -> Crop | None:
@@ -106,6 +106,16 @@ def crop_of(log: FieldLog) -> Crop | None:
                 plane_point=None if plane is None else np.asarray(plane.point, dtype=np.float64),
                 plane_normal=None if plane is None else np.asarray(plane.normal, dtype=np.float64),
                 min_height=out.crop_min_height, max_height=out.crop_max_height, max_sigma=out.max_sigma)
+
+
+def dip_width_policy(log: FieldLog) -> str:
+    """How a scan of ``log`` sets the tracker's dip width: ``"auto"`` (widened as the shadows need,
+    :func:`gnomon.tracking.track_widening`), ``"field log"`` (``[scan] max_dip_frames``, checked), or
+    ``"sun"`` (kept and not checked: under a moving sun, with clouds and dusk, the width is what tells the
+    shadow from a change of light; ``max_dip_frames`` sets it)."""
+    if log.scan.max_dip_frames is not None:
+        return "field log"
+    return "sun" if log.light.kind == "sun" or log.scan.normalize_illumination else "auto"
 
 
 def tracker_settings(log: FieldLog) -> TrackerSettings:

@@ -620,6 +620,7 @@ def track_widening(
     shape: tuple[int, int],
     *,
     widen: bool,
+    check: bool = True,
     **kwargs: object,
 ) -> tuple[TrackedSequence, TrackerSettings, list[str]]:
     """``track_pass(source, settings, shape, **kwargs)`` (:func:`track_source` or a drop-in), then, when the
@@ -628,7 +629,8 @@ def track_widening(
     without ``on_frame`` (the first pass saw every frame) and without colour.
 
     Returns the last pass, its settings and what to tell the user: a note for each widening, a warning when
-    the dips are still at the limit (``widen`` false: the width was given; or the widest reached).
+    the dips are still at the limit (``widen`` false: the width was given; or the widest reached) unless
+    ``check`` is false (a sun scan: there the width is what tells a shadow from a cloud or dusk).
     """
     tracked = track_pass(source, settings, shape, **kwargs)
     notes: list[str] = []
@@ -650,7 +652,7 @@ def track_widening(
             if colour is not None:
                 source.color_frames = colour
     d = dwell(tracked.times, settings.max_width)
-    if d.at_limit:
+    if check and d.at_limit:
         if settings.max_width >= MAX_DIP_FRAMES:
             fix = (f"the tracker finds no dip wider than {MAX_DIP_FRAMES} frames: keep fewer frames (every second "
                    "one) or sweep faster")

@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from gnomon.publish import check_output_folder
     from gnomon.reference_lines import PlaneInCamera
     from gnomon.regions import hull_mask, propose_regions
-    from gnomon.scan_setup import frame_source, resolve_reference_planes, tracker_settings
+    from gnomon.scan_setup import dip_width_policy, frame_source, resolve_reference_planes, tracker_settings
     from gnomon.tracking import track_source, track_widening
 
     if args.out is not None:
@@ -102,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
             raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: nothing to start from; give it markers, "
                                 "a chessboard or rough regions")
     tracked, _, notes = track_widening(track_source, source, tracker_settings(log), shape,
-                                       widen=log.scan.max_dip_frames is None, progress=not args.quiet,
+                                       widen=dip_width_policy(log) == "auto",
+                                       check=dip_width_policy(log) != "sun", progress=not args.quiet,
                                        where=f"{log.path}: [camera]")
     for note in notes:
         print(f"warning: {note}")
