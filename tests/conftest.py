@@ -27,19 +27,23 @@ os.environ.pop("WAYLAND_DISPLAY", None)
 
 def write_tiny_capture(folder: Path, *, n_frames: int = 24, width: int = 48, height: int = 36,
                        lamp=(-200.0, 0.0, 400.0), extra: dict | None = None, band_half_width: float = 5.0,
-                       noise_dn: float = 0.0) -> Path:
+                       noise_dn: float = 0.0, time_jitter_frames: float = 0.0) -> Path:
     """A minimal, valid capture: a dark band (its dark core ``2·band_half_width`` px wide, 6 px soft
     edges) sweeping left→right from outside the image to outside it, a camera looking straight down at
-    the desk from 500 mm, and its field log; ``noise_dn``: Gaussian noise (DN, seeded). Returns the log's path."""
+    the desk from 500 mm, and its field log; ``noise_dn``: Gaussian noise (DN, seeded);
+    ``time_jitter_frames``: each pixel sees the band that many frames late or early (Gaussian, fixed per
+    pixel, seeded: a time error no image noise explains). Returns the log's path."""
     frames = folder / "frames"
     frames.mkdir(parents=True, exist_ok=True)
     u = np.arange(width)
     rng = np.random.default_rng(7)
     travel = band_half_width + 7.0  # the band starts and ends this far outside the image
+    speed = (width + 2 * travel) / (n_frames - 1)  # px per frame
+    late = rng.normal(0.0, time_jitter_frames, (height, width)) * speed if time_jitter_frames > 0 else 0.0
     for i in range(n_frames):
-        centre = -travel + (width + 2 * travel) * i / (n_frames - 1)
+        centre = -travel + (width + 2 * travel) * i / (n_frames - 1) - late
         shadow = np.clip((np.abs(u - centre) - band_half_width) / 6.0, 0, 1)  # 1 = lit, soft edges
-        image = np.tile(40 + 160 * shadow, (height, 1))
+        image = 40 + 160 * np.broadcast_to(shadow, (height, width))
         if noise_dn > 0:
             image = np.round(image + rng.normal(0.0, noise_dn, image.shape))
         cv2.imwrite(str(frames / f"frame_{i:04d}.png"), np.clip(image, 0, 255).astype(np.uint8))

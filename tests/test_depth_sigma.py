@@ -4,6 +4,7 @@ the numpy definition, and the value on a plane whose depth moves at a known rate
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from gnomon.camera import OpenCVCamera
 from gnomon.triangulation import triangulate
@@ -62,3 +63,46 @@ def test_sigma_of_a_plane_moving_at_a_known_rate() -> None:
     # dZ/dt along each ray: 2 per frame in Z
     np.testing.assert_allclose(got.dz_dt, 2.0, atol=2e-4)
     np.testing.assert_allclose(got.sigma_z, 2.0 * np.hypot(0.3, 0.4), atol=2e-4)
+
+
+# --------------------------------------------------------------------------- time scatter the noise misses
+
+
+def test_unmodelled_time_scatter_is_what_the_lines_show_beyond_the_noise() -> None:
+    from gnomon.validity import LineResiduals, unmodelled_time_scatter
+
+    desk = LineResiduals("desk", residual_frames=0.25, expected_frames=0.07, frames=40)
+    wall = LineResiduals("wall", residual_frames=0.5, expected_frames=0.3, frames=40)
+    assert unmodelled_time_scatter([desk]) == pytest.approx(0.24)  # sqrt(0.25² − 0.07²)
+    assert unmodelled_time_scatter([desk, wall, None]) == pytest.approx(0.24)  # the smaller: 0.24 < 0.4
+    assert unmodelled_time_scatter([LineResiduals("desk", 0.05, 0.07, 40)]) == 0.0  # the noise explains it
+    assert unmodelled_time_scatter([None]) == 0.0 and unmodelled_time_scatter([]) == 0.0
+
+
+def test_a_time_error_no_image_noise_explains_reaches_the_depth_sigma(tmp_path) -> None:
+    import json
+
+    from conftest import write_tiny_capture
+    from gnomon.cli import main
+
+    def scan(jitter: float) -> tuple[dict, np.ndarray, np.ndarray]:
+        log = write_tiny_capture(tmp_path / f"j{jitter}", n_frames=96, time_jitter_frames=jitter, noise_dn=0.5)
+        out = tmp_path / f"j{jitter}_scan"
+        assert main(["scan", str(log), "--out", str(out), "--quiet", "--no-rrd"]) == 0
+        report = json.loads((out / "report.json").read_text())
+        depth, sigma = np.load(out / "depth.npy"), np.load(out / "sigma.npy")
+        ok = np.isfinite(depth)
+        return report, np.abs(depth[ok] - 500.0), sigma[ok]  # the desk is 500 mm under the camera
+
+    clean, err0, sig0 = scan(0.0)
+    assert all(clean["edges"][e]["unmodelled_sigma_t_frames"] == 0.0 for e in ("enter", "leave"))
+    assert 1.4826 * np.median(err0 / sig0) < 1.5  # the noise model alone is right here
+    # Every pixel sees the band 0.3 frame (1σ) early or late. The lines' crossings are interpolated
+    # between neighbouring pixels, which averages two pixels' errors: they show about 0.3/√2.
+    jittered, err, sig = scan(0.3)
+    for e in ("enter", "leave"):
+        assert 0.15 < jittered["edges"][e]["unmodelled_sigma_t_frames"] < 0.35
+    assert np.median(sig) > 5 * np.median(sig0)
+    # σZ now carries the scatter: the errors are a few σ, not tens (without it, ≈ 10 σ at the median)
+    assert 1.4826 * np.median(err / sig) < 2.5
+    assert np.median(err) > 5 * np.median(sig0)  # and the error is real

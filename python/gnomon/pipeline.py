@@ -73,6 +73,7 @@ from gnomon.validity import (
     LINE_RESIDUAL_WARN_RATIO,
     MIN_CONTRAST_SIGMAS,
     reference_line_residuals,
+    unmodelled_time_scatter,
 )
 
 # Quality gates: share of the sweep's frames with a measured shadow plane (error below / warning
@@ -123,6 +124,8 @@ class EdgeResult:
     # ray and its shadow plane: a depth moves by an error of the plane (or of the time, times the shadow's
     # speed) over the sine of this angle (docs/method.md §4)
     ray_plane_angle_deg: tuple[float, float, float] | None = None
+    # frames of per-pixel time σ the reference lines showed beyond the noise model, added to every pixel's
+    unmodelled_sigma_t: float = 0.0
 
 
 def ray_plane_angles(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray,
@@ -349,9 +352,16 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
 def _reconstruct_edge_checked(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, setup: ScanSetup,
                               tracked: TrackedSequence, levels: _Levels) -> tuple[EdgeResult, list[Any]]:
     """:func:`_reconstruct_edge` and its lines' residuals (:func:`_check_line_residuals` judges them), on the
-    edge's own thread."""
+    edge's own thread. The time scatter the lines show beyond the noise model
+    (:func:`~gnomon.validity.unmodelled_time_scatter`) is added to every pixel's time σ first, so that σZ
+    (and the fusion, the edges' agreement and ``max_sigma``, which read it) carries it."""
+    residuals = [reference_line_residuals(lines, edge.sigma_t) for lines in planes.lines]
+    excess = unmodelled_time_scatter(residuals)
+    if excess > 0:
+        edge = dataclasses.replace(edge, sigma_t=np.hypot(edge.sigma_t, np.float32(excess)).astype(np.float32))
     result = _reconstruct_edge(edge, planes, ray_map, setup, tracked, levels)
-    return result, [reference_line_residuals(lines, edge.sigma_t) for lines in result.lines]
+    result.unmodelled_sigma_t = excess
+    return result, residuals
 
 
 def _relative_depth(tracked: TrackedSequence, hi: np.ndarray, lo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1264,6 +1274,7 @@ def _edges_report(edges: list[EdgeResult], keep: np.ndarray) -> dict[str, Any]:
             "triangulated": int(np.isfinite(e.depth).sum()),
             "ray_plane_angle_deg": (None if e.ray_plane_angle_deg is None
                                     else dict(zip(("p10", "p50", "p90"), e.ray_plane_angle_deg, strict=True))),
+            "unmodelled_sigma_t_frames": e.unmodelled_sigma_t,
             "reference_lines": [
                 {"plane": ln.plane_name, "frames_with_line": int(ln.found.sum()),
                  "extrapolated": int(ln.extrapolated.sum()),
