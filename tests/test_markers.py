@@ -136,8 +136,9 @@ def test_an_edge_is_not_a_marker():
     img = np.full((120, 160), 200, np.uint8)
     img[:, 80:] = 40  # one straight edge
     img = cv2.GaussianBlur(img, (0, 0), 0.8)
-    with pytest.raises(GnomonError, match="not found within 30 px"):
+    with pytest.raises(GnomonError, match="not found within 30 px") as info:
         markers.find_marker(img, (80.0, 60.0), name="e1")
+    assert "give its centre as pixel = [u, v] instead of pixel_hint" in str(info.value)
 
 
 @pytest.mark.slow

@@ -177,7 +177,9 @@ def find_marker(
         raise GnomonError(
             f"{where}: not found within {search_px:g} px of its hint ({u0:.1f}, {v0:.1f}) "
             f"(best candidate ({u:.1f}, {v:.1f}): contrast {contrast:.0f} DN, 2x2-checker score {x_score:.2f}, "
-            f"asymmetry {asym:.2f}; need ≥ {min_contrast:g} DN, ≥ 0.5, ≤ 0.35)"
+            f"asymmetry {asym:.2f}; need ≥ {min_contrast:g} DN, ≥ 0.5, ≤ 0.35); if the mark is there but not a "
+            "clean 2x2 checker (squares that overlap or gap, seen at a grazing angle), give its centre as "
+            "pixel = [u, v] instead of pixel_hint"
         )
     return MarkerDetection(name=name, hint=(u0, v0), pixel=(u, v), contrast=contrast, x_score=x_score, asymmetry=asym)
 
