@@ -665,8 +665,11 @@ def _parse_output(t: _Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec
     return OutputSpec(box, above, low, high, formats, max_sigma)
 
 
-def load_field_log(path: str | Path) -> FieldLog:
-    """Read and validate a field log. Raises :class:`FieldLogError` on any problem."""
+def load_field_log(path: str | Path, *, without_light: bool = False) -> FieldLog:
+    """Read and validate a field log. Raises :class:`FieldLogError` on any problem.
+
+    ``without_light``: the ``[light]`` table is optional and not read (a lamp with no position: for
+    ``gnomon calibrate lamp``, which measures the position the table will hold)."""
     p = Path(path)
     if not p.exists():
         raise FieldLogError(f"{p}: field log not found")
@@ -691,7 +694,11 @@ def load_field_log(path: str | Path) -> FieldLog:
     planes = tuple(
         _parse_plane(_Table(p, f"planes.{i}", d), i, camera.width, camera.height) for i, d in enumerate(raw_planes)
     )
-    light = _parse_light(section("light"), base)
+    if without_light:
+        root.data.pop("light", None)
+        light = LightSpec("lamp")
+    else:
+        light = _parse_light(section("light"), base)
     scan = _parse_scan(optional_section("scan"))
     site = _parse_site(optional_section("site"))
     pole = _parse_pole(optional_section("pole"))

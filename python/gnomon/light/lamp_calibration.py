@@ -26,7 +26,11 @@ Field log for ``gnomon calibrate lamp FIELD_LOG``
 -------------------------------------------------
 The same ``[camera]`` (with ``[camera.pose]``) and ``[[planes]]`` tables as a
 scan's field log (see ``field_logs/README.md``; a plane's ``regions`` are
-optional here and ignored), plus::
+optional here and ignored), or, without ``[camera.pose]``, a scan's
+``[capture]`` and planes with markers or a chessboard (optionally in their own
+``image``): the pose is then measured from them as a scan measures it, the
+first such plane's frame being the world's (the paper's set-up: a board on
+the desk photographed from the scan's place), plus::
 
     [pencil]
     height = 80.0          # pencil height, world units (required, > 0)
@@ -60,6 +64,7 @@ import argparse
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -340,8 +345,36 @@ class PencilLog:
 _IGNORED_SECTIONS = ("capture", "light", "scan", "site")
 
 
+# What measures a plane in a scan's field log (gnomon.scan_setup.resolve_reference_planes).
+_MARK_KEYS = ("markers", "chessboard", "square", "image", "x_axis", "aruco", "charuco")
+
+
+def _pose_from_marked_planes(path: Path) -> tuple[Any, Pose, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """Without ``[camera.pose]``: the field log read as a scan's and its planes measured from their own
+    markers or board (the first one's frame is the world's). Returns the camera (fitted to the frames), the
+    pose and each plane's point and unit normal in that world."""
+    from gnomon.fieldlog import load_field_log
+    from gnomon.scan_setup import frame_source, resolve_reference_planes
+
+    data = toml_io.load(path)
+    marked = [pl for pl in data.get("planes", []) if isinstance(pl, dict) and any(k in pl for k in _MARK_KEYS)]
+    if "capture" not in data or not marked:
+        raise FieldLogError(f"{path}: missing required table [camera.pose] (the world → camera transform), or a "
+                            "[capture] and a plane with markers or a chessboard to measure it from")
+    log = load_field_log(path, without_light=True)
+    log, _ = resolve_reference_planes(log, frame_source(log))
+    assert log.pose is not None  # a marked plane was measured
+    planes = {pl.name: (np.asarray(pl.point, float), np.asarray(pl.normal, float) / np.linalg.norm(pl.normal))
+              for pl in log.planes}
+    return log.camera, log.pose, planes
+
+
 def load_pencil_log(path: str | Path) -> PencilLog:
-    """Read ``[camera]``, ``[camera.pose]``, ``[[planes]]`` and ``[pencil]``; errors name file and key."""
+    """Read ``[camera]``, ``[camera.pose]``, ``[[planes]]`` and ``[pencil]``; errors name file and key.
+
+    Without ``[camera.pose]`` the pose comes from the planes' own markers or chessboard, measured as a scan
+    of the same field log measures them (it then needs its ``[capture]``): the paper's set-up, a board on
+    the desk photographed from the scan's place."""
     p = Path(path)
     if not p.is_file():
         raise FieldLogError(f"{p}: field log not found")
@@ -351,8 +384,10 @@ def load_pencil_log(path: str | Path) -> PencilLog:
     if "camera" not in root.data:
         raise FieldLogError(f"{p}: missing required table [camera]")
     camera, pose, _, _, _ = _parse_camera(_Table(p, "camera", root.data.pop("camera")), base)
+    measured: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
     if pose is None:
-        raise FieldLogError(f"{p}: missing required table [camera.pose] (the world → camera transform)")
+        # no pose typed: the planes' own markers or board place the camera, as in a scan of this field log
+        camera, pose, measured = _pose_from_marked_planes(p)
 
     raw_planes = root.data.pop("planes", None)
     if not isinstance(raw_planes, list) or not raw_planes:
@@ -365,9 +400,11 @@ def load_pencil_log(path: str | Path) -> PencilLog:
         normal = t.vector("normal", 3, [0.0, 0.0, 1.0])
         if np.linalg.norm(normal) < 1e-12:
             raise t.error("normal", "must not be the zero vector")
-        t.take("regions", None)  # the scan's bare regions: not needed here
+        for key in ("regions", "mask") + (_MARK_KEYS if measured is not None else ()):
+            t.take(key, None)  # the scan's bare regions, and what measured the plane: not needed here
         t.done()
-        planes.setdefault(name, (point, normal / np.linalg.norm(normal)))
+        planes.setdefault(name, measured[name] if measured is not None and name in measured
+                          else (point, normal / np.linalg.norm(normal)))
 
     capture_units = None
     capture = root.data.get("capture")
