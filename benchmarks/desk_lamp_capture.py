@@ -1,0 +1,138 @@
+"""Scan a public real capture of the paper's own set-up end to end: desk, lamp, pencil (a script, not a test).
+
+    PYTHONPATH=python python benchmarks/desk_lamp_capture.py MIRROR_DIR [--out DIR]
+
+MIRROR_DIR is a checkout of the GitHub repository
+Leeiieeo/3D-photography-on-your-desk (never committed here, never downloaded
+by tests): ``bowl/`` 100 frames (1920×1080 JPEG, a phone looking down at a
+bowl upside down on a white desk, a stick's shadow swept across it, a phone's
+torch as the lamp), ``calib/`` 20 chessboard photos (9×6 inner corners, 28 mm
+squares; ``calib_1.jpg`` taken from the scan's place, the board lying on the
+desk), ``light/`` 12 photos of a 132.8 mm pencil standing on the desk, whose
+bases and shadow tips its author clicked (read here from its ``src/light.py``,
+not copied into this repository).
+
+The script runs what a user runs: ``gnomon calibrate camera`` on the board
+photos; a field log whose desk is measured from the board in ``calib_1.jpg``
+(no pose typed) and whose regions are two bands above and below the bowl
+(read off the first frame, as the paper's two reference rows); ``gnomon
+calibrate lamp`` on the pencils; the lamp's ``[light]`` into the field log;
+``gnomon preview`` and ``gnomon scan``. It scores the scan against the desk
+measured from the board: planarity of the swept bare desk (outside the bowl
+and its cast shadow, circles read off the first frame; swept: a shadow time
+at 80 % of the 15×15 pixels around, not the desk's sparse noise dips outside
+the sweep), coverage, and false points (outside those circles, more than
+5 mm off the desk), and prints the bowl's heights above the desk.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from gnomon import toml_io
+from gnomon.calibration import load_camera_file
+from gnomon.camera import Pose
+from real_captures import run
+
+# Read off bowl_00.jpg (pixels): the bowl's rim and its cast shadow (circles), and two bare bands of desk
+# above and below them that the shadow crosses in every frame of the sweep.
+BOWL = ((862.0, 578.0), 262.0)
+CAST = ((850.0, 440.0), 250.0)
+BANDS = [[0, 100, 1920, 240], [0, 900, 1920, 1080]]
+PENCIL_MM, BOARD, SQUARE_MM = 132.8, "9x6", 28.0
+
+
+def clicked(mirror: Path) -> tuple[list, list]:
+    """The author's clicked pencil tips' shadows and bases (pixels), from its src/light.py."""
+    text = (mirror / "src" / "light.py").read_text()
+    out = []
+    for name in ("tip", "base"):
+        body = re.search(name + r"\s*=\s*np\.array\(\[(.*?)\]\s*,\s*dtype", text, re.S)
+        if body is None:
+            raise SystemExit(f"{mirror / 'src' / 'light.py'}: no '{name} = np.array([...])'")
+        out.append([[float(u), float(v)] for u, v in re.findall(r"\[\s*(\d+)\s*,\s*(\d+)\s*\]", body.group(1))])
+    return out[0], out[1]
+
+
+def circle(shape: tuple[int, int], c: tuple[tuple[float, float], float]) -> np.ndarray:
+    yy, xx = np.mgrid[: shape[0], : shape[1]]
+    (u, v), r = c
+    return (xx - u) ** 2 + (yy - v) ** 2 < r**2
+
+
+def score(folder: Path) -> None:
+    scan = folder / "scan"
+    rep = json.loads((scan / "report.json").read_text())
+    depth, sigma = np.load(scan / "depth.npy"), np.load(scan / "sigma.npy")
+    shadow_time = np.load(scan / "shadow_time.npy")
+    cam = load_camera_file(folder / "camera.toml")
+    rays = cam.ray_map().astype(np.float64)
+    points = rays * (depth / rays[..., 2])[..., None]
+    desk = rep["reference_planes"][0]
+    R = Pose.from_rvec_tvec(np.array(desk["rvec"]), np.array(desk["tvec"])).R
+    d = (points - np.array(desk["tvec"])) @ R[:, 2]  # signed distance to the board's plane (mm)
+    has = np.isfinite(depth)
+    obj = circle(depth.shape, BOWL) | circle(depth.shape, CAST)
+    # swept: a shadow time, with one at 80 % of the pixels around (not the sparse noise dips of the desk
+    # the shadow never crossed, right and left of the sweep)
+    timed = np.isfinite(shadow_time).astype(np.float32)
+    swept = (timed > 0) & (cv2.blur(timed, (15, 15)) >= 0.8)
+    bare = swept & ~obj
+    on = bare & has
+    a = np.abs(d[on])
+    print(f"desk: planarity median {np.median(a):.3f} mm, RMS {np.sqrt(np.mean(a ** 2)):.3f} mm, p99 "
+          f"{np.percentile(a, 99):.2f} mm; coverage {100 * on.sum() / bare.sum():.1f} % of {bare.sum()} swept bare "
+          f"pixels; robust z {1.4826 * np.median(a / sigma[on]):.2f}")
+    false = has & ~obj & (np.abs(d) > 5.0)
+    print(f"false points (outside the bowl and its shadow, > 5 mm off the desk) {100 * false.sum() / has.sum():.2f} % "
+          f"of {has.sum()}")
+    bowl = circle(depth.shape, BOWL) & has
+    print(f"bowl: points on {100 * bowl.sum() / circle(depth.shape, BOWL).sum():.1f} % of its disc; height above "
+          f"the desk p5 / p50 / p95 {' / '.join(f'{h:.1f}' for h in np.percentile(-d[bowl], [5, 50, 95]))} mm")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("mirror", type=Path, help="checkout of Leeiieeo/3D-photography-on-your-desk")
+    ap.add_argument("--out", type=Path, default=Path("desk_lamp_capture"))
+    args = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    folder = args.out
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("bowl", "calib"):
+        link = folder / name
+        if not link.exists():
+            link.symlink_to((args.mirror / name).resolve(), target_is_directory=True)
+    run(["calibrate", "camera", *sorted(map(str, (args.mirror / "calib").glob("*.jpg"))), "--board", BOARD,
+         "--square", str(SQUARE_MM), "--out", str(folder / "camera.toml"), "--no-rrd"])
+    tips, bases = clicked(args.mirror)
+    log = {"capture": {"frames": "bowl/*.jpg", "units": "mm", "gamma": "srgb"},
+           "camera": {"file": "camera.toml"},
+           "planes": [{"name": "desk", "chessboard": BOARD, "square": SQUARE_MM, "image": "calib/calib_1.jpg",
+                       "regions": BANDS}],
+           "pencil": {"height": PENCIL_MM, "sigma_px": 3.0,
+                      "photos": [{"base": b, "tip": t} for b, t in zip(bases, tips, strict=True)]}}
+    path = folder / "field_log.toml"
+    toml_io.dump(log, path)
+    run(["calibrate", "lamp", str(path)])
+    log["light"] = toml_io.load(folder / "lamp.toml")["light"]
+    toml_io.dump(log, path)
+    run(["preview", str(path), "--out", str(folder / "preview.png")])
+    run(["scan", str(path), "--out", str(folder / "scan"), "--no-rrd", "--quiet"])
+    score(folder)
+    print(f"done in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
