@@ -204,3 +204,25 @@ def test_kernel_crossings_equal_the_numpy_definition() -> None:
     flat = np.full((5, 7), 3.0, np.float32)  # no step: no crossing
     assert all(len(x) == 0 for x in isochrone_crossings(flat, 10))
     assert all(len(x) == 0 for x in isochrone_crossings(np.zeros((0, 4), np.float32), 10))
+
+
+def test_a_frame_whose_crossings_scatter_far_more_than_the_planes_lines_has_no_line() -> None:
+    """Where a sweep stops, a frame's few crossings may line up only roughly (a real desk-lamp capture:
+    25 crossings at 19-24 times the plane's typical line RMS): such a frame has no line, rather than a
+    plane tens of mm off; the frames around keep theirs."""
+    from gnomon.reference_lines import MAX_LINE_SCATTER, PlaneInCamera, lines_on_plane
+
+    times = desk_times()
+    rng = np.random.default_rng(5)
+    times = times + rng.normal(0, 0.01, times.shape)  # 0.05 mm of line scatter
+    late = (times > 40.5) & (times < 43.5)
+    times[late] += rng.normal(0, 0.6, late.sum())  # frames 41..43: 3 mm of scatter
+    plane = PlaneInCamera.from_world(np.zeros(3), np.array([0, 0, 1.0]), POSE)
+    lines = lines_on_plane(times, 60, plane, np.ones(times.shape, dtype=bool), CAMERA, "desk")
+    typical = float(np.nanmedian(lines.rms))
+    assert not lines.found[41:44].any()
+    assert lines.found[5:40].all() and np.nanmax(lines.rms) <= MAX_LINE_SCATTER * typical
+    # the gate is what drops them: the same frames, unchecked, fit lines far more scattered
+    unchecked = lines_on_plane(times, 60, plane, np.ones(times.shape, dtype=bool), CAMERA, "desk",
+                               max_scatter=None)
+    assert unchecked.found[41:44].all() and np.all(unchecked.rms[41:44] > MAX_LINE_SCATTER * typical)

@@ -149,7 +149,9 @@ def shadow_lines(times: np.ndarray, n_frames: int, planes: list[PlaneInCamera], 
     cuts that plane. A plane whose crossings that frame do not lie on the
     shadow plane (an object inside its mask) has no line then.
     """
-    lines = [lines_on_plane(times, n_frames, p, m, camera, nm, ransac_tolerance=tol)
+    # every fit kept: a first guess's lines over seeds that hold objects scatter unevenly, and its
+    # per-pixel consistency test judges them (the scan's lines drop the scattered ones)
+    lines = [lines_on_plane(times, n_frames, p, m, camera, nm, ransac_tolerance=tol, max_scatter=None)
              for p, m, nm, tol in zip(planes, masks, names, tolerance, strict=True)]
     if len(planes) < 2:
         return lines
