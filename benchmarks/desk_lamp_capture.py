@@ -17,6 +17,9 @@ photos; a field log whose desk is measured from the board in ``calib_1.jpg``
 (no pose typed) and whose regions are two bands above and below the bowl
 (read off the first frame, as the paper's two reference rows); ``gnomon
 calibrate lamp`` on the pencils; the lamp's ``[light]`` into the field log;
+``gnomon regions`` grown from the bands (its mask replaces them: the whole
+bare desk the shadow crosses; started from the board's outline instead, it
+takes the bowl's flat top for the desk in the frames the shadow crosses it);
 ``gnomon preview`` and ``gnomon scan``. It scores the scan against the desk
 measured from the board: planarity of the swept bare desk (outside the bowl
 and its cast shadow, circles read off the first frame; swept: a shadow time
@@ -42,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from gnomon import toml_io
 from gnomon.calibration import load_camera_file
 from gnomon.camera import Pose
-from real_captures import run
+from real_captures import regions_preview_scan, run
 
 # Read off bowl_00.jpg (pixels): the bowl's rim and its cast shadow (circles), and two bare bands of desk
 # above and below them that the shadow crosses in every frame of the sweep.
@@ -127,8 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     run(["calibrate", "lamp", str(path)])
     log["light"] = toml_io.load(folder / "lamp.toml")["light"]
     toml_io.dump(log, path)
-    run(["preview", str(path), "--out", str(folder / "preview.png")])
-    run(["scan", str(path), "--out", str(folder / "scan"), "--no-rrd", "--quiet"])
+    regions_preview_scan(path)  # gnomon regions from the bands, its mask into the field log, preview, scan
     score(folder)
     print(f"done in {time.perf_counter() - t0:.0f} s")
     return 0
