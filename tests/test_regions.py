@@ -297,3 +297,78 @@ def test_regions_on_retimed_times_leave_out_a_fold() -> None:
     # the fold (their part on the bare wall is out of the image) and so follow it.
     kept_fold[:, :20] = kept_fold[:, -20:] = False
     assert scene["depth_off"][kept_fold].max() < 4.2 * 1.1  # 10 % for the line fit and the hinge's pixel
+
+
+def test_one_plane_seeded_over_a_flat_topped_object_leaves_its_top_out() -> None:
+    """A single plane (the paper's desk and lamp) seeded over an object with a flat top and its cast
+    shadow: the top's isochrones are straight too, but off the desk's lines; the proposal keeps the desk
+    beside it and leaves the top out."""
+    from gnomon.camera import OpenCVCamera, Pose
+    from gnomon.reference_lines import PlaneInCamera
+    from gnomon.regions import propose_regions
+
+    cam = OpenCVCamera(200, 150, 180.0, 180.0, 99.5, 74.5, (0.0,) * 5)
+    pose = Pose.from_rvec_tvec(np.array([np.pi, 0.0, 0.0]), np.array([0.0, 0.0, 300.0]))  # looking down
+    lamp = np.array([-400.0, 0.0, 450.0])
+    x0, speed, n_frames = -200.0, 4.0, 100  # the desk line x = x0 + speed·t
+    # a disc 60 mm above the desk under the camera: its isochrones run over 82 rows and 110 mm, the desk
+    # beside it and its cast shadow over fewer rows, and the desk's whole lines over 250 mm
+    top, radius = 60.0, 55.0
+    rays = pose.R.T @ cam.ray_map().reshape(-1, 3).T  # world directions
+    centre = pose.camera_centre_world
+    s_top = (top - centre[2]) / rays[2]
+    on_top = centre[:, None] + rays * s_top
+    hits_top = np.hypot(on_top[0], on_top[1]) < radius
+    s_desk = -centre[2] / rays[2]
+    p = np.where(hits_top, on_top, centre[:, None] + rays * s_desk)
+    # the desk the disc's top hides from the lamp sees no shadow pass
+    via_top = p + (lamp[:, None] - p) * (top / lamp[2])
+    cast = ~hits_top & (np.hypot(via_top[0], via_top[1]) < radius)
+    # the plane through the lamp and the desk line at x = X contains p when X = (px − Lx·z/Lz) / (1 − z/Lz)
+    x_line = (p[0] - lamp[0] * p[2] / lamp[2]) / (1.0 - p[2] / lamp[2])
+    times = ((x_line - x0) / speed).reshape(150, 200).astype(np.float32)
+    times[(times < 0) | (times > n_frames - 1) | cast.reshape(150, 200)] = np.nan
+    on_disc = hits_top.reshape(150, 200)
+    plane = PlaneInCamera.from_world(np.zeros(3), np.array([0.0, 0.0, 1.0]), pose)
+    seed = np.ones((150, 200), dtype=bool)
+    region = propose_regions([times, times], n_frames, [plane], ["desk"], [seed], cam)[0].mask
+    assert not (region & on_disc).any()
+    # the desk above and below the disc, in the columns the disc's top shadows the lines of
+    desk = ~on_disc & np.isfinite(times)
+    columns = np.zeros_like(desk)
+    columns[:, on_disc.any(axis=0)] = True
+    # all but the 2 px margins the proposal keeps around the disc, its cast shadow and its stripes (84 %)
+    assert (region & desk & columns).sum() > 0.8 * (desk & columns).sum()
+
+
+def test_short_lines_off_the_sweep_are_moved_to_where_their_long_neighbours_put_them() -> None:
+    """:func:`gnomon.regions.follow_the_sweep`: frames whose (short) line sits on an object's top, tens of
+    mm off the line the long lines before and after predict, are refitted to their crossings near the
+    prediction; a frame with none there loses its line; the others are left as they are."""
+    from gnomon.camera import OpenCVCamera, Pose
+    from gnomon.reference_lines import PlaneInCamera, ReferenceLines
+    from gnomon.regions import follow_the_sweep
+
+    cam = OpenCVCamera(200, 150, 180.0, 180.0, 99.5, 74.5, (0.0,) * 5)
+    pose = Pose.from_rvec_tvec(np.array([np.pi, 0.0, 0.0]), np.array([0.0, 0.0, 400.0]))  # looking down
+    plane = PlaneInCamera.from_world(np.zeros(3), np.array([0.0, 0.0, 1.0]), pose)
+    x0, speed, n = -150.0, 10.0, 31  # the desk's line x = x0 + speed·t (world mm)
+    rays = pose.R.T @ cam.ray_map().reshape(-1, 3).T
+    c = pose.camera_centre_world
+    desk_x = (c[:, None] + rays * (-c[2] / rays[2]))[0].reshape(150, 200)
+    times = ((desk_x - x0) / speed).astype(np.float32)
+    times[np.abs(times - 20.0) < 0.5] = np.nan  # frame 20: no crossings anywhere
+    world_y = np.array([0.0, 1.0, 0.0])
+    point = np.array([pose.world_to_camera(np.array([x0 + speed * t, 0.0, 0.0])) for t in range(n)])
+    direction = np.tile(pose.R @ world_y, (n, 1))
+    extrapolated = np.zeros(n, dtype=bool)
+    extrapolated[12:21] = True
+    point[12:21] = [pose.world_to_camera(np.array([x0 + speed * t + 25.0, 0.0, 0.0])) for t in range(12, 21)]
+    lines = ReferenceLines("desk", plane, point.copy(), direction, np.full(n, 0.1), np.full(n, 50),
+                           [np.zeros((0, 2))] * n, extrapolated, [np.zeros((0, 3))] * n)
+    follow_the_sweep(lines, times, n, np.ones((150, 200), dtype=bool), cam, tolerance=0.5)
+    x = np.array([pose.camera_to_world(p)[0] for p in lines.point])
+    np.testing.assert_allclose(x[12:20], x0 + speed * np.arange(12, 20), atol=0.5)  # back on the desk's line
+    assert np.isnan(x[20])  # nothing near the prediction: no line
+    np.testing.assert_allclose(x[:12], x0 + speed * np.arange(12), atol=1e-9)  # the long lines untouched
+    np.testing.assert_allclose(x[21:], x0 + speed * np.arange(21, n), atol=1e-9)

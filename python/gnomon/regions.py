@@ -14,7 +14,10 @@ surface off the plane has no shadow time or another one. So:
    (:func:`ransac_shadow_plane`): an object's isochrone back-projected onto a
    plane it is not on can look like a line on that plane alone (the frog's
    belly on the desk in the CMU frog capture), never like one coplanar with
-   the other planes' lines;
+   the other planes' lines; with one plane (a desk and a known lamp) nothing else
+   tells the plane's line from a flat-topped object's, so a frame's short line that
+   sits off the line its long neighbours predict is refitted to the crossings near
+   that prediction (:func:`follow_the_sweep`);
 2. predict every pixel's shadow time from those lines (the frame at which
    the line, interpolated between consecutive frames, crosses the pixel's
    point on the plane), for the entering and the leaving edge, from the
@@ -50,13 +53,16 @@ from gnomon.reference_lines import (
     mask_crossings,
 )
 
-__all__ = ["PlaneRegion", "hull_mask", "monotone_sweep", "nearest_plane", "pixel_footprint", "predicted_times",
-           "propose_regions", "ransac_shadow_plane", "shadow_lines", "smooth_times"]
+__all__ = ["PlaneRegion", "follow_the_sweep", "hull_mask", "monotone_sweep", "nearest_plane", "pixel_footprint",
+           "predicted_times", "propose_regions", "ransac_shadow_plane", "shadow_lines", "smooth_times"]
 
 # The first lines (over the seed, which may hold objects) are RANSAC lines of this tolerance, in pixels on the plane.
 RANSAC_PIXELS = 2.0
 # Neighbouring shadow times of a smooth swept surface differ by less than this (frames).
 SMOOTH_STEP = 2.0
+# follow_the_sweep: a short line's crossings within this many RANSAC tolerances of the line its long
+# neighbours predict are the plane's (an object's top, tens of mm higher, lies farther off).
+FOLLOW_WINDOW = 10.0
 # A plane's lines are one sweep where consecutive lines move less than this times their median speed (per frame).
 MAX_SPEED_RATIO = 8.0
 
@@ -154,7 +160,7 @@ def shadow_lines(times: np.ndarray, n_frames: int, planes: list[PlaneInCamera], 
     lines = [lines_on_plane(times, n_frames, p, m, camera, nm, ransac_tolerance=tol, max_scatter=None)
              for p, m, nm, tol in zip(planes, masks, names, tolerance, strict=True)]
     if len(planes) < 2:
-        return lines
+        return [follow_the_sweep(lines[0], times, n_frames, masks[0], camera, tolerance[0])]
     pts, lab, frm, pixs = [], [], [], []
     for k, (plane, mask) in enumerate(zip(planes, masks, strict=True)):
         f, pix = mask_crossings(times, mask, n_frames)
@@ -199,6 +205,64 @@ def shadow_lines(times: np.ndarray, n_frames: int, planes: list[PlaneInCamera], 
             ln.pixels[t] = pixel[idx][mine]
             ln.points[t] = points[idx][mine]
             ln.extrapolated[t] = False
+    return lines
+
+
+def follow_the_sweep(lines: ReferenceLines, times: np.ndarray, n_frames: int, mask: np.ndarray,
+                     camera: CameraModel, tolerance: float) -> ReferenceLines:
+    """One plane's short lines held to the sweep: each frame whose line was too short to set its own
+    direction (``extrapolated``) and lies more than 3 ``tolerance`` (world units) off the line its nearest
+    long lines before and after predict (offset and direction interpolated in time) is refitted to its
+    crossings within ``FOLLOW_WINDOW`` ``tolerance`` of that prediction (the predicted direction, their
+    median offset: the interpolation over a gap of tens of frames errs by a few tolerances where a hand
+    sweeps unevenly), or loses its line when fewer than ``MIN_POINTS`` are there. Changes ``lines`` in
+    place and returns it.
+
+    With one reference plane nothing else tells the desk's line from an object's: where the shadow
+    crosses an object with a flat top (a bowl upside down), that top's isochrone is one straight run with
+    more crossings than the desk's two stretches on either side, and the RANSAC line is the object's. The
+    sweep moves smoothly, so the long lines around such frames say where the desk's line is.
+    """
+    plane = lines.plane
+    long_ = np.flatnonzero(lines.found & ~lines.extrapolated)
+    short = np.flatnonzero(lines.found & lines.extrapolated)
+    if len(long_) < 2 or not len(short):
+        return lines
+    frame, pix = mask_crossings(times, mask, n_frames)
+    on = plane.intersect(camera.rays(pix)) if len(frame) else np.zeros((0, 3))
+    good = np.isfinite(on[:, 0])
+    frame, pix, on = frame[good], pix[good], on[good]
+    xy = plane.to_plane_coords(on)
+    centres = plane.to_plane_coords(lines.point)
+    d2 = np.stack([lines.direction @ plane.e1, lines.direction @ plane.e2], axis=1)
+    for t in short.tolist():
+        before, after = long_[long_ < t], long_[long_ > t]
+        if not len(before) or not len(after):
+            continue
+        a, b = int(before[-1]), int(after[0])
+        w = (t - a) / (b - a)
+        da, db = d2[a], d2[b] * (1.0 if d2[a] @ d2[b] >= 0 else -1.0)
+        d = (1.0 - w) * da + w * db
+        d /= np.linalg.norm(d)
+        n = np.array([-d[1], d[0]])
+        predicted = (1.0 - w) * float(centres[a] @ n) + w * float(centres[b] @ n)
+        if abs(float(centres[t] @ n) - predicted) <= 3.0 * tolerance:
+            continue
+        mine = np.flatnonzero(frame == t)
+        near = mine[np.abs(xy[mine] @ n - predicted) <= FOLLOW_WINDOW * tolerance]
+        if len(near) < MIN_POINTS:
+            lines.point[t], lines.direction[t], lines.rms[t], lines.count[t] = np.nan, np.nan, np.nan, 0
+            continue
+        offsets = xy[near] @ n
+        along = xy[near] @ d
+        centre = float(np.median(offsets)) * n + float(np.mean(along)) * d
+        lines.point[t] = plane.from_plane_coords(centre)
+        d3 = d[0] * plane.e1 + d[1] * plane.e2
+        lines.direction[t] = d3 / np.linalg.norm(d3)
+        lines.rms[t] = float(np.sqrt(np.mean((offsets - np.median(offsets)) ** 2)))
+        lines.count[t] = len(near)
+        lines.pixels[t] = pix[near]
+        lines.points[t] = on[near]
     return lines
 
 
