@@ -121,6 +121,14 @@ CROPS = ("centre", "center")
 """``[camera] crop`` values: the frames are the sensor's largest centred crop of their aspect ratio."""
 
 
+def other_aspect(calibrated: tuple[int, int], frames: tuple[int, int]) -> bool:
+    """Whether frames of ``frames`` (width, height) pixels have another aspect ratio than a camera calibrated
+    at ``calibrated`` (width, height): their scale factors differ by more than 1 % (a crop of the sensor,
+    not a resampling; :func:`fit_camera_to_frames`)."""
+    sw, sh = frames[0] / calibrated[0], frames[1] / calibrated[1]
+    return abs(sw / sh - 1.0) > 0.01
+
+
 def fit_camera_to_frames(
     camera: OpenCVCamera | TsaiCamera, width: int, height: int, where: str, frame_name: str = "frame 0",
     crop: str | None = None,
@@ -149,7 +157,7 @@ def fit_camera_to_frames(
         raise GnomonError(f"{where}: crop: expected \"centre\", got {crop!r}")
     sw, sh = width / w0, height / h0
     ox = oy = 0.0
-    if abs(sw / sh - 1.0) > 0.01:
+    if other_aspect((w0, h0), (width, height)):
         if crop is None:
             raise GnomonError(
                 f"{frame_name} is {width}x{height} but the camera's {w0}x{h0} ({where}) has another aspect ratio "

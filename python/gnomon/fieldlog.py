@@ -402,7 +402,7 @@ def _fit_camera(camera: CalibratedCamera, calibration: dict, capture: CaptureSpe
                 where: str, crop: str | None = None) -> tuple[CalibratedCamera, dict]:
     """The camera rescaled to the frames' size when it was calibrated at another one (same aspect, or with
     ``crop``, their centred crop)."""
-    from gnomon.calibration import fit_camera_to_frames
+    from gnomon.calibration import fit_camera_to_frames, other_aspect
 
     first = capture.video if capture.video is not None else capture.image_files[0]
     size = video_size(first) if capture.video is not None else image_size(first)
@@ -411,7 +411,7 @@ def _fit_camera(camera: CalibratedCamera, calibration: dict, capture: CaptureSpe
     if note is None:
         return camera, calibration
     more: dict[str, Any] = {"rescaled_from": [int(camera.width), int(camera.height)]}
-    if crop is not None and abs(camera.width / camera.height - size[0] / size[1]) > 0.01 * size[0] / size[1]:
+    if crop is not None and other_aspect((camera.width, camera.height), size):
         more["crop"] = "centre"
     return fitted, {**calibration, **more}
 

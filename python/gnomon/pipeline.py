@@ -125,6 +125,7 @@ class EdgeResult:
     # speed) over the sine of this angle (docs/method.md §4)
     ray_plane_angle_deg: tuple[float, float, float] | None = None
     # frames of per-pixel time σ the reference lines showed beyond the noise model, added to every pixel's
+    # time σ before σZ was propagated (gnomon.validity.unmodelled_time_scatter)
     unmodelled_sigma_t: float = 0.0
 
 
@@ -665,8 +666,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
         with _timed(timings, "tracking_s", cpu):
             tracked, tracker, notes = track_widening(track, source, setup.tracker,
                                                      (setup.camera.height, setup.camera.width),
-                                                     widen=setup.dip_width == "auto",
-                                                     check=setup.dip_width != "sun", skip=skip, on_frame=on_frame,
+                                                     dip_width=setup.dip_width, skip=skip, on_frame=on_frame,
                                                      progress=progress, where=f"{setup.inputs.field_log}: [camera]")
         setup = dataclasses.replace(setup, tracker=tracker)  # the dip width tracked with
         warnings += notes

@@ -619,24 +619,26 @@ def track_widening(
     settings: TrackerSettings,
     shape: tuple[int, int],
     *,
-    widen: bool,
-    check: bool = True,
+    dip_width: str,
     **kwargs: object,
 ) -> tuple[TrackedSequence, TrackerSettings, list[str]]:
     """``track_pass(source, settings, shape, **kwargs)`` (:func:`track_source` or a drop-in), then, when the
-    shadow stayed on many pixels nearly as long as the widest dip (:class:`Dwell`) and ``widen``, again with
-    a wider one (at most ``WIDENING_PASSES`` passes, ``MAX_DIP_FRAMES`` frames): the source is read again,
-    without ``on_frame`` (the first pass saw every frame) and without colour.
+    shadow stayed on many pixels nearly as long as the widest dip (:class:`Dwell`) and ``dip_width`` is
+    ``"auto"``, again with a wider one (at most ``WIDENING_PASSES`` passes, ``MAX_DIP_FRAMES`` frames): the
+    source is read again, without ``on_frame`` (the first pass saw every frame) and without colour.
 
-    Returns the last pass, its settings and what to tell the user: a note for each widening, a warning when
-    the dips are still at the limit (``widen`` false: the width was given; or the widest reached) unless
-    ``check`` is false (a sun scan: there the width is what tells a shadow from a cloud or dusk).
+    ``dip_width``: who set the width (:func:`gnomon.scan_setup.dip_width_policy`): ``"auto"`` widens;
+    ``"field log"`` and ``"live"`` keep it; ``"sun"`` keeps it and is not checked (there the width is what
+    tells a shadow from a cloud or dusk). Returns the last pass, its settings and what to tell the user: a
+    note for each widening, a warning when the dips are still at the limit (the width was kept, or the
+    widest reached), except under the sun.
     """
+    widen = dip_width == "auto"
     tracked = track_pass(source, settings, shape, **kwargs)
+    d = dwell(tracked.times, settings.max_width)
     notes: list[str] = []
     again = {**kwargs, "on_frame": None}
     for _ in range(WIDENING_PASSES - 1):
-        d = dwell(tracked.times, settings.max_width)
         wider = d.wider() if widen else None
         if wider is None:
             break
@@ -651,8 +653,8 @@ def track_widening(
         finally:
             if colour is not None:
                 source.color_frames = colour
-    d = dwell(tracked.times, settings.max_width)
-    if check and d.at_limit:
+        d = dwell(tracked.times, settings.max_width)
+    if dip_width != "sun" and d.at_limit:
         if settings.max_width >= MAX_DIP_FRAMES:
             fix = (f"the tracker finds no dip wider than {MAX_DIP_FRAMES} frames: keep fewer frames (every second "
                    "one) or sweep faster")

@@ -139,12 +139,12 @@ def run(args: argparse.Namespace) -> int:
     if args.camera is not None:
         if not args.camera.is_file():
             raise GnomonError(f"{args.camera}: camera file not found")
-        from gnomon.calibration import load_camera_file
+        from gnomon.calibration import load_camera_file, other_aspect
 
         rel = Path(os.path.relpath(os.path.abspath(args.camera), base)).as_posix()
         camera = f'file = "{rel}"  # from `gnomon calibrate camera`\n'
         cal = load_camera_file(args.camera)
-        if abs((cal.width / cal.height) / (width / height) - 1.0) > 0.01:
+        if other_aspect((cal.width, cal.height), (width, height)):
             note = (f"the camera was calibrated at {cal.width}x{cal.height} (aspect {cal.width / cal.height:.3f}), "
                     f"the {what} are {width}x{height} ({width / height:.3f})")
             camera += (f"# {note}: taken as the sensor's centred crop (a phone's video against its photos).\n"

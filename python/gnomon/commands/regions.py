@@ -102,8 +102,7 @@ def run(args: argparse.Namespace) -> int:
             raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: nothing to start from; give it markers, "
                                 "a chessboard or rough regions")
     tracked, _, notes = track_widening(track_source, source, tracker_settings(log), shape,
-                                       widen=dip_width_policy(log) == "auto",
-                                       check=dip_width_policy(log) != "sun", progress=not args.quiet,
+                                       dip_width=dip_width_policy(log), progress=not args.quiet,
                                        where=f"{log.path}: [camera]")
     for note in notes:
         print(f"warning: {note}")

@@ -349,14 +349,14 @@ _IGNORED_SECTIONS = ("capture", "light", "scan", "site")
 _MARK_KEYS = ("markers", "chessboard", "square", "image", "x_axis", "aruco", "charuco")
 
 
-def _pose_from_marked_planes(path: Path) -> tuple[Any, Pose, dict[str, tuple[np.ndarray, np.ndarray]]]:
-    """Without ``[camera.pose]``: the field log read as a scan's and its planes measured from their own
-    markers or board (the first one's frame is the world's). Returns the camera (fitted to the frames), the
-    pose and each plane's point and unit normal in that world."""
+def _pose_from_marked_planes(path: Path, data: dict[str, Any]
+                             ) -> tuple[Any, Pose, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """Without ``[camera.pose]``: the field log at ``path`` (``data``: its tables, as read) read as a scan's
+    and its planes measured from their own markers or board (the first one's frame is the world's). Returns
+    the camera (fitted to the frames), the pose and each plane's point and unit normal in that world."""
     from gnomon.fieldlog import load_field_log
     from gnomon.scan_setup import frame_source, resolve_reference_planes
 
-    data = toml_io.load(path)
     marked = [pl for pl in data.get("planes", []) if isinstance(pl, dict) and any(k in pl for k in _MARK_KEYS)]
     if "capture" not in data or not marked:
         raise FieldLogError(f"{path}: missing required table [camera.pose] (the world → camera transform), or a "
@@ -387,7 +387,7 @@ def load_pencil_log(path: str | Path) -> PencilLog:
     measured: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
     if pose is None:
         # no pose typed: the planes' own markers or board place the camera, as in a scan of this field log
-        camera, pose, measured = _pose_from_marked_planes(p)
+        camera, pose, measured = _pose_from_marked_planes(p, root.data)
 
     raw_planes = root.data.pop("planes", None)
     if not isinstance(raw_planes, list) or not raw_planes:
