@@ -1,12 +1,16 @@
 """The angle between a pixel's ray and its shadow plane (pipeline.ray_plane_angles, report.json's
-edges.<edge>.ray_plane_angle_deg): how much a plane's error is magnified in depth."""
+edges.<edge>.ray_plane_angle_deg and grazing_share): how much a plane's error is magnified in depth, and the
+scan's warning when the rays graze the planes."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
+import pytest
 
 from gnomon.camera import OpenCVCamera
-from gnomon.pipeline import _ray_plane_angles_numpy, ray_plane_angles
+from gnomon.pipeline import GRAZING_DEG, _ray_plane_angles_numpy, ray_plane_angles
 
 
 def test_angles_follow_the_plane_interpolated_at_each_pixels_time() -> None:
@@ -48,3 +52,38 @@ def test_kernel_angles_equal_the_numpy_definition() -> None:
     assert got.shape == (int(where.sum()),) and np.isnan(want).any() and np.isfinite(want).sum() > 100
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+
+
+@pytest.mark.slow
+def test_a_lamp_above_the_camera_warns_and_errs_as_its_angles_say(desk_scan, tmp_path) -> None:
+    """The desk capture of ``desk_scan`` again with its lamp 60 mm straight above the camera: every shadow
+    plane passes within 60 mm of the camera's centre, 650 mm from the scene, so the rays meet the planes at
+    under 2° (sin α ≲ 60/650) instead of the lamp-to-the-side scene's ~30°. The scan must say so (and the
+    side-lit one not), and its depth errors must grow as the angles predict: same noise, same sweep, so the
+    median error over the swept pixels scales with the median 1/sin α, within a factor of 2 either way."""
+    from gnomon.cli import main
+    from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
+
+    simulate_desk_lamp(tmp_path / "capture", DeskLampConfig(width=400, height=300, frames=120, seed=5,
+                                                             pencil_photos=0, lamp_above_camera=60.0))
+    assert main(["scan", str(tmp_path / "capture" / "field_log.toml"), "--out", str(tmp_path / "scan"),
+                 "--quiet", "--no-rrd"]) == 0
+    results = {}
+    for name, root in (("side", desk_scan), ("above", tmp_path)):
+        report = json.loads((root / "scan" / "report.json").read_text())
+        truth = np.load(root / "capture" / "ground_truth.npz")
+        depth = np.load(root / "scan" / "depth.npy")
+        swept = truth["swept"] & np.isfinite(depth)
+        err = np.median(np.abs(depth[swept] - truth["depth"][swept]))
+        edges = [v for k, v in report["edges"].items() if k != "disagreement"]
+        angle = np.median([e["ray_plane_angle_deg"]["p50"] for e in edges])
+        share = np.mean([e["grazing_share"] for e in edges])
+        grazing = [w for w in report["warnings"] if f"under {GRAZING_DEG:g}°" in w]
+        results[name] = (err, angle, share, grazing)
+    err_side, angle_side, share_side, warned_side = results["side"]
+    err_above, angle_above, share_above, warned_above = results["above"]
+    assert share_side == 0.0 and not warned_side and angle_side > 20.0
+    assert share_above > 0.9 and angle_above < np.degrees(np.arcsin(60.0 / 650.0))
+    assert len(warned_above) == 1 and "max_sigma" in warned_above[0]
+    predicted = np.sin(np.radians(angle_side)) / np.sin(np.radians(angle_above))
+    assert 0.5 * predicted < err_above / err_side < 2.0 * predicted, (err_above, err_side, predicted)

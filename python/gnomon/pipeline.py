@@ -124,6 +124,8 @@ class EdgeResult:
     # ray and its shadow plane: a depth moves by an error of the plane (or of the time, times the shadow's
     # speed) over the sine of this angle (docs/method.md §4)
     ray_plane_angle_deg: tuple[float, float, float] | None = None
+    # (share of the triangulated pixels whose ray meets its shadow plane under GRAZING_DEG, their count)
+    grazing: tuple[float, int] | None = None
     # frames of per-pixel time σ the reference lines showed beyond the noise model, added to every pixel's
     # time σ before σZ was propagated (gnomon.validity.unmodelled_time_scatter)
     unmodelled_sigma_t: float = 0.0
@@ -341,13 +343,14 @@ def _reconstruct_edge(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, 
                                                            c.line_point, c.line_direction, c.sigma_rad))
     angles = ray_plane_angles(ray_map, scaled, planes.planes, np.isfinite(depth))
     angles = angles[np.isfinite(angles)]
-    spread = None
+    spread = grazing = None
     if angles.size:
         p10, p50, p90 = (float(a) for a in np.percentile(angles, [10, 50, 90]))
         spread = (p10, p50, p90)
+        grazing = (float(np.mean(angles < GRAZING_DEG)), int(angles.size))
     return EdgeResult(edge.name, edge.times, planes.lines, planes.planes, depth,
                       _with_typical_sigma(depth, sigma_z), planes.degenerate, edge.slope, planes.measured,
-                      screening.rejected, screening.notes, spread)
+                      screening.rejected, screening.notes, spread, grazing)
 
 
 def _reconstruct_edge_checked(edge: EdgeTimes, planes: EdgePlanes, ray_map: np.ndarray, setup: ScanSetup,
@@ -559,6 +562,31 @@ def _fuse(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: flo
     return _Fused(depth, sigma, keep, conflict, shadow_time, under, unsupported, untrusted)
 
 
+# A ray meeting its shadow plane under GRAZING_DEG degrees turns a time error (or a plane's) into a depth
+# error over 1 / sin(2°) ≈ 29 times what a ray square to the plane gets (docs/method.md §4); a scan warns
+# when more than GRAZING_SHARE of its triangulated pixels are such rays: the shadow planes pass close to
+# the camera, i.e. the light stands nearly in line with it as seen from the scene.
+GRAZING_DEG = 2.0
+GRAZING_SHARE = 0.10
+
+
+def grazing_warnings(edges: list[EdgeResult]) -> list[str]:
+    """The warning for a capture whose rays graze its shadow planes (``GRAZING_SHARE`` of the
+    triangulated pixels under ``GRAZING_DEG``, over all edges), or none."""
+    counted = [e.grazing for e in edges if e.grazing is not None and e.grazing[1] > 0]
+    total = sum(n for _, n in counted)
+    if not total:
+        return []
+    share = sum(f * n for f, n in counted) / total
+    if share <= GRAZING_SHARE:
+        return []
+    return [f"{100 * share:.0f} % of the triangulated pixels see their shadow plane at under {GRAZING_DEG:g}°: "
+            "the shadow planes pass close to the camera (the light stands nearly in line with it, seen from "
+            f"the scene), so their depth errs over {1 / np.sin(np.radians(GRAZING_DEG)):.0f} times more than "
+            "square to the plane; light the scene from farther to the side of the camera (sigma.npy gives "
+            "each point's σ, [output] max_sigma drops the worst)"]
+
+
 def _fusion_warnings(fused: _Fused) -> list[str]:
     warnings = []
     under, keep = fused.undersampled, fused.keep
@@ -699,7 +727,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: ScanRecording |
                                       else _record_points_part(timings, setup, edges, points, fused, frame_stride,
                                                                tracked.used, coverage)))
             surface = mesh_surface(points, setup.max_depth_jump)
-    warnings += _fusion_warnings(fused)
+    warnings += _fusion_warnings(fused) + grazing_warnings(edges)
     timings["total_s"] = time.perf_counter() - t0
     report = _report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
     _report_outputs(report, setup, cropped, cpu, warnings)
@@ -1274,6 +1302,7 @@ def _edges_report(edges: list[EdgeResult], keep: np.ndarray) -> dict[str, Any]:
             "triangulated": int(np.isfinite(e.depth).sum()),
             "ray_plane_angle_deg": (None if e.ray_plane_angle_deg is None
                                     else dict(zip(("p10", "p50", "p90"), e.ray_plane_angle_deg, strict=True))),
+            "grazing_share": None if e.grazing is None else e.grazing[0],  # under GRAZING_DEG
             "unmodelled_sigma_t_frames": e.unmodelled_sigma_t,
             "reference_lines": [
                 {"plane": ln.plane_name, "frames_with_line": int(ln.found.sum()),

@@ -251,11 +251,15 @@ class DeskLampConfig(SweepConfig):
     write beside the capture; 0 for none, else 2 to 12.
     ``lamp_height``: the lamp's height above the desk, mm (default: ``LAMP``'s,
     380); a lower lamp casts longer object shadows (scenes for dual-scan fusion).
+    ``lamp_above_camera``: put the lamp this many mm straight above the camera's
+    centre instead (the light nearly in line with the camera: every shadow
+    plane passes within that distance of it, and the rays graze the planes).
     """
 
     lamp_side: str = "left"
     pencil_photos: int = 3
     lamp_height: float | None = None
+    lamp_above_camera: float | None = None
 
     @property
     def scene_name(self) -> str:
@@ -267,6 +271,11 @@ class DeskLampConfig(SweepConfig):
         super().validate()
         if self.lamp_height is not None and not (math.isfinite(self.lamp_height) and 120 <= self.lamp_height <= 2000):
             raise self.error(f"lamp_height {self.lamp_height}: must be 120 to 2000 mm")
+        if self.lamp_above_camera is not None and not (
+                math.isfinite(self.lamp_above_camera) and 10 <= self.lamp_above_camera <= 500):
+            raise self.error(f"lamp_above_camera {self.lamp_above_camera}: must be 10 to 500 mm")
+        if self.lamp_above_camera is not None and (self.lamp_height is not None or self.lamp_side != "left"):
+            raise self.error("lamp_above_camera places the lamp itself: give neither lamp_height nor lamp_side")
         if not (self.pencil_photos == 0 or 2 <= self.pencil_photos <= MAX_PENCIL_PHOTOS):
             raise self.error(f"--pencil-photos {self.pencil_photos}: must be 0 (none) or 2 to "
                              f"{MAX_PENCIL_PHOTOS}")
@@ -364,6 +373,8 @@ class DeskLampScene:
         S = LAMP.astype(np.float64)
         c = self.config
         if isinstance(c, DeskLampConfig):
+            if c.lamp_above_camera is not None:
+                return np.asarray(self.C, dtype=np.float64) + np.array([0.0, 0.0, c.lamp_above_camera])
             if c.lamp_height is not None:
                 S[2] = float(c.lamp_height)
             if c.lamp_side == "right":
