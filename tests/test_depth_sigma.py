@@ -65,6 +65,28 @@ def test_sigma_of_a_plane_moving_at_a_known_rate() -> None:
     np.testing.assert_allclose(got.sigma_z, 2.0 * np.hypot(0.3, 0.4), atol=2e-4)
 
 
+def test_a_ray_that_leaves_the_planes_within_the_step_has_a_large_sigma() -> None:
+    """Between rows 0 and 1 the plane is n·X = d with n = (1, 0, 0.016·(0.75 − t)), d = t − 0.375: the
+    ray along the optical axis meets it at Z = d / n_z = 31.25 at t = 0.5, behind the camera at
+    t = 0.25, and lies in it at t = 0.75, so neither t ± 0.25 gives a depth. ∂Z/∂t there is
+    0.375 / (0.016·(0.75 − t)²) = 375 per frame: σZ = 375·σt, not the typical σ a missing one gets
+    (σt 0.1 frame: 37.5). The kernel and the numpy definition agree bit for bit, on the other pixels
+    of a map too (their steps of 0.25 frame exist: unchanged)."""
+    cam = OpenCVCamera(9, 9, 20.0, 20.0, 4.0, 4.0)
+    rays = cam.ray_map().astype(np.float64)
+    planes = np.array([[1.0, 0.0, 0.012, -0.375], [1.0, 0.0, -0.004, 0.625]])
+    times = np.full((9, 9), 0.5, np.float32)
+    depth = triangulate(rays, times, planes).depth
+    assert abs(depth[4, 4] - 31.25) < 0.01
+    sigma_t = np.full((9, 9), 0.1, np.float32)
+    got = depth_sigma(rays, times, planes, depth, sigma_t, np.zeros(2))
+    want = _depth_sigma_numpy(rays, times, planes, depth, sigma_t, np.zeros(2))
+    assert abs(got.dz_dt[4, 4] - 375.0) < 1.0 and abs(got.sigma_z[4, 4] - 37.5) < 0.1
+    for field in ("sigma_z", "dz_dt"):
+        np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=field)
+    assert np.isfinite(want.sigma_z[np.isfinite(depth)]).all()
+
+
 # --------------------------------------------------------------------------- time scatter the noise misses
 
 

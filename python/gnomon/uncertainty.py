@@ -15,7 +15,8 @@ time, then mapped to depth through the local sensitivity ∂Z/∂ts:
   how fast the line moves across the plane (world units per frame).
 
 Independent sources add in quadrature: ``σZ = |∂Z/∂t| · sqrt(σt_pixel² + σt_line²)``.
-∂Z/∂t comes from triangulating each pixel again at ``ts ± h``.
+∂Z/∂t comes from triangulating each pixel again at ``ts ± h`` (at ``ts ± h / FINE_STEP_DIVISOR``
+where neither gives a depth).
 """
 
 from __future__ import annotations
@@ -29,6 +30,10 @@ from gnomon.reference_lines import ReferenceLines
 from gnomon.triangulation import MIN_RAY_PLANE_COS, triangulate
 
 DERIVATIVE_STEP_FRAMES = 0.25
+# Where neither ts + h nor ts − h gives a depth (the ray lies in the shadow planes there, or
+# behind the camera), ∂Z/∂t is taken again with h / FINE_STEP_DIVISOR, within the pixel's own
+# pair of plane rows: such a depth has a large σ, not the typical one a missing σ gets.
+FINE_STEP_DIVISOR = 64.0
 # A transition sampled by fewer than this many frames (steepest single-frame
 # step larger than contrast / this) is under-sampled: linear interpolation
 # between the two samples is then biased by the edge's shape.
@@ -332,14 +337,19 @@ def depth_sigma(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray, dept
 def _depth_sigma_numpy(ray_map: np.ndarray, times: np.ndarray, planes: np.ndarray, depth: np.ndarray,
                        sigma_t_pixel: np.ndarray, sigma_t_line_per_frame: np.ndarray) -> DepthUncertainty:
     """:func:`depth_sigma` in numpy (the kernel's ``depth_sigma`` gives the same on float32 maps)."""
-    h = DERIVATIVE_STEP_FRAMES
-    plus = triangulate(ray_map, times + h, planes).depth
-    minus = triangulate(ray_map, times - h, planes).depth
-    with np.errstate(invalid="ignore"):
-        central = (plus - minus) / (2 * h)
-        forward = (plus - depth) / h
-        backward = (depth - minus) / h
-    dz_dt = np.where(np.isfinite(central), central, np.where(np.isfinite(forward), forward, backward))
+    def derivative(h: float) -> np.ndarray:
+        plus = triangulate(ray_map, times + h, planes).depth
+        minus = triangulate(ray_map, times - h, planes).depth
+        with np.errstate(invalid="ignore"):
+            central = (plus - minus) / (2 * h)
+            forward = (plus - depth) / h
+            backward = (depth - minus) / h
+        return np.where(np.isfinite(central), central, np.where(np.isfinite(forward), forward, backward))
+
+    dz_dt = derivative(DERIVATIVE_STEP_FRAMES)
+    retry = ~np.isfinite(dz_dt) & np.isfinite(depth)
+    if retry.any():
+        dz_dt = np.where(retry, derivative(DERIVATIVE_STEP_FRAMES / FINE_STEP_DIVISOR), dz_dt)
 
     n = len(sigma_t_line_per_frame)
     line_sigma = np.where(np.isfinite(sigma_t_line_per_frame), sigma_t_line_per_frame, np.nan)

@@ -173,6 +173,12 @@ pub struct DepthSigma {
     pub sigma_t_line: Vec<f32>,
 }
 
+/// Where neither `t + step` nor `t − step` gives a depth, [`depth_sigma`] takes the
+/// derivative again with `step / FINE_STEP_DIVISOR`: a depth whose ray lies in the
+/// shadow planes a quarter frame away has a large ∂Z/∂t, not the typical one its
+/// missing σ would get.
+pub const FINE_STEP_DIVISOR: f64 = 64.0;
+
 /// σZ of every pixel by first-order propagation (see [`DepthSigma`]).
 ///
 /// * `rays`, `times`, `planes`, `min_cos` as [`triangulate`]; `depth` (`H·W`) the pixel's
@@ -182,7 +188,8 @@ pub struct DepthSigma {
 ///   `i = clamp(⌊t⌋, 0, N−1)` and `min(i + 1, N−1)` with weight `t − ⌊t⌋` (f64); a non-finite
 ///   time takes row 0 with weight 0 (as numpy's casts do); where the interpolation is not
 ///   finite, `line_fill` (the rows' median);
-/// * `step` (frames): the depths at `t ± step` give ∂Z/∂t.
+/// * `step` (frames): the depths at `t ± step` give ∂Z/∂t (central, else one-sided), or,
+///   where neither exists, those at `t ± step / FINE_STEP_DIVISOR`.
 ///
 /// The arithmetic is the numpy definition's, type for type: the depths and their differences
 /// in f32 (`step` and `2·step` rounded to f32), the line's σ in f64, `σt_pixel²` in f32,
@@ -241,6 +248,8 @@ pub fn depth_sigma(
         }
     };
     let (h, h2) = (step as f32, (2.0 * step) as f32);
+    let fine_step = step / FINE_STEP_DIVISOR;
+    let (fine, fine2) = (fine_step as f32, (2.0 * fine_step) as f32);
     // The depth at time `t` on a ray normalised once per pixel (`hit` on the same ray, value for value).
     let z_at = |t: f32, ray: Option<Ray>| {
         ray.and_then(|ray| plane_at(&planes, f64::from(t))?.intersect(&ray, min_cos))
@@ -268,17 +277,26 @@ pub fn depth_sigma(
                 } else {
                     None
                 };
-                let (plus, minus) = (z_at(t + h, ray), z_at(t - h, ray));
-                let central = (plus - minus) / h2;
-                let forward = (plus - z) / h;
-                let backward = (z - minus) / h;
-                let dz = if central.is_finite() {
-                    central
-                } else if forward.is_finite() {
-                    forward
-                } else {
-                    backward
+                let derivative = |h: f32, h2: f32| {
+                    let (plus, minus) = (z_at(t + h, ray), z_at(t - h, ray));
+                    let central = (plus - minus) / h2;
+                    let forward = (plus - z) / h;
+                    let backward = (z - minus) / h;
+                    if central.is_finite() {
+                        central
+                    } else if forward.is_finite() {
+                        forward
+                    } else {
+                        backward
+                    }
                 };
+                let mut dz = derivative(h, h2);
+                if !dz.is_finite() && z.is_finite() {
+                    // Neither t + step nor t − step meets the ray (it lies in the planes there, or
+                    // behind the camera): the slope at t itself, from a step within t's own pair
+                    // of rows, where the interpolated plane moves linearly.
+                    dz = derivative(fine, fine2);
+                }
                 let floor = t.floor();
                 // numpy: nan_to_num, then the int64 cast (x86: out of range → i64::MIN), then clip
                 let row = if floor.is_finite() && floor.abs() < 9.0e18 {
@@ -633,6 +651,32 @@ mod tests {
         )
         .is_err());
         assert!(depth_sigma(&rays, &times, &planes, &depth, &sp, &line, 0.0, 0.0, 1e-3).is_err());
+    }
+
+    #[test]
+    fn depth_sigma_where_the_ray_leaves_the_planes_a_quarter_frame_away() {
+        // Between rows 0 and 1 (t in 0..1) the plane is n·X = d with n = (1, 0, 0.016·(0.75 − t)),
+        // d = t − 0.375: a ray along z meets it at Z = d / n_z, in front of the camera at t = 0.5
+        // (Z = 31.25), behind it at t = 0.25, and lies in it at t = 0.75. So neither t ± 0.25 gives a
+        // depth, and ∂Z/∂t = 0.375 / (0.016·(0.75 − t)²) = 375 at t = 0.5 comes from the fine step.
+        let planes = [1.0, 0.0, 0.012, -0.375, 1.0, 0.0, -0.004, 0.625];
+        let rays = [0.0, 0.0, 1.0];
+        let (points, _) = triangulate(&rays, &[0.5], &planes, 1e-3).unwrap();
+        assert!((points[2] - 31.25).abs() < 0.01, "{points:?}"); // f32 times, f64 planes
+        let got = depth_sigma(
+            &rays,
+            &[0.5],
+            &planes,
+            &[points[2]],
+            &[0.1],
+            &[0.0, 0.0],
+            0.0,
+            0.25,
+            1e-3,
+        )
+        .unwrap();
+        assert!((got.dz_dt[0] - 375.0).abs() < 1.0, "{:?}", got.dz_dt);
+        assert!((got.sigma_z[0] - 37.5).abs() < 0.1, "{:?}", got.sigma_z);
     }
 
     #[test]
