@@ -9,7 +9,7 @@ rendered of a monkey's head, a sphere on a post and a short cylinder standing
 on a bare white ground, a thin stick's shadow swept across them by a point
 lamp; one photo of an 8×8 chessboard lying on that ground
 (``camera_calibration_0.jpg``); and ``calib.txt``, where its authors wrote the
-renderer's camera (position, Euler angles, 50 mm lens) and, for three cones
+renderer's camera (position, Euler angles, 50 mm lens) and, for four cones
 standing on the ground, the world coordinates of each cone's tip and of its
 shadow's tip (cm).
 
@@ -22,7 +22,7 @@ What the script checks, and how:
   Euler tilt.
 * **The scan itself, with the renderer's own calibration**: the camera from
   ``calib.txt`` (centred, no distortion), the ground plane at the height of
-  the cones' shadow tips, the lamp where the three tip-to-shadow lines meet
+  the cones' shadow tips, the lamp where the four tip-to-shadow lines meet
   (least squares). ``gnomon regions`` proposes the bare swept ground, then
   ``gnomon scan``. The board's square size is not given anywhere, so Gnomon's
   own board pose sets no scale here.
