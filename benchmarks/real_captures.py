@@ -63,6 +63,7 @@ import argparse
 import glob
 import json
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -141,10 +142,20 @@ def run(cmd: list[str]) -> None:
         raise SystemExit(f"gnomon {cmd[0]} failed with code {code}")
 
 
+# A previous run's --out folder whose proposed regions (CAPTURE/regions/) the scans reuse instead of
+# running gnomon regions: two builds are then scored on the same pixels (main_'s --regions-from).
+REGIONS_FROM: Path | None = None
+
+
 def regions_preview_scan(log_path: Path) -> Path:
-    """gnomon regions, the masks into the field log, gnomon preview, gnomon scan."""
+    """gnomon regions (or a previous run's, see ``REGIONS_FROM``), the masks into the field log,
+    gnomon preview, gnomon scan."""
     folder = log_path.parent
-    run(["regions", str(log_path), "--out", str(folder / "regions"), "--quiet"])
+    if REGIONS_FROM is None:
+        run(["regions", str(log_path), "--out", str(folder / "regions"), "--quiet"])
+    else:
+        shutil.rmtree(folder / "regions", ignore_errors=True)
+        shutil.copytree(REGIONS_FROM / folder.name / "regions", folder / "regions")
     log = toml_io.load(log_path)
     for plane in log["planes"]:
         plane["mask"] = f"regions/{plane['name']}_mask.png"
@@ -485,7 +496,12 @@ def main_(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default="frog," + ",".join(PHONE))
     ap.add_argument("--max-sigma", default="", metavar="LIST",
                     help="also scan the frog with [output] max_sigma at each of these bounds (mm, comma-separated)")
+    ap.add_argument("--regions-from", type=Path, default=None, metavar="DIR",
+                    help="reuse the regions a previous run (its --out) proposed, to compare two builds on the "
+                         "same pixels")
     args = ap.parse_args(argv)
+    global REGIONS_FROM
+    REGIONS_FROM = args.regions_from.resolve() if args.regions_from is not None else None
     wanted = args.only.split(",")
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
