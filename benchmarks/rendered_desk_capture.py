@@ -35,6 +35,9 @@ What the script checks, and how:
   line with the camera, 2.2 m away, and the rays meet the shadow planes at a
   median 4.7°, under 1° near the image's centre column, where the planes pass
   through the camera (``report.json`` ``grazing_share``).
+* **The timing alone**: each edge's times on the bare ground against the time
+  at which its own shadow planes (interpolated between frames, as the
+  triangulation does) pass through the renderer's ground point of the pixel.
 """
 
 from __future__ import annotations
@@ -179,6 +182,43 @@ def score(scan: Path, first_frame: Path, ground_z: float, region_mask: Path) -> 
     return out
 
 
+def time_errors(log_path: Path, out: Path, ground_z: float, first_frame: Path) -> list[str]:
+    """Each edge's shadow times on the bare ground against the times its own shadow planes give the
+    renderer's ground point of each pixel (the plane table interpolated linearly between frames, as
+    the triangulation does): the timing alone, whatever the geometry does with it."""
+    from gnomon.pipeline import ScanOptions, run_scan
+
+    result = run_scan(log_path, out, ScanOptions(rrd=False))
+    rays = result.setup.camera.ray_map().astype(np.float64)
+    R, t = result.setup.pose.R, result.setup.pose.t
+    normal = R @ np.array([0.0, 0.0, 1.0])
+    ground = rays * ((normal @ (R @ np.array([0.0, 0.0, ground_z]) + t)) / (rays @ normal))[..., None]
+    hsv = cv2.cvtColor(cv2.imread(str(first_frame)), cv2.COLOR_BGR2HSV)
+    magenta = ((hsv[..., 0] > 135) & (hsv[..., 0] < 165) & (hsv[..., 1] > 80)).astype(np.uint8)
+    bare = ~cv2.dilate(magenta, np.ones((9, 9), np.uint8)).astype(bool)
+    lines = []
+    for edge in result.edges:
+        v, u = np.nonzero(bare & np.isfinite(edge.times))
+        times, x = edge.times[v, u].astype(np.float64), ground[v, u]
+        truth = np.full(len(v), np.nan)
+        for dk in range(-3, 3):  # the row pair around the scan's time whose planes bracket the point
+            k = np.clip(np.floor(times).astype(int) + dk, 0, len(edge.planes) - 2)
+            a, b = edge.planes[k], edge.planes[k + 1]
+            sa = np.einsum("ij,ij->i", a[:, :3], x) - a[:, 3]
+            sb = np.einsum("ij,ij->i", b[:, :3], x) - b[:, 3]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                f = sa / (sa - sb)
+            candidate = k + f
+            better = (f >= 0) & (f <= 1) & (np.isnan(truth) | (np.abs(candidate - times) < np.abs(truth - times)))
+            truth[better] = candidate[better]
+        err = (times - truth)[np.isfinite(truth)]
+        a = np.abs(err)
+        lines.append(f"  {edge.name} edge's times on the bare ground, against the renderer's ground point on its own "
+                     f"planes ({err.size} pixels): median {np.median(err):+.4f}, |median| {np.median(a):.4f}, "
+                     f"p90 {np.percentile(a, 90):.4f}, p99 {np.percentile(a, 99):.4f} frame")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("mirror", type=Path)
@@ -245,6 +285,9 @@ def main(argv: list[str] | None = None) -> int:
                       f"(p10 / 50 / 90), {100 * e['grazing_share']:.1f} % under 2°")
         print("\n".join(score(folder / name, sorted(source.glob("0*.jpg"))[0], ground_z,
                               folder / "regions" / "ground_mask.png")))
+        if bound is None:
+            print("\n".join(time_errors(log_path, folder / "scan_in_memory", ground_z,
+                                         sorted(source.glob("0*.jpg"))[0])))
     print(f"done in {time.time() - t0:.0f} s")
     return 0
 
