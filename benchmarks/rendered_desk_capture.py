@@ -35,6 +35,10 @@ What the script checks, and how:
   line with the camera, 2.2 m away, and the rays meet the shadow planes at a
   median 4.7°, under 1° near the image's centre column, where the planes pass
   through the camera (``report.json`` ``grazing_share``).
+* **Gnomon's own calibration**: the same scan with the Tsai camera and the
+  ground from the board photo (a plane with ``chessboard`` and ``image``); its
+  square size, which the authors do not give, set from the renderer's camera
+  height, and the lamp carried into the board's frame.
 * **The timing alone**: each edge's times on the bare ground against the time
   at which its own shadow planes (interpolated between frames, as the
   triangulation does) pass through the renderer's ground point of the pixel.
@@ -48,6 +52,7 @@ import math
 import re
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -113,31 +118,32 @@ def lamp_from_cones(tips: list[np.ndarray], shadows: list[np.ndarray]) -> tuple[
     return lamp, np.array([np.linalg.norm(p @ (lamp - s)) for p, s in projectors])
 
 
-def board_tilt_deg(image: Path, camera_file: Path, focal_px: float) -> tuple[float, float]:
-    """The angle between the optical axis and the board's normal (deg), and the pose's reprojection RMS
-    (px, from normalised image coordinates at ``focal_px``)."""
+def board_pose(image: Path, camera_file: Path) -> tuple[np.ndarray, np.ndarray, float]:
+    """The board's pose in the camera (rotation, translation in squares) from its corners' undistorted
+    rays, and the RMS of its reprojection in normalised image coordinates."""
     grey = cv2.imread(str(image), cv2.IMREAD_GRAYSCALE)
     ok, corners = cv2.findChessboardCorners(grey, BOARD)
     if not ok:
         raise SystemExit(f"{image}: no {BOARD[0]}x{BOARD[1]} board found")
     corners = cv2.cornerSubPix(grey, corners, (5, 5), (-1, -1),
                                (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4))
-    camera = load_camera_file(camera_file)
-    pixels = corners.reshape(-1, 2).astype(np.float64)
-    rays = camera.rays(pixels)
+    rays = load_camera_file(camera_file).rays(corners.reshape(-1, 2).astype(np.float64))
     undistorted = rays[:, :2] / rays[:, 2:3]  # normalised image coordinates: a pinhole with K = I
     grid = np.array([[i, j, 0.0] for j in range(BOARD[1]) for i in range(BOARD[0])])
     ok, rvec, tvec = cv2.solvePnP(grid, undistorted, np.eye(3), None)
-    R = cv2.Rodrigues(rvec)[0]
     back = cv2.projectPoints(grid, rvec, tvec, np.eye(3), None)[0].reshape(-1, 2)
-    rms = float(np.sqrt(np.mean(np.sum((back - undistorted) ** 2, axis=1)))) * focal_px
-    return math.degrees(math.acos(abs(R[2, 2]))), rms
+    rms = float(np.sqrt(np.mean(np.sum((back - undistorted) ** 2, axis=1))))
+    return cv2.Rodrigues(rvec)[0], tvec.ravel(), rms
 
 
-def score(scan: Path, first_frame: Path, ground_z: float, region_mask: Path) -> list[str]:
-    """The figures of the module docstring, as lines."""
+def score(scan: Path, first_frame: Path, ground_z: float, region_mask: Path,
+          to_renderer: Callable[[np.ndarray], np.ndarray] | None = None) -> list[str]:
+    """The figures of the module docstring, as lines (``to_renderer`` carries the points from the scan's
+    world frame into the renderer's first)."""
     ply = read_ply(scan / "points.ply")
     xyz, uv, sigma = ply["xyz"].astype(np.float64), ply["uv"], ply["sigma"]
+    if to_renderer is not None:
+        xyz = to_renderer(xyz)
     image = cv2.imread(str(first_frame))
     hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
     magenta = ((hsv[..., 0] > 135) & (hsv[..., 0] < 165) & (hsv[..., 1] > 80)).astype(np.uint8)
@@ -219,6 +225,45 @@ def time_errors(log_path: Path, out: Path, ground_z: float, first_frame: Path) -
     return lines
 
 
+def own_calibration(out: Path, source: Path, camera: Path, R: np.ndarray, t: np.ndarray, lamp: np.ndarray,
+                    height_mm: float, ground_z: float) -> None:
+    """The scan with Gnomon's own calibration from the one board photo: the Tsai camera, the ground from
+    the board (a field log plane with ``chessboard`` and ``image``), the same regions. The authors give no
+    square size: it is set so that the board puts the camera at the renderer's height above the ground;
+    the lamp is carried into the board's frame through the renderer's camera."""
+    from gnomon.fieldlog import load_field_log
+    from gnomon.scan_setup import frame_source, resolve_scan
+
+    folder = out / "own_calibration"
+    folder.mkdir(exist_ok=True)
+    board_R, board_t, _ = board_pose(source / "camera_calibration_0.jpg", camera)
+    square = height_mm / abs((-board_R.T @ board_t)[2])  # the camera's height above the board, in squares
+    log = {"capture": {"frames": str(source / "0*.jpg"), "units": "mm"}, "camera": {"file": str(camera)},
+           "planes": [{"name": "ground", "chessboard": f"{BOARD[0]}x{BOARD[1]}", "square": square,
+                       "image": str(source / "camera_calibration_0.jpg"),
+                       "mask": str(out / "scan_setup" / "regions" / "ground_mask.png")}],
+           "light": {"kind": "lamp", "position": [0.0, 0.0, -1.0e4]}}  # replaced below
+    log_path = folder / "field_log.toml"
+    toml_io.dump(log, log_path)
+    pose = resolve_scan(loaded := load_field_log(log_path), frame_source(loaded)).pose
+    log["light"]["position"] = pose.camera_to_world((R @ lamp + t)[None])[0].tolist()
+    toml_io.dump(log, log_path)
+    run(["scan", str(log_path), "--out", str(folder / "scan"), "--no-rrd", "--quiet"])
+    # the board's plane (z = 0 in its frame) against the renderer's ground: its angle, and its height at
+    # the board's centre (square units 3, 3) above the renderer's ground
+    def to_renderer(points: np.ndarray) -> np.ndarray:  # board frame -> camera -> the renderer's world
+        return (pose.world_to_camera(points) - t) @ R
+
+    centre, normal_end = to_renderer(np.array([[3.0 * square, 3.0 * square, 0.0], [3.0 * square, 3.0 * square, -1.0]]))
+    n = normal_end - centre
+    angle = math.degrees(math.acos(min(1.0, abs(n[2]) / np.linalg.norm(n))))
+    print(f"with Gnomon's own calibration (square {square:.2f} mm from the renderer's camera height; the board's "
+          f"plane is {angle:.3f}° off the renderer's ground and {centre[2] - ground_z:+.2f} mm above it at the "
+          f"board's centre):")
+    print("\n".join(score(folder / "scan", sorted(source.glob("0*.jpg"))[0], ground_z,
+                          out / "scan_setup" / "regions" / "ground_mask.png", to_renderer=to_renderer)))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("mirror", type=Path)
@@ -238,7 +283,8 @@ def main(argv: list[str] | None = None) -> int:
     run(["calibrate", "camera", str(source / "camera_calibration_0.jpg"), "--board", f"{BOARD[0]}x{BOARD[1]}",
          "--square", "1", "--model", "tsai", "--pixel-pitch", f"{pitch!r}", "--out", str(camera), "--no-rrd"])
     fitted = toml_io.load(camera)
-    tilt, rms = board_tilt_deg(source / "camera_calibration_0.jpg", camera, fitted["f_mm"] / pitch)
+    board_R, _, board_rms = board_pose(source / "camera_calibration_0.jpg", camera)
+    tilt, rms = math.degrees(math.acos(abs(board_R[2, 2]))), board_rms * fitted["f_mm"] / pitch
     std = fitted["calibration"]["std"]["f_mm"]
     print(f"camera from the one board photo (Tsai): f {fitted['f_mm']:.3f} ± {std:.3f} mm "
           f"(renderer {calib['focal_mm']:g} mm), RMS {fitted['calibration']['rms_px']:.3f} px; the board's tilt to "
@@ -267,6 +313,7 @@ def main(argv: list[str] | None = None) -> int:
     log["planes"][0]["mask"] = "regions/ground_mask.png"
     log["planes"][0].pop("regions")
     toml_io.dump(log, log_path)
+    own_calibration(out, source, camera, R, t, lamp, calib["position_mm"][2] - ground_z, ground_z)
     bounds = [float(x) for x in args.max_sigma.split(",") if x]
     for bound in [None, *bounds]:
         name = "scan" if bound is None else f"scan_max_sigma_{bound:g}"
