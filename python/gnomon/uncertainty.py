@@ -32,7 +32,8 @@ from gnomon.triangulation import MIN_RAY_PLANE_COS, triangulate
 DERIVATIVE_STEP_FRAMES = 0.25
 # Where neither ts + h nor ts − h gives a depth (the ray lies in the shadow planes there, or
 # behind the camera), ∂Z/∂t is taken again with h / FINE_STEP_DIVISOR, within the pixel's own
-# pair of plane rows: such a depth has a large σ, not the typical one a missing σ gets.
+# pair of plane rows: such a depth has a large σ, not the typical one a missing σ gets (the
+# kernel's own FINE_STEP_DIVISOR: the two must agree, tests/test_depth_sigma.py compares them).
 FINE_STEP_DIVISOR = 64.0
 # A transition sampled by fewer than this many frames (steepest single-frame
 # step larger than contrast / this) is under-sampled: linear interpolation
