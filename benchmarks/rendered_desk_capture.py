@@ -47,7 +47,6 @@ What the script checks, and how:
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import re
 import sys
@@ -62,6 +61,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from gnomon import toml_io
 from gnomon.calibration import load_camera_file
+from gnomon.markers import PlanePose, plane_pose_from_chessboard
+from gnomon.pipeline import ScanOptions, ScanResult, run_scan
 from gnomon.ply import read_ply
 from real_captures import run
 
@@ -118,22 +119,10 @@ def lamp_from_cones(tips: list[np.ndarray], shadows: list[np.ndarray]) -> tuple[
     return lamp, np.array([np.linalg.norm(p @ (lamp - s)) for p, s in projectors])
 
 
-def board_pose(image: Path, camera_file: Path) -> tuple[np.ndarray, np.ndarray, float]:
-    """The board's pose in the camera (rotation, translation in squares) from its corners' undistorted
-    rays, and the RMS of its reprojection in normalised image coordinates."""
-    grey = cv2.imread(str(image), cv2.IMREAD_GRAYSCALE)
-    ok, corners = cv2.findChessboardCorners(grey, BOARD)
-    if not ok:
-        raise SystemExit(f"{image}: no {BOARD[0]}x{BOARD[1]} board found")
-    corners = cv2.cornerSubPix(grey, corners, (5, 5), (-1, -1),
-                               (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4))
-    rays = load_camera_file(camera_file).rays(corners.reshape(-1, 2).astype(np.float64))
-    undistorted = rays[:, :2] / rays[:, 2:3]  # normalised image coordinates: a pinhole with K = I
-    grid = np.array([[i, j, 0.0] for j in range(BOARD[1]) for i in range(BOARD[0])])
-    ok, rvec, tvec = cv2.solvePnP(grid, undistorted, np.eye(3), None)
-    back = cv2.projectPoints(grid, rvec, tvec, np.eye(3), None)[0].reshape(-1, 2)
-    rms = float(np.sqrt(np.mean(np.sum((back - undistorted) ** 2, axis=1))))
-    return cv2.Rodrigues(rvec)[0], tvec.ravel(), rms
+def board_pose(image: Path, camera_file: Path) -> PlanePose:
+    """The board's plane from the photo (squares as units), as a field log's ``chessboard`` plane gets it."""
+    return plane_pose_from_chessboard(cv2.imread(str(image)), load_camera_file(camera_file), BOARD, 1.0,
+                                      source=str(image))
 
 
 def score(scan: Path, first_frame: Path, ground_z: float, region_mask: Path,
@@ -188,13 +177,10 @@ def score(scan: Path, first_frame: Path, ground_z: float, region_mask: Path,
     return out
 
 
-def time_errors(log_path: Path, out: Path, ground_z: float, first_frame: Path) -> list[str]:
+def time_errors(result: ScanResult, ground_z: float, first_frame: Path) -> list[str]:
     """Each edge's shadow times on the bare ground against the times its own shadow planes give the
     renderer's ground point of each pixel (the plane table interpolated linearly between frames, as
     the triangulation does): the timing alone, whatever the geometry does with it."""
-    from gnomon.pipeline import ScanOptions, run_scan
-
-    result = run_scan(log_path, out, ScanOptions(rrd=False))
     rays = result.setup.camera.ray_map().astype(np.float64)
     R, t = result.setup.pose.R, result.setup.pose.t
     normal = R @ np.array([0.0, 0.0, 1.0])
@@ -236,8 +222,7 @@ def own_calibration(out: Path, source: Path, camera: Path, R: np.ndarray, t: np.
 
     folder = out / "own_calibration"
     folder.mkdir(exist_ok=True)
-    board_R, board_t, _ = board_pose(source / "camera_calibration_0.jpg", camera)
-    square = height_mm / abs((-board_R.T @ board_t)[2])  # the camera's height above the board, in squares
+    square = height_mm / board_pose(source / "camera_calibration_0.jpg", camera).offset_cam  # height in squares
     log = {"capture": {"frames": str(source / "0*.jpg"), "units": "mm"}, "camera": {"file": str(camera)},
            "planes": [{"name": "ground", "chessboard": f"{BOARD[0]}x{BOARD[1]}", "square": square,
                        "image": str(source / "camera_calibration_0.jpg"),
@@ -283,8 +268,8 @@ def main(argv: list[str] | None = None) -> int:
     run(["calibrate", "camera", str(source / "camera_calibration_0.jpg"), "--board", f"{BOARD[0]}x{BOARD[1]}",
          "--square", "1", "--model", "tsai", "--pixel-pitch", f"{pitch!r}", "--out", str(camera), "--no-rrd"])
     fitted = toml_io.load(camera)
-    board_R, _, board_rms = board_pose(source / "camera_calibration_0.jpg", camera)
-    tilt, rms = math.degrees(math.acos(abs(board_R[2, 2]))), board_rms * fitted["f_mm"] / pitch
+    board = board_pose(source / "camera_calibration_0.jpg", camera)
+    tilt, rms = math.degrees(math.acos(abs(board.normal_cam[2]))), board.rms_px
     std = fitted["calibration"]["std"]["f_mm"]
     print(f"camera from the one board photo (Tsai): f {fitted['f_mm']:.3f} ± {std:.3f} mm "
           f"(renderer {calib['focal_mm']:g} mm), RMS {fitted['calibration']['rms_px']:.3f} px; the board's tilt to "
@@ -322,8 +307,11 @@ def main(argv: list[str] | None = None) -> int:
             bounded = dict(log, output={"max_sigma": bound})
             path = folder / f"field_log_max_sigma_{bound:g}.toml"
             toml_io.dump(bounded, path)
-        run(["scan", str(path), "--out", str(folder / name), "--no-rrd", "--quiet"])
-        report = json.loads((folder / name / "report.json").read_text())
+        print(f"$ gnomon scan {path} --out {folder / name} --no-rrd --quiet (in this process)", flush=True)
+        result = run_scan(path, folder / name, ScanOptions(rrd=False))
+        for warning in result.warnings:
+            print(f"gnomon: warning: {warning}")
+        report = result.report
         print(f"{name}:")
         for edge, e in report["edges"].items():
             if edge != "disagreement" and e.get("ray_plane_angle_deg"):
@@ -333,8 +321,7 @@ def main(argv: list[str] | None = None) -> int:
         print("\n".join(score(folder / name, sorted(source.glob("0*.jpg"))[0], ground_z,
                               folder / "regions" / "ground_mask.png")))
         if bound is None:
-            print("\n".join(time_errors(log_path, folder / "scan_in_memory", ground_z,
-                                         sorted(source.glob("0*.jpg"))[0])))
+            print("\n".join(time_errors(result, ground_z, sorted(source.glob("0*.jpg"))[0])))
     print(f"done in {time.time() - t0:.0f} s")
     return 0
 
