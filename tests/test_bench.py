@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from gnomon import _kernel
-from gnomon.bench import format_table, run_bench
+from gnomon.bench import format_scan_table, format_table, run_bench, run_scan_bench
 from gnomon.cli import main
 
 
@@ -25,3 +25,19 @@ def test_scan_bench_names_a_missing_field_log(tmp_path, capsys):
     assert main(["bench", "--scan", str(missing)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "nope.toml" in err[0]
+
+
+def test_scan_bench_times_decoding_tracking_and_the_scan(tiny_capture, tmp_path):
+    """`--scan`: decoding alone, one tracking pass alone (the scan's reader and tracker, nothing after)
+    and the whole scan, over the same frames; the table names each (times are the benchmark's, not
+    asserted)."""
+    r = run_scan_bench(str(tiny_capture), str(tmp_path / "out"))
+    assert (r.width, r.height) == (48, 36)
+    assert r.decode.frames == 24
+    assert r.track is not None and r.track.frames == 24  # a lamp skips no frame
+    assert r.track.seconds > 0 and r.scan_seconds > 0
+    assert (tmp_path / "out" / "report.json").is_file()
+    text = format_scan_table(r)
+    assert "decode alone" in text and "decode+track" in text and "whole scan" in text
+    assert f"{r.track.seconds / r.decode.seconds:.2f}x the decode-alone wall time" in text
+    assert r.to_dict()["track"]["frames"] == 24

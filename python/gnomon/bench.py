@@ -240,6 +240,9 @@ class ScanBench:
     decode_one_thread: Throughput | None = None
     """Decoding the image files alone on one thread (as the scan's reader did before it decoded on
     several), when ``decode_threads`` > 1: for comparison with figures taken then."""
+    track: Throughput | None = None
+    """Decoding and tracking alone: one pass of the scan's own reader and kernel tracker (its settings,
+    one dip width) over the frames, and nothing after it: what no scan of the capture can go below."""
 
     @property
     def ratio(self) -> float:
@@ -276,13 +279,15 @@ def run_scan_bench(field_log: str, out_dir: str, mesh_formats: tuple[str, ...] |
         one_thread = _decode_pass(source)[0]
         source.decode_threads = None
     decode, shape = _decode_pass(source)
+    track = _track_pass(log, source)
     t0, c0 = time.perf_counter(), time.process_time()
     result = run_scan(field_log, out_dir, ScanOptions(mesh_formats=mesh_formats))
     scan_s, scan_cpu = time.perf_counter() - t0, time.process_time() - c0
     stages = {k: float(v) for k, v in result.report.get("timings_s", {}).items()}
     stages_cpu = {k: float(v) for k, v in result.report.get("cpu_timings_s", {}).items()}
     return ScanBench(str(field_log), decode.frames, int(shape[1]), int(shape[0]), decode, scan_s, scan_cpu,
-                     stages, _load_average(), stages_cpu, list(result.setup.mesh_formats), threads, one_thread)
+                     stages, _load_average(), stages_cpu, list(result.setup.mesh_formats), threads, one_thread,
+                     track)
 
 
 def _decode_pass(source) -> tuple[Throughput, tuple[int, int]]:
@@ -294,6 +299,19 @@ def _decode_pass(source) -> tuple[Throughput, tuple[int, int]]:
     return Throughput(count, time.perf_counter() - t0, time.process_time() - c0), shape
 
 
+def _track_pass(log, source) -> Throughput:
+    """Time one tracking pass over ``source``'s frames as the scan makes it (its reader, its kernel tracker
+    with the field log's settings, the frames the light skips), the shadow times included, nothing after."""
+    from gnomon.scan_setup import resolve_scan
+    from gnomon.tracking import track_source
+
+    setup = resolve_scan(log, source)
+    t0, c0 = time.perf_counter(), time.process_time()
+    tracked = track_source(source, setup.tracker, (setup.camera.height, setup.camera.width),
+                           skip=setup.light.skipped_frames(source.count))
+    return Throughput(tracked.n_frames, time.perf_counter() - t0, time.process_time() - c0)
+
+
 def format_scan_table(r: ScanBench) -> str:
     lines = [
         (f"gnomon bench --scan {r.field_log}: {r.frames} frames {r.width}x{r.height}, "
@@ -303,6 +321,10 @@ def format_scan_table(r: ScanBench) -> str:
         *([f"  (on 1 thread  {r.decode_one_thread.seconds:8.2f} s wall {r.decode_one_thread.cpu_seconds:8.2f} s CPU: "
            f"the whole scan is {r.scan_seconds / r.decode_one_thread.seconds:.2f}x that wall time)"]
           if r.decode_one_thread is not None and r.decode_one_thread.seconds > 0 else []),
+        *([f"  decode+track  {r.track.seconds:8.2f} s wall {r.track.cpu_seconds:8.2f} s CPU: "
+           f"{r.track.seconds / r.decode.seconds:.2f}x the decode-alone wall time (the kernel tracker on the "
+           "decoded frames, nothing after: the floor of any scan)"]
+          if r.track is not None and r.decode.seconds > 0 else []),
         (f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
          f"{r.ratio:.2f}x the decode-alone wall time, {r.cpu_ratio:.2f}x its CPU time"
          + (f" (mesh formats {', '.join(r.mesh_formats)})" if r.mesh_formats else "")),

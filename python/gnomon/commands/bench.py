@@ -23,8 +23,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help=COMMANDS["bench"],
         description="Synthesise grey frames of a sweeping shadow, time the Rust tracker and the numpy "
         "tracker on them, and measure the kernel's peak memory (RSS of a fresh process) for 100 and "
-        "for --frames frames. With --scan FIELD_LOG: time decoding that capture's frames alone, then "
-        "its whole scan, in one run.",
+        "for --frames frames. With --scan FIELD_LOG: time decoding that capture's frames alone, one "
+        "tracking pass alone (decoding and the kernel tracker, nothing after), then its whole scan, in one run.",
     )
     p.add_argument("--frames", type=int, default=1000, metavar="N", help="frames for the kernel (default 1000)")
     p.add_argument("--numpy-frames", type=int, default=30, metavar="M",
@@ -34,7 +34,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--window", type=int, default=4, help="tracker window half-width m (default 4)")
     p.add_argument("--max-width", type=int, default=32, help="tracker dip width W, frames (default 32)")
     p.add_argument("--scan", metavar="FIELD_LOG",
-                   help="instead: time decoding this capture's frames alone, then its whole scan")
+                   help="instead: time decoding this capture's frames alone, decoding and tracking alone, then its "
+                   "whole scan")
     p.add_argument("--scan-out", metavar="DIR", help="output folder of the --scan run (default: a temporary one)")
     p.add_argument("--mesh-formats", type=_mesh_formats, default=None, metavar="LIST",
                    help="with --scan: the mesh's files, as gnomon scan --mesh-formats ('all': every format)")
