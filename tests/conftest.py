@@ -27,10 +27,12 @@ os.environ.pop("WAYLAND_DISPLAY", None)
 
 def write_tiny_capture(folder: Path, *, n_frames: int = 24, width: int = 48, height: int = 36,
                        lamp=(-200.0, 0.0, 400.0), extra: dict | None = None, band_half_width: float = 5.0,
-                       noise_dn: float = 0.0, time_jitter_frames: float = 0.0) -> Path:
+                       noise_dn: float = 0.0, time_jitter_frames: float = 0.0, dip_dn: float = 160.0,
+                       min_contrast: float | None = 20.0) -> Path:
     """A minimal, valid capture: a dark band (its dark core ``2·band_half_width`` px wide, 6 px soft
-    edges) sweeping left→right from outside the image to outside it, a camera looking straight down at
-    the desk from 500 mm, and its field log; ``noise_dn``: Gaussian noise (DN, seeded);
+    edges, ``dip_dn`` DN below the lit 200 DN) sweeping left→right from outside the image to outside it,
+    a camera looking straight down at the desk from 500 mm, and its field log (``[scan] min_contrast``,
+    None: none); ``noise_dn``: Gaussian noise (DN, seeded);
     ``time_jitter_frames``: each pixel sees the band that many frames late or early (Gaussian, fixed per
     pixel, seeded: a time error no image noise explains). Returns the log's path."""
     frames = folder / "frames"
@@ -43,7 +45,7 @@ def write_tiny_capture(folder: Path, *, n_frames: int = 24, width: int = 48, hei
     for i in range(n_frames):
         centre = -travel + (width + 2 * travel) * i / (n_frames - 1) - late
         shadow = np.clip((np.abs(u - centre) - band_half_width) / 6.0, 0, 1)  # 1 = lit, soft edges
-        image = 40 + 160 * np.broadcast_to(shadow, (height, width))
+        image = (200 - dip_dn) + dip_dn * np.broadcast_to(shadow, (height, width))
         if noise_dn > 0:
             image = np.round(image + rng.normal(0.0, noise_dn, image.shape))
         cv2.imwrite(str(frames / f"frame_{i:04d}.png"), np.clip(image, 0, 255).astype(np.uint8))
@@ -59,7 +61,7 @@ def write_tiny_capture(folder: Path, *, n_frames: int = 24, width: int = 48, hei
         "planes": [{"name": "desk", "point": [0, 0, 0], "normal": [0, 0, 1],
                     "regions": [[0, 0, width, 6], [0, height - 6, width, height]]}],
         "light": {"kind": "lamp", "position": list(lamp)},
-        "scan": {"min_contrast": 20},
+        "scan": {} if min_contrast is None else {"min_contrast": min_contrast},
     }
     for section, values in (extra or {}).items():
         log.setdefault(section, {}).update(values)

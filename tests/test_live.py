@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
-from conftest import encode_h264
+from conftest import encode_h264, write_tiny_capture
 from gnomon import ply
 from gnomon.cli import main
 from gnomon.frames import FrameSource
@@ -150,3 +150,31 @@ def test_bad_source_is_one_line(desk_scan, capsys):
     assert main(["live", str(log), "--source", "no/such/thing.mp4", "--no-view", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "no/such/thing.mp4" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_two_plane_scans_show_points_while_the_shadow_moves(two_plane_small, tmp_path):
+    """A two-plane light (its planes from the lines on desk and wall, completed from the located light
+    where the shadow crossed one plane) gets live points like a lamp, and the same final outputs as
+    `gnomon scan`. Its live planes are those of frames with a line on both planes: the simulated sweep
+    has them for nearly every pixel's time."""
+    log = two_plane_small / "field_log.toml"
+    assert main(["scan", str(log), "--out", str(tmp_path / "scan"), "--no-rrd", "--quiet"]) == 0
+    assert main(["live", str(log), "--out", str(tmp_path / "live"), "--no-view", "--no-rrd", "--quiet"]) == 0
+    for name in ("depth.npy", "sigma.npy"):
+        np.testing.assert_array_equal(np.load(tmp_path / "scan" / name), np.load(tmp_path / "live" / name))
+    report = json.loads((tmp_path / "live" / "report.json").read_text())
+    assert report["tracking"]["live"]["points_logged"] >= 0.8 * report["coverage"]["points"] > 0
+
+
+def test_the_watch_opens_the_dips_the_scan_keeps(tmp_path):
+    """Without a min_contrast in the field log the scan keeps dips of MIN_CONTRAST_SIGMAS σ of the
+    measured noise; the live watch opens the same ones (from the frame after the noise is measured),
+    not only those deeper than a fixed 20 DN: a band 15 DN deep under 1 DN of noise (floor ≈ 8 DN)
+    shows its points while it sweeps."""
+    log = write_tiny_capture(tmp_path / "capture", n_frames=40, noise_dn=1.0, dip_dn=15.0, min_contrast=None)
+    assert main(["live", str(log), "--out", str(tmp_path / "live"), "--no-view", "--no-rrd", "--quiet"]) == 0
+    report = json.loads((tmp_path / "live" / "report.json").read_text())
+    final = report["coverage"]["points"]
+    assert final > 0.5 * 48 * 36  # the scan keeps the shallow band
+    assert report["tracking"]["live"]["points_logged"] >= 0.8 * final

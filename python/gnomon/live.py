@@ -59,7 +59,6 @@ from gnomon.fieldlog import load_field_log
 from gnomon.fitting import fit_line_robust
 from gnomon.frames import Frame, FrameSource, to_grey
 from gnomon.fusion import fuse_depths
-from gnomon.light.base import LightModel as _BaseLight
 from gnomon.pipeline import ScanResult, scan, write_scan
 from gnomon.publish import staged_outputs
 from gnomon.recording import ScanRecording, display_available, playable_video
@@ -78,6 +77,7 @@ from gnomon.tracking import (
     ShadowTracker,
     TrackedSequence,
     TrackerSettings,
+    contrast_floor,
     linear,
     track_source,
 )
@@ -103,6 +103,8 @@ MAX_DEFER = 8
 POINT_CHUNK = 4
 # Longest side of the live shadow-time map in the recording (pixels).
 LIVE_MAP_SIZE = 480
+# The live watch's contrast floor (DN) where the scan's is 0 (noiseless frames, no min_contrast).
+WATCH_FLOOR_DN = 20.0
 
 
 @dataclass
@@ -558,7 +560,7 @@ class LiveView:
         cam = setup.camera
         self.shape = (cam.height, cam.width)
         self.ray_map = cam.ray_map()
-        self.lines_light = type(setup.light).shadow_planes is _BaseLight.shadow_planes
+        self.lines_light = setup.light.planes_from_reference_lines
         wanted = [e for e in ("enter", "leave") if setup.edge in (e, "both")]
         capacity = 256
         self.edges = [_EdgeState(name, self.shape, setup.planes, capacity) for name in wanted]
@@ -574,6 +576,7 @@ class LiveView:
         self.contrast_lin = np.zeros(n_pixels, dtype=np.float32)
         self.used: list[int] = []
         self.tracker: ShadowTracker | None = None
+        self.watching = False  # the kernel's live watch has started (once the noise is known)
         self.noise_dn: float | None = None
         self._previous: np.ndarray | None = None
         self._noise: list[float] = []
@@ -592,16 +595,19 @@ class LiveView:
     def on_update(self, frame: Frame, tracker: ShadowTracker) -> None:
         """After the tracker took ``frame``: finished pixels → maps → lines → planes → points → log."""
         t0, c0 = time.perf_counter(), time.thread_time()
-        if self.tracker is None:
-            self.tracker = tracker
-            # The field log's contrast floor; without one, 20 DN (the scan's floor comes from the noise,
-            # which is not known yet at the first frame).
-            floor = self.setup.tracker.min_contrast
-            tracker.watch(floor if floor is not None else 20.0, self.recover)
+        self.tracker = tracker
         self.used.append(frame.index)
         k = len(self.used) - 1  # tracker frame
         self._estimate_noise(frame.grey)
-        fin = tracker.take_finished()
+        if not self.watching and self.noise_dn is not None:
+            # The scan's own contrast floor (the field log's min_contrast and MIN_CONTRAST_SIGMAS σ of the
+            # noise, whichever is higher), so the watch opens the dips the final pass keeps: with a fixed
+            # 20 DN it missed the low-contrast half of a phone video's points. The watch starts with the
+            # frame after the noise is known (its first pairs of frames).
+            floor = contrast_floor(self.setup.tracker.min_contrast, self.noise_dn)
+            tracker.watch(floor if floor > 0 else WATCH_FLOOR_DN, self.recover)
+            self.watching = True
+        fin = tracker.take_finished() if self.watching else []
         if len(fin):
             self._add_finished(fin, k, frame.index)
             self.idle = 0

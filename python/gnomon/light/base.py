@@ -137,6 +137,10 @@ class LightModel:
     kind: ClassVar[str] = ""
     # True when :meth:`choose_dips` needs the tracker's second candidate dips (``tracked.second``).
     chooses_dips: ClassVar[bool] = False
+    # True when the planes come from the shadow lines on the reference planes (:meth:`planes_from_lines`,
+    # whatever :meth:`shadow_planes` adds to them): the live view (:mod:`gnomon.live`) then measures the
+    # lines and planes as the frames come; False for a light whose planes need the whole capture.
+    planes_from_reference_lines: ClassVar[bool] = True
 
     def skipped_frames(self, n_frames: int) -> np.ndarray:
         """(n_frames,) bool: capture frames the tracker must not see."""

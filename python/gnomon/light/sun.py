@@ -273,6 +273,7 @@ class SunWithPole(SunLight):
 
     mode = "pole"
     chooses_dips = True
+    planes_from_reference_lines = False  # the pole's planes need the capture's whole timeline
 
     def __init__(self, clock: SunClock, pose: Pose, base_world: np.ndarray, top_world: np.ndarray,
                  radius: float = 0.0):
