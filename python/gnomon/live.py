@@ -607,8 +607,8 @@ class LiveView:
             floor = contrast_floor(self.setup.tracker.min_contrast, self.noise_dn)
             tracker.watch(floor if floor > 0 else WATCH_FLOOR_DN, self.recover)
             self.watching = True
-        fin = tracker.take_finished() if self.watching else []
-        if len(fin):
+        fin = tracker.take_finished() if self.watching else None
+        if fin is not None and len(fin):
             self._add_finished(fin, k, frame.index)
             self.idle = 0
         else:
