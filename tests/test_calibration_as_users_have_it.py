@@ -213,6 +213,34 @@ def test_frames_glob_matches_upper_case_suffixes(tmp_path):
     assert glob_frames(frames, "frame_000[0-2].Png") == tuple(sorted(frames.glob("frame_000[0-2].*")))
 
 
+def test_a_quoted_pattern_names_its_files_on_the_command_line(tmp_path, capsys, monkeypatch):
+    """`gnomon init "frames/*.png"` and `gnomon calibrate camera "calib/*.jpg"` (a shell that does not
+    expand the pattern, or a user who quoted it) take the files it matches as the field log's frames glob
+    does: any-case suffix, natural order; a pattern that matches nothing is one line naming it."""
+    from gnomon.cli import main
+    from gnomon.frames import expand_glob_argument
+
+    write_tiny_capture(tmp_path / "cap", n_frames=12)
+    frames = tmp_path / "cap" / "frames"
+    for k, p in enumerate(sorted(frames.iterdir())):
+        if k % 3 == 0:
+            p.rename(p.with_suffix(".PNG"))
+    expected = tuple(sorted(frames.iterdir(), key=lambda p: p.stem))
+    assert expand_glob_argument(str(frames / "*.png")) == expected  # absolute
+    monkeypatch.chdir(tmp_path)
+    assert expand_glob_argument("cap/frames/frame_*.png") == tuple(p.relative_to(tmp_path) for p in expected)
+    assert expand_glob_argument(str(frames / "frame_0001.png")) is None  # an existing file is itself
+    assert calibration.expand_image_args([str(frames / "frame_000[0-3].png")]) == list(expected[:4])
+    out = tmp_path / "field_log.toml"
+    assert main(["init", str(frames / "*.png"), "--out", str(out)]) == 0
+    assert tomllib.loads(out.read_text())["capture"]["frames"] == "cap/frames/*.png"  # as 8 of the 12 spell it
+    assert "12 frames of 48x36" in capsys.readouterr().out
+    assert main(["init", str(frames / "*.tif"), "--out", str(tmp_path / "other.toml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "*.tif: no frame matches this pattern" in err[0]
+    assert not (tmp_path / "other.toml").exists()
+
+
 def test_markers_that_do_not_fit_say_whether_the_camera_or_the_marks_are_at_fault() -> None:
     """Six marks (the corners and mid-points of the long sides of a 152 × 121 mm rectangle) on a plane 45° to
     a 1920×1080 camera 600 mm away. Filmed at f = 1400 px by a camera calibrated at 1000 px (a zoom since the

@@ -199,11 +199,17 @@ def to_grey_u8(image: np.ndarray) -> np.ndarray:
 
 
 def expand_image_args(items: Sequence[str | os.PathLike]) -> list[Path]:
-    """Command-line image arguments → files: a directory stands for its images, sorted by name."""
+    """Command-line image arguments → files: a directory stands for its images, sorted by name; a
+    pattern (``"calib/*.jpg"``) for the files it matches (:func:`gnomon.frames.expand_glob_argument`)."""
+    from gnomon.frames import expand_glob_argument
+
     out: list[Path] = []
     for it in items:
         p = Path(it)
-        if p.is_dir():
+        matched = expand_glob_argument(it, "image")
+        if matched is not None:
+            out.extend(matched)
+        elif p.is_dir():
             found = sorted(q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES)
             if not found:
                 raise GnomonError(f"{p}: directory holds no images ({', '.join(IMAGE_SUFFIXES)})")

@@ -21,6 +21,7 @@ suffix in any case (``*.jpg`` finds ``.JPG`` too).
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import io
 import os
@@ -316,6 +317,23 @@ def glob_frames(base: Path, pattern: str) -> tuple[Path, ...]:
     if m:
         pattern = head + sep + m.group(1) + _any_case(m.group(2))
     return tuple(sorted({p for p in base.glob(pattern) if p.is_file()}, key=natural_key))
+
+
+def expand_glob_argument(argument: str | os.PathLike, what: str = "file") -> tuple[Path, ...] | None:
+    """A command-line argument that names no existing path but is a glob pattern (``"frames/*.jpg"``,
+    quoted, or from a shell that does not expand it) → the files it matches, as a field log's ``frames``
+    matches them (:func:`glob_frames`: any-case suffix, natural order); None for any other argument.
+    :class:`FrameError` naming the pattern when it matches no file (``what``: what the files are)."""
+    text = os.fspath(argument)
+    if os.path.lexists(text) or not glob.has_magic(text):
+        return None
+    parts = Path(text).parts
+    first = next(i for i, part in enumerate(parts) if glob.has_magic(part))
+    base = Path(*parts[:first]) if first else Path(".")
+    found = glob_frames(base, "/".join(parts[first:]))
+    if not found:
+        raise FrameError(f"{text}: no {what} matches this pattern")
+    return found
 
 
 def natural_key(path: Path) -> tuple:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from collections import Counter
 from pathlib import Path
 
 from gnomon.commands import COMMANDS
@@ -95,7 +96,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "section commented: the frames glob, the camera (--camera FILE, or inline keys to fill in), a desk "
         "and a wall with markers to fill in, a two-plane light and the scan settings.",
     )
-    p.add_argument("frames", nargs="+", type=Path, help="the frames (image files) or one video")
+    p.add_argument("frames", nargs="+", type=Path, help="the frames (image files, or a quoted pattern such as "
+                   "\"frames/*.jpg\") or one video")
     p.add_argument("--camera", type=Path, default=None, help="a camera file from `gnomon calibrate camera`")
     p.add_argument("--out", type=Path, default=None, help="field log to write (default: field_log.toml "
                    "beside the frames' folder)")
@@ -106,11 +108,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from gnomon import atomic
     from gnomon.errors import GnomonError
-    from gnomon.frames import FrameSource, natural_key
+    from gnomon.frames import FrameSource, expand_glob_argument, natural_key
     from gnomon.publish import check_output_file
     from gnomon.validate import input_file
 
-    files = sorted(args.frames, key=natural_key)
+    files = sorted((f for a in args.frames for f in (expand_glob_argument(a, "frame") or (a,))), key=natural_key)
     for f in files:
         input_file(f, "frame")
     if args.out is not None:
@@ -132,8 +134,10 @@ def run(args: argparse.Namespace) -> int:
     else:
         if len({f.parent.resolve() for f in files}) != 1:
             raise GnomonError(f"{files[0]}: the frames must be in one folder")
-        suffixes = {f.suffix for f in files}
-        suffix = files[0].suffix if len(suffixes) == 1 else ".*"
+        # the frames glob matches a suffix in any case: written as most of the files spell it
+        spellings = Counter(f.suffix for f in files)
+        one = len({s.lower() for s in spellings}) == 1
+        suffix = max(spellings, key=lambda s: (spellings[s], s)) if one else ".*"
         rel = Path(os.path.relpath(os.path.abspath(folder), base)).as_posix()
         frames, count, what = f"{rel}/*{suffix}", str(len(files)), "frames"
     if args.camera is not None:
