@@ -55,3 +55,42 @@ def test_video_capture_is_recorded_as_a_video(tiny_capture: Path) -> None:
     from gnomon.review import summarize
 
     assert summarize(rrd).to_dict()["frames_stored"] == len(frames)
+
+
+@pytest.mark.parametrize("suffix, fmt, codec", [(".webm", "webm", "libvpx"), (".mkv", "matroska", "libx264")])
+def test_a_variable_frame_rate_video_in_any_container_has_all_its_frames(tmp_path: Path, suffix, fmt, codec) -> None:
+    """Matroska and WebM carry no frame count: OpenCV estimates it from the duration and the nominal rate,
+    which a variable frame rate (a browser's or a webcam app's recording) puts off by many frames. The
+    source counts them: every frame, in order, and the capture is not taken for a truncated one."""
+    import fractions
+
+    import numpy as np
+
+    from gnomon.cli import main
+    from gnomon.frames import FrameSource
+
+    path, n = tmp_path / f"vfr{suffix}", 45
+    out = av.open(str(path), "w", format=fmt)
+    stream = out.add_stream(codec, rate=30)
+    stream.width, stream.height, stream.pix_fmt = 64, 48, "yuv420p"
+    stream.codec_context.time_base = fractions.Fraction(1, 1000)
+    t = 0
+    for i in range(n):
+        image = np.full((48, 64, 3), 200, np.uint8)
+        image[:, i : i + 8] = 40  # a dark band one column further right in each frame
+        frame = av.VideoFrame.from_ndarray(image, format="rgb24")
+        frame.pts, frame.time_base = t, fractions.Fraction(1, 1000)
+        t += 20 if i % 3 else 80  # 20 ms, 20 ms, 80 ms: 30 fps on average, never at 30 fps
+        for packet in stream.encode(frame):
+            out.mux(packet)
+    for packet in stream.encode():
+        out.mux(packet)
+    out.close()
+    source = FrameSource((), path)
+    assert source.count == n
+    frames = list(source)
+    assert [f.index for f in frames] == list(range(n))
+    centre = [float(np.mean(np.flatnonzero(f.grey[24] < 120))) for f in frames]  # the band's middle column
+    assert all(abs(c - (i + 3.5)) <= 1.0 for i, c in enumerate(centre))  # each frame in its place
+    assert main(["init", str(path), "--out", str(tmp_path / "field_log.toml")]) == 0
+    assert f"# {n} video" in (tmp_path / "field_log.toml").read_text()

@@ -289,6 +289,22 @@ def image_size(path: Path) -> tuple[int, int]:
     return (h, w) if orientation in (5, 6, 7, 8) else (w, h)
 
 
+# Video containers whose frame count OpenCV reads from an index of every frame (ISO base media: MP4,
+# QuickTime). In the others it is the duration times the nominal frame rate, an estimate: a variable
+# frame rate (a browser's WebM, a webcam app's Matroska) puts it off by many frames (a 60-frame WebM
+# announced 72) and a constant one by one (59 for 60). Their frames are counted (decoded once, not
+# converted) when the source is opened: a scan needs its frame count before the first frame.
+EXACT_COUNT_SUFFIXES = (".mp4", ".mov", ".m4v")
+
+
+def _count_frames(cap: cv2.VideoCapture) -> int:
+    """Frames a freshly opened capture delivers to its end (``grab``: decoded, not converted)."""
+    n = 0
+    while cap.grab():
+        n += 1
+    return n
+
+
 def video_size(path: Path) -> tuple[int, int]:
     """(width, height) of a video's frames."""
     cap = cv2.VideoCapture(str(path))
@@ -377,6 +393,8 @@ class FrameSource:
                 if not cap.isOpened():
                     raise FrameError(f"{video}: cannot be opened as a video")
                 announced = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+                if expected_count is None and video.suffix.lower() not in EXACT_COUNT_SUFFIXES:
+                    announced = _count_frames(cap)
             finally:
                 cap.release()
             self.count = expected_count if expected_count is not None else announced
