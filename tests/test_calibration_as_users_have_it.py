@@ -241,6 +241,29 @@ def test_a_quoted_pattern_names_its_files_on_the_command_line(tmp_path, capsys, 
     assert not (tmp_path / "other.toml").exists()
 
 
+def test_heic_photos_are_named_as_such_with_what_to_do(tmp_path, capsys):
+    """An iPhone's photos are HEIC by default, which OpenCV does not read: calibration photos and frames
+    in that format are refused in one line that says so (recognised by the file's first bytes)."""
+    from gnomon.cli import main
+
+    heic = b"\x00\x00\x00\x18ftypheic\x00\x00\x00\x00mif1heic" + bytes(64)  # an ISO base media 'ftyp' box
+    folder = tmp_path / "calib"
+    folder.mkdir()
+    for i in range(3):
+        (folder / f"IMG_{i}.HEIC").write_bytes(heic)
+    for args in ([str(folder / "IMG_0.HEIC"), str(folder / "IMG_1.HEIC")], [str(folder)]):
+        assert main(["calibrate", "camera", *args, "--board", "9x6", "--square", "25",
+                     "--out", str(tmp_path / "cam.toml"), "--no-rrd"]) == 2
+        err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("gnomon:")]  # not the progress
+        assert len(err) == 1 and "HEIF" in err[0] and "JPEG" in err[0], err
+    log = write_tiny_capture(tmp_path / "cap", n_frames=6)
+    (tmp_path / "cap" / "frames" / "frame_0003.png").write_bytes(heic)  # one frame saved as HEIC
+    assert main(["scan", str(log), "--out", str(tmp_path / "scan"), "--quiet", "--no-rrd"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "frame_0003.png: HEIF/HEIC" in err[0], err
+    assert not (tmp_path / "scan").exists()
+
+
 def test_markers_that_do_not_fit_say_whether_the_camera_or_the_marks_are_at_fault() -> None:
     """Six marks (the corners and mid-points of the long sides of a 152 × 121 mm rectangle) on a plane 45° to
     a 1920×1080 camera 600 mm away. Filmed at f = 1400 px by a camera calibrated at 1000 px (a zoom since the

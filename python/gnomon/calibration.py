@@ -113,7 +113,9 @@ def read_grey(path: str | os.PathLike) -> np.ndarray:
     flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION
     img = cv2.imdecode(np.frombuffer(raw, np.uint8), flags)
     if img is None:
-        raise GnomonError(f"{p}: not a readable image")
+        from gnomon.frames import unsupported_format
+
+        raise GnomonError(f"{p}: {unsupported_format(raw) or 'not a readable image'}")
     return apply_exif_orientation(img, exif_orientation(raw))
 
 
@@ -212,7 +214,10 @@ def expand_image_args(items: Sequence[str | os.PathLike]) -> list[Path]:
         elif p.is_dir():
             found = sorted(q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES)
             if not found:
-                raise GnomonError(f"{p}: directory holds no images ({', '.join(IMAGE_SUFFIXES)})")
+                heif = [q.name for q in p.iterdir() if q.suffix.lower() in (".heic", ".heif", ".avif")]
+                why = (f"; {heif[0]} and the like are HEIF/AVIF, which is not read: export them as JPEG or PNG"
+                       if heif else "")
+                raise GnomonError(f"{p}: directory holds no images ({', '.join(IMAGE_SUFFIXES)}){why}")
             out.extend(found)
         else:
             out.append(p)

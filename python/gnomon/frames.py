@@ -258,6 +258,21 @@ def _read_image_bytes(path: Path) -> bytes:
     return raw
 
 
+# ISO base media brands of HEIF images (HEIC: an iPhone's photos by default) and AVIF: OpenCV reads neither.
+_HEIF_BRANDS = {b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b"hevm", b"hevs", b"mif1", b"msf1",
+                b"avif", b"avis"}
+
+
+def unsupported_format(raw: bytes) -> str | None:
+    """What to tell the user about an image format OpenCV cannot decode, recognised by its first bytes
+    (not its name), or None."""
+    if len(raw) >= 12 and raw[4:8] == b"ftyp" and raw[8:12] in _HEIF_BRANDS:
+        kind = "AVIF" if raw[8:12] in (b"avif", b"avis") else "HEIF/HEIC (an iPhone's default photo format)"
+        return (f"{kind} is not read: export the images as JPEG or PNG (on an iPhone: Settings > Camera > "
+                "Formats > Most Compatible takes JPEG photos)")
+    return None
+
+
 def _decode(path: Path, raw: bytes, flags: int) -> np.ndarray:
     """``raw`` (the bytes of ``path``) decoded with OpenCV's ``flags``, turned upright by its EXIF orientation."""
     try:
@@ -267,7 +282,7 @@ def _decode(path: Path, raw: bytes, flags: int) -> np.ndarray:
             else str(exc).strip().splitlines()[-1]
         raise FrameError(f"{path}: cannot be decoded: {reason}") from None
     if image is None or image.size == 0:
-        raise FrameError(f"{path}: cannot be decoded as an image")
+        raise FrameError(f"{path}: {unsupported_format(raw) or 'cannot be decoded as an image'}")
     if image.dtype not in (np.uint8, np.uint16):
         raise FrameError(f"{path}: unsupported sample type {image.dtype} (8- or 16-bit images only)")
     return apply_exif_orientation(image, exif_orientation(raw))
