@@ -94,3 +94,37 @@ def test_a_variable_frame_rate_video_in_any_container_has_all_its_frames(tmp_pat
     assert all(abs(c - (i + 3.5)) <= 1.0 for i, c in enumerate(centre))  # each frame in its place
     assert main(["init", str(path), "--out", str(tmp_path / "field_log.toml")]) == 0
     assert f"# {n} video" in (tmp_path / "field_log.toml").read_text()
+
+
+def test_a_video_opencv_cannot_decode_is_one_line_naming_its_codec(tmp_path: Path, monkeypatch) -> None:
+    """AV1 (some phones', some browsers' recordings): the FFmpeg inside OpenCV's wheels has no AV1 decoder
+    but opens the file. Not 'the video ended after 0 frames': one line naming the file and its codec, and
+    no FFmpeg log lines on the process's stderr. (Where OpenCV does read AV1, the video must simply work.)"""
+    import os
+
+    import numpy as np
+
+    monkeypatch.setenv("SVT_LOG", "1")  # the AV1 encoder's banner: errors only
+    path = tmp_path / "av1.mp4"
+    out = av.open(str(path), "w", format="mp4")
+    stream = out.add_stream("libsvtav1", rate=30)
+    stream.width, stream.height, stream.pix_fmt = 64, 48, "yuv420p"
+    for i in range(10):
+        image = np.full((48, 64, 3), 200, np.uint8)
+        image[:, 4 * i : 4 * i + 8] = 40
+        for packet in stream.encode(av.VideoFrame.from_ndarray(image, format="rgb24")):
+            out.mux(packet)
+    for packet in stream.encode():
+        out.mux(packet)
+    out.close()
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
+    # a process of its own: FFmpeg's log level is fixed by the first video a process opens
+    proc = subprocess.run([sys.executable, "-m", "gnomon", "init", str(path), "--out", str(tmp_path / "log.toml")],
+                          capture_output=True, text=True, timeout=120, env=env)
+    if cv2.VideoCapture(str(path)).read()[0]:
+        assert proc.returncode == 0, proc.stderr
+        return
+    assert proc.returncode == 2 and not (tmp_path / "log.toml").exists()
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, lines
+    assert "av1.mp4: no frame could be decoded" in lines[0] and "'AV01'" in lines[0]

@@ -190,6 +190,9 @@ def one_malloc_arena() -> bool:
 def main(argv: list[str] | None = None) -> int:
     # rerun's writer thread logs its own errors on stderr; ours are one line.
     os.environ.setdefault("RUST_LOG", "off")
+    # So does FFmpeg's decoder inside OpenCV ("Get current frame error" for a codec it cannot decode); a video
+    # it cannot read is named by our own line (gnomon.frames). OPENCV_FFMPEG_LOGLEVEL in the environment wins.
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
     if argv is None:  # the process's command line: the process ends with this run
         one_malloc_arena()
         _skip_exit_collection()

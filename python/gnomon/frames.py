@@ -320,6 +320,15 @@ def _count_frames(cap: cv2.VideoCapture) -> int:
     return n
 
 
+def _undecodable(video: Path, cap: cv2.VideoCapture) -> str:
+    """Why a video opened but gave no frame: most often a codec OpenCV's FFmpeg does not decode (AV1)."""
+    code = int(cap.get(cv2.CAP_PROP_FOURCC))
+    fourcc = "".join(chr((code >> (8 * k)) & 0xFF) for k in range(4)).strip("\x00 ")
+    codec = f"its codec '{fourcc}'" if fourcc.isprintable() and fourcc else "its codec"
+    return (f"{video}: no frame could be decoded: {codec} is not one OpenCV's video decoder reads here "
+            "(AV1 is not); convert it to H.264 (MP4) or to image frames")
+
+
 def video_size(path: Path) -> tuple[int, int]:
     """(width, height) of a video's frames."""
     cap = cv2.VideoCapture(str(path))
@@ -410,6 +419,8 @@ class FrameSource:
                 announced = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
                 if expected_count is None and video.suffix.lower() not in EXACT_COUNT_SUFFIXES:
                     announced = _count_frames(cap)
+                    if announced == 0:
+                        raise FrameError(_undecodable(video, cap))
             finally:
                 cap.release()
             self.count = expected_count if expected_count is not None else announced
@@ -466,6 +477,8 @@ class FrameSource:
             i = 0
             while i < self.count:
                 ok, image = cap.read()
+                if (not ok or image is None) and i == 0:
+                    raise FrameError(_undecodable(self.video, cap))
                 if not ok or image is None:
                     raise FrameError(
                         f"{self.video}: the video ended after {i} frames, expected {self.count}"
