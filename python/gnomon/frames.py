@@ -472,13 +472,15 @@ class FrameSource:
     def _decode(self) -> Iterator[Frame]:
         """A video's frames in order, on the reader thread (image files: :meth:`_decode_parallel`)."""
         first: np.ndarray | None = None
-        cap = cv2.VideoCapture(str(self.video))
+        video = self.video
+        assert video is not None  # the image files decode in _decode_parallel
+        cap = cv2.VideoCapture(str(video))
         try:
             i = 0
             while i < self.count:
                 ok, image = cap.read()
                 if (not ok or image is None) and i == 0:
-                    raise FrameError(_undecodable(self.video, cap))
+                    raise FrameError(_undecodable(video, cap))
                 if not ok or image is None:
                     raise FrameError(
                         f"{self.video}: the video ended after {i} frames, expected {self.count}"
