@@ -178,3 +178,19 @@ def test_the_watch_opens_the_dips_the_scan_keeps(tmp_path):
     final = report["coverage"]["points"]
     assert final > 0.5 * 48 * 36  # the scan keeps the shallow band
     assert report["tracking"]["live"]["points_logged"] >= 0.8 * final
+
+
+def test_a_camera_that_is_not_there_is_one_line_on_the_process_stderr(desk_scan):
+    """OpenCV warns on stderr itself when a camera index cannot be opened ('can't open camera by
+    index'); the command's own line is the only one (a process of its own: OpenCV's log level is
+    read once per process)."""
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENCV_LOG_LEVEL", "OPENCV_FFMPEG_LOGLEVEL")}
+    proc = subprocess.run([sys.executable, "-m", "gnomon", "live", str(desk_scan / "capture" / "field_log.toml"),
+                           "--source", "97", "--no-view", "--quiet", "--out", str(desk_scan / "no_camera")],
+                          capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert lines == ["gnomon: error: camera 97: cannot be opened as a camera or stream"], lines

@@ -193,6 +193,8 @@ def main(argv: list[str] | None = None) -> int:
     # So does FFmpeg's decoder inside OpenCV ("Get current frame error" for a codec it cannot decode); a video
     # it cannot read is named by our own line (gnomon.frames). OPENCV_FFMPEG_LOGLEVEL in the environment wins.
     os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+    # And OpenCV's own warnings ("can't open camera by index"): a camera or stream it cannot open is ours too.
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")
     if argv is None:  # the process's command line: the process ends with this run
         one_malloc_arena()
         _skip_exit_collection()
