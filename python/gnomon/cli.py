@@ -25,7 +25,7 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from gnomon import __version__, _kernel
+from gnomon import __version__, _kernel, interrupts
 from gnomon.commands import COMMANDS
 from gnomon.errors import GnomonError
 
@@ -48,6 +48,8 @@ class Terminated(KeyboardInterrupt):
 
 
 def _raise_terminated(signum: int, frame) -> None:
+    if interrupts.postpone(signum, frame):  # inside a held block, or inside importlib: later
+        return
     raise Terminated(signum)
 
 
@@ -57,6 +59,8 @@ _interrupted = False  # a SIGINT arrived during this run (numpy may turn it into
 def _raise_interrupted(signum: int, frame) -> None:
     global _interrupted
     _interrupted = True
+    if interrupts.postpone(signum, frame):
+        return
     raise KeyboardInterrupt
 
 

@@ -29,8 +29,9 @@ import queue
 import re
 import threading
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -390,6 +391,22 @@ class Frame:
     name: str
 
 
+@contextmanager
+def frame_pass(source: Iterable[Frame]) -> Iterator[Iterator[Frame]]:
+    """One pass over a source's frames as a context: ``with frame_pass(source) as frames: for frame in
+    frames``. The pass is closed when the block ends (its decoding threads stopped), also when it ends
+    early or by an exception, not later by the garbage collector: a pass closed in a finalizer is one
+    where Python only prints an exception raised meanwhile (a SIGTERM, SIGHUP or Ctrl-C turned into one
+    by ``gnomon.cli``) and goes on, so the scan ran to its end and published."""
+    frames = iter(source)
+    try:
+        yield frames
+    finally:
+        close = getattr(frames, "close", None)
+        if close is not None:
+            close()
+
+
 class FrameSource:
     """A sequence of frames from an image list or a video file.
 
@@ -537,6 +554,19 @@ class FrameSource:
                 for job in pending:
                     job.cancel()
         self._digest = digest.hexdigest()
+
+    def first(self) -> Frame:
+        """The first frame alone (:class:`FrameError` when there is none).
+
+        The pass is closed here, before returning: its decoding threads stop in this call, so a signal
+        that arrives meanwhile (``gnomon.cli``'s SIGTERM/SIGHUP/SIGINT) is raised to the caller. Left to
+        the garbage collector (a ``for`` loop left by ``return``), the pass is closed in a finalizer,
+        where Python only prints such an exception and goes on: the scan then ran to its end."""
+        with frame_pass(self) as frames:
+            frame = next(frames, None)
+        if frame is None:
+            raise FrameError(f"{self.name}: no frames")
+        return frame
 
     def __iter__(self) -> Iterator[Frame]:
         """Frames in order, decoded on background threads."""

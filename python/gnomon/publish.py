@@ -39,12 +39,11 @@ import errno
 import os
 import re
 import shutil
-import signal
 import tempfile
-from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
+from collections.abc import Iterable
 from pathlib import Path
 
+from gnomon import interrupts
 from gnomon.errors import OutputError
 
 __all__ = [
@@ -65,7 +64,6 @@ OUTPUT_FILES = ("points.ply", "points_enu.ply", "mesh.ply", "mesh.obj", "mesh.mt
 
 _INSIDE_PARTIAL = ".gnomon-partial-"
 _INSIDE_COMMIT = ".gnomon-commit-"
-_INTERRUPTS = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
 _TMP_NAME = re.compile(r"^\.(?P<name>.+)\.[A-Za-z0-9_]+\.tmp$")
 
 
@@ -191,20 +189,6 @@ def _exchange(a: Path, b: Path) -> bool:
     if err in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP, errno.EXDEV):
         return False
     raise OSError(err, os.strerror(err), str(b))
-
-
-@contextmanager
-def _interrupts_held() -> Iterator[None]:
-    """Hold SIGINT/SIGTERM/SIGHUP until the block ends (they are delivered afterwards)."""
-    try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
-    except (AttributeError, ValueError, OSError):  # not the main thread's business, or no sigmask
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _owner_alive(name: str, prefix: str) -> bool:
@@ -392,14 +376,24 @@ class staged_outputs:
                                           and os.access(self.out.parent, os.W_OK | os.X_OK)):
                 # OUT is a mount point (or its parent is not ours): stage inside it.
                 self.inside = True
-                self.staging = _mkstaging(self.out, _INSIDE_PARTIAL)
+                where, prefix = self.out, _INSIDE_PARTIAL
             else:
                 self.inside = False
                 self.out.parent.mkdir(parents=True, exist_ok=True)
-                self.staging = _mkstaging(self.out.parent, f".{self.out.name}.partial-")
-        except OSError as exc:
-            raise output_error(exc, exc.filename or self.out) from None
-        return self.staging
+                where, prefix = self.out.parent, f".{self.out.name}.partial-"
+            # A signal that comes while the folder is made, or before this returns (when the with
+            # statement would not yet remove it on the way out), removes it here: with them held, the
+            # folder exists only once it is known, and one delivered on their release is caught below.
+            with interrupts.held():
+                self.staging = _mkstaging(where, prefix)
+            return self.staging
+        except BaseException as exc:
+            if self.staging is not None:
+                shutil.rmtree(self.staging, ignore_errors=True)
+                self.staging = None
+            if isinstance(exc, OSError):
+                raise output_error(exc, exc.filename or self.out) from None
+            raise
 
     # -- leaving: publish or discard
     def __exit__(self, exc_type, exc, tb) -> None:
@@ -429,7 +423,7 @@ class staged_outputs:
         try:
             _write_manifest(staging)
             fsync_tree(staging)
-            with _interrupts_held():
+            with interrupts.held():
                 self._swap_in(staging)
                 if rrd_tmp is not None and self.rrd_path is not None:
                     os.replace(rrd_tmp, self.rrd_path)

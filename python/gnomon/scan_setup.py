@@ -20,7 +20,7 @@ from gnomon.calibration import fit_camera_to_frames, read_grey
 from gnomon.camera import CalibratedCamera, CameraModel, OpenCVCamera, Pose
 from gnomon.chi2 import chi2_isf
 from gnomon.crop import Crop
-from gnomon.errors import FieldLogError, FrameError, GnomonError
+from gnomon.errors import FieldLogError, GnomonError
 from gnomon.fieldlog import FieldLog, PlaneSpec, check_geometry
 from gnomon.frames import FrameSource, to_grey
 from gnomon.light import LightModel, light_from_field_log
@@ -127,9 +127,8 @@ def tracker_settings(log: FieldLog) -> TrackerSettings:
 
 def first_frame(source: FrameSource) -> np.ndarray:
     """The capture's first frame (colour when it has colour)."""
-    for frame in source:
-        return frame.color if frame.color is not None else frame.grey
-    raise FrameError(f"{source.name}: no frames")
+    frame = source.first()
+    return frame.color if frame.color is not None else frame.grey
 
 
 def _plane_pose_from_aruco(log: FieldLog, plane: PlaneSpec, image: np.ndarray, camera: CameraModel,

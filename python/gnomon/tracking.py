@@ -61,7 +61,7 @@ import numpy as np
 from gnomon import _kernel
 from gnomon.cloud_levels import HeldFrame, cloud_levels
 from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, KernelLutError, KernelParameterError
-from gnomon.frames import Frame, FrameSource
+from gnomon.frames import Frame, FrameSource, frame_pass
 from gnomon.progress import Progress
 from gnomon.uncertainty import image_noise_dn
 from gnomon.validate import MAX_DIP_FRAMES
@@ -524,8 +524,8 @@ def track_source(
     seen = 0
     # The noise estimate (first frame pairs) runs on a worker thread while the tracker goes on.
     with Progress("tracking", source.count, enabled=progress) as bar, \
-            ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-noise") as pool:
-        for frame in source:
+            ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-noise") as pool, frame_pass(source) as frames:
+        for frame in frames:
             seen += 1
             if first is None:
                 _check_first(frame, shape, where)

@@ -125,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
     if out.exists() and not args.force:
         raise GnomonError(f"{out}: exists; use --force to overwrite it")
     source = FrameSource((), files[0], None) if video else FrameSource(tuple(files), None, None)
-    first = next(iter(source))
+    first = source.first()
     height, width = first.grey.shape[:2]
     base = os.path.abspath(out.parent)
     if video:
