@@ -367,3 +367,51 @@ def test_tiles_flag_errors_are_one_line(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+def _children(pid: int) -> set[int]:
+    """The processes whose parent is ``pid`` (Linux /proc)."""
+    kids = set()
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                kids.add(int(entry.name))
+    return kids
+
+
+def _running(pid: int) -> bool:
+    try:
+        state = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc to find the worker processes")
+def test_a_terminated_local_batch_stops_its_workers_and_publishes_nothing(tmp_path):
+    """SIGTERM to `gnomon batch` on its own LocalCluster while the scans run: one line, exit 143, the
+    worker processes gone, no scan published after the stop and no staging folder left. (It used to close
+    the cluster gracefully: the workers ran on for the nanny's grace period and published their scans,
+    and Dask logged a warning per cancelled task.)"""
+    logs = [write_tiny_capture(tmp_path / name, n_frames=400, width=320, height=240) for name in ("a", "b")]
+    out = tmp_path / "out"
+    p = subprocess.Popen([sys.executable, "-m", "gnomon", "batch", "--quiet", *map(str, logs), "--out", str(out),
+                          "--workers", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while time.monotonic() < deadline and p.poll() is None and not (
+            out.exists() and any(".partial-" in q.name for q in out.iterdir())):
+        time.sleep(0.01)
+    assert p.poll() is None, p.communicate()
+    workers = {k for c in _children(p.pid) for k in _children(c) | {c}}  # spawn's helpers and their workers
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=BATCH_TIMEOUT_S)
+    assert p.returncode == 128 + signal.SIGTERM, err
+    assert err.strip().splitlines() == ["gnomon: terminated (SIGTERM)"], err
+    time.sleep(2.0)  # a worker left running would publish its scan by now
+    assert not any(_running(k) for k in workers)
+    assert sorted(q.name for q in out.iterdir()) == [], "published or staged after the stop"
