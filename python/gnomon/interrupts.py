@@ -11,11 +11,12 @@ recording's file with it). Two kinds of place must not see such an exception:
   Blocking the signals (``pthread_sigmask``) is not enough once other threads run: the kernel
   hands a process's signal to any thread that does not block it, and Python runs its handler in
   the main thread all the same.
-* importlib's own code, where it takes and gives back its locks: an exception raised between
-  taking its global lock and the ``try`` that releases it leaves the lock held for ever, and every
-  later import, on any thread, waits (a scan hung so: its writer thread waiting to import, the
-  main thread waiting for the writer). A signal that comes there is sent again a few
-  milliseconds later.
+* an import: importlib's code takes and gives back its locks, and an exception raised between
+  taking its global lock and the ``try`` that releases it leaves the lock held for ever, so that
+  every later import, on any thread, waits (a scan hung so: its writer thread waiting to import,
+  the main thread waiting for the writer). A signal that comes while importlib's code is anywhere on
+  the main thread's stack (whose innermost frame alone did not prevent the hang) is sent again a few
+  milliseconds later: an import delays it by its own length at most.
 
 The handlers call :func:`postpone` first; it says whether the signal was put off.
 """
