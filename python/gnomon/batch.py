@@ -460,6 +460,7 @@ def run_batch(plan: BatchPlan, *, scheduler: str | None = None, workers: int | N
     from gnomon.progress import Progress
 
     client, cluster = connect_client(scheduler, workers, timeout_s)
+    interrupted = False
     try:
         futures = {}
         for job in plan.scans:
@@ -487,13 +488,14 @@ def run_batch(plan: BatchPlan, *, scheduler: str | None = None, workers: int | N
                 bar.update(len(results))
         return [results[n] for n in jobs]
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM/SIGHUP (gnomon.cli.Terminated)
+        interrupted = True
         if cluster is not None:
             stop_local_workers(cluster)
-            close_client(client, cluster)
-            remove_staging([j.out for j in plan.scans] + [m.out for m in plan.merges])
         raise
     finally:
         close_client(client, cluster)
+        if interrupted and cluster is not None:  # the killed workers are reaped by now
+            remove_staging([j.out for j in plan.scans] + [m.out for m in plan.merges])
 
 
 def stop_local_workers(cluster) -> None:
@@ -531,13 +533,12 @@ def remove_staging(outs: Sequence[Path]) -> None:
 
 
 def close_client(client, cluster) -> None:
-    """Close a :func:`connect_client` pair (again: a no-op). A local worker still busy after the nanny's
-    grace period is killed on purpose (our scan tasks hold no state worth saving), so that warning is not
-    shown."""
+    """Close a :func:`connect_client` pair. A local worker still busy after the nanny's grace period is
+    killed on purpose (our scan tasks hold no state worth saving), so that warning is not shown."""
     import logging
 
     client.close()
-    if cluster is not None and cluster.status.name not in ("closing", "closed"):
+    if cluster is not None:
         nanny = logging.getLogger("distributed.nanny")
         level = nanny.level
         nanny.setLevel(logging.ERROR)
