@@ -1,77 +1,63 @@
-"""`gnomon init FRAMES... [--camera FILE]`: a commented field-log template for a capture.
+"""`gnomon init FRAMES... [--camera FILE] [--light KIND]`: a commented field-log template for a capture.
 
 Reads the first frame for its size, writes ``field_log.toml`` beside the
 frames (or ``--out``) with the capture's frames glob (or video), the camera
-(the file given, or inline keys to fill in), two reference planes (desk and
-wall) with marker tables to fill in, a two-plane light and the scan
-settings, each with a comment saying what it means. Then: fill in the
-markers, check with ``gnomon preview``, propose the regions with
-``gnomon regions``, and scan.
+(the file given, or inline keys to fill in), the reference planes, the light
+and the scan settings, each with a comment saying what it means. The set-up
+(``--light``) decides the rest:
+
+* ``two-plane`` (the default): a desk and a wall, each with markers to fill
+  in; no light to measure.
+* ``lamp``: one desk, placed by a chessboard lying on it (``--board``,
+  ``--square``, ``--board-image``) or by markers; a ``[pencil]`` table listing
+  the pencil photos (``--pencil``) whose base and shadow tip are to be filled
+  in for ``gnomon calibrate lamp``, and a light read from the ``lamp.toml``
+  that command writes.
+* ``sun``: the ground and a facade with markers, a ``[site]`` to fill in (its
+  latitude, longitude and heading are NaN until then, so the log does not
+  load unfilled), illumination normalised, and the frames' times: EXIF when
+  the first frame has them, else the file names' pattern when every name
+  parses with it, else a start and frame rate to fill in.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import re
 from collections import Counter
 from pathlib import Path
 
 from gnomon.commands import COMMANDS
 from gnomon.fieldlog import VIDEO_SUFFIXES
 
-TEMPLATE = '''\
-# Gnomon field log, written by `gnomon init` (format: field_logs/README.md).
-# Next: fill in the markers below, check with `gnomon preview {name}`,
-# propose the regions with `gnomon regions {name}`, then `gnomon scan {name}`.
+LIGHTS = ("two-plane", "lamp", "sun")
+
+HEADER = '''\
+# Gnomon field log for a {setup}, written by `gnomon init` (format: field_logs/README.md).
+{steps}
 # Paths are relative to this file. Lengths in [capture] units; pixels with the
 # top-left pixel's centre at (0, 0).
 
+'''
+
+STEPS = {
+    "two-plane": "# Next: fill in the markers below, check with `gnomon preview {name}`,\n"
+                 "# propose the regions with `gnomon regions {name}`, then `gnomon scan {name}`.",
+    "lamp": "# Next: fill in the desk's board (or markers) and each pencil photo's base and tip,\n"
+            "# locate the lamp with `gnomon calibrate lamp {name}` (it writes lamp.toml), check with\n"
+            "# `gnomon preview {name}`, draw two rough bands of bare desk (regions), grow them with\n"
+            "# `gnomon regions {name}`, then `gnomon scan {name}`.",
+    "sun": "# Next: fill in [site] (every NaN), the frames' times if asked below and the markers,\n"
+           "# check with `gnomon preview {name}`, propose the regions with `gnomon regions {name}`,\n"
+           "# then `gnomon scan {name}`.",
+}
+
+CAPTURE = '''\
 [capture]
 frames = "{frames}"  # {count} {what}, {width}x{height}
-units = "mm"
+units = "{units}"
 gamma = "srgb"  # how the camera encoded intensity: "srgb", a decoding exponent (2.2), or 1.0 for linear data
-
-[camera]
-{camera}
-[[planes]]
-# The desk. Its markers' frame is the world frame: origin `point`, axes `x_axis` and normal x x_axis.
-# Give at least 4 markers: their centres in this frame (plane_xy, in mm) and, in the first frame,
-# pixel_hint = [u, v] for a printed 2x2 checker (found within 30 px and refined), or
-# pixel = [u, v] for the exact pixel of any other mark (a clicked cross).
-name = "desk"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 0.0, 1.0]
-x_axis = [1.0, 0.0, 0.0]
-markers = [
-  # {{ id = 0, plane_xy = [0.0, 0.0], pixel_hint = [u, v] }},
-]
-# regions: where only this plane is seen, bare and swept; `gnomon regions` writes a mask:
-# mask = "regions/desk_mask.png"
-# regions = [[u0, v0, u1, v1], {{ polygon = [[u, v], [u, v], [u, v]] }}]
-
-[[planes]]
-# The wall, in its own frame (placed in the world by its own markers: no pose to type).
-name = "wall"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 0.0, 1.0]
-x_axis = [1.0, 0.0, 0.0]
-markers = [
-  # {{ id = 4, plane_xy = [0.0, 0.0], pixel_hint = [u, v] }},
-]
-# mask = "regions/wall_mask.png"
-
-[light]
-kind = "two-plane"  # the shadow planes from the lines on the two planes; or "lamp" with position = [x, y, z]
-
-[scan]
-# min_contrast = 20  # DN: pixels whose lit and shadowed values differ less are left out
-                    # (without it: 8 σ of the image noise measured between the first frames)
-edge = "both"  # triangulate the entering and the leaving shadow edge and fuse them
-
-# [output]  # what the written files keep (all optional)
-# crop_above = "desk"
-# crop_min_height = 2.0  # the object without the desk: points at least this high above it
-# max_sigma = 1.5  # drop the points whose predicted depth sigma exceeds this: fewer points, fewer wrong ones
 '''
 
 INLINE_CAMERA = '''\
@@ -87,22 +73,201 @@ cy = {cy}
 dist = [0.0, 0.0, 0.0, 0.0, 0.0]  # k1, k2, p1, p2, k3
 '''
 
+MARKERS_HOWTO = '''\
+# Give at least 4 markers: their centres in this frame (plane_xy, in {units}) and, in the first frame,
+# pixel_hint = [u, v] for a printed 2x2 checker (found within 30 px and refined), or
+# pixel = [u, v] for the exact pixel of any other mark (a clicked cross).
+'''
+
+MARKED_PLANE = '''\
+[[planes]]
+# {what}
+{howto}name = "{name}"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+x_axis = [1.0, 0.0, 0.0]
+markers = [
+  # {{ id = {first_id}, plane_xy = [0.0, 0.0], pixel_hint = [u, v] }},
+]
+{regions}
+'''
+
+REGIONS_MASK = '''\
+# regions: where only this plane is seen, bare and swept; `gnomon regions` writes a mask:
+# mask = "regions/{name}_mask.png"
+# regions = [[u0, v0, u1, v1], {{ polygon = [[u, v], [u, v], [u, v]] }}]'''
+
+LAMP_DESK = '''\
+[[planes]]
+# The desk, the world frame (x along the board's columns, z up from the desk).
+# Its pose from a chessboard lying flat on it (COLSxROWS inner corners, `square` in {units}),
+# photographed from the scan's own place (`image`; by default the capture's first frame). The board
+# may be taken away before the sweep; the camera may not move. Or give markers instead, as
+# in a two-plane field log (field_logs/README.md).
+name = "desk"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+x_axis = [1.0, 0.0, 0.0]
+{board}
+# regions: two rough bands of bare desk that the shadow crosses (above and below the object);
+# `gnomon regions` grows them into a mask of the bare, swept desk:
+regions = [
+  # [u0, v0, u1, v1],
+]
+# mask = "regions/desk_mask.png"
+'''
+
+PENCIL = '''\
+[pencil]
+# For `gnomon calibrate lamp`: photos (from the scan's place, the lamp where it is for the sweep)
+# of a pencil standing upright on the desk, moved between photos to places spread around the
+# scene. For each: its base (foot) and the tip of its shadow, in pixels. With `empty`, a photo
+# of the desk without the pencil, the tip may be left out and found for you (base a rough pixel).
+height = {height}  # the pencil's length in {units}: measure it
+sigma_px = 1.0  # how well the base and tip are placed, pixels
+# empty = "light/empty.jpg"
+
+{photos}
+'''
+
+LIGHT = {
+    "two-plane": '''\
+[light]
+kind = "two-plane"  # the shadow planes from the lines on the two planes; or "lamp" with position = [x, y, z]
+''',
+    "lamp": '''\
+[light]
+kind = "lamp"
+file = "lamp.toml"  # written by `gnomon calibrate lamp {name}` from the [pencil] table
+''',
+    "sun": '''\
+[light]
+kind = "sun"  # the sun's direction at each frame's time, from [site] (pvlib's NREL SPA)
+''',
+}
+
+SITE = '''\
+[site]
+# Where the world origin is (the ground's first marker), and how the world frame is turned.
+latitude = nan  # degrees north: fill in
+longitude = nan  # degrees east: fill in
+altitude = 0.0  # m above sea level
+timezone = "UTC"  # IANA name (e.g. "Europe/Zurich") or offset, for timestamps without one
+heading_deg = nan  # the compass heading of the world x axis (the ground markers' x), degrees: fill in,
+                   # or measure it from a vertical pole's shadow with a [gnomon] table (field_logs/README.md)
+'''
+
+SCAN = '''\
+[scan]
+# min_contrast = 20  # DN: pixels whose lit and shadowed values differ less are left out
+                    # (without it: 8 σ of the image noise measured between the first frames)
+edge = "both"  # triangulate the entering and the leaving shadow edge and fuse them
+{extra}
+# [output]  # what the written files keep (all optional)
+# crop_above = "{first}"
+# crop_min_height = {crop}  # the object without the {first}: points at least this high above it
+# max_sigma = {sigma}  # drop the points whose predicted depth sigma exceeds this: fewer points, fewer wrong ones
+'''
+
+# A date and a time of day in a file name's stem: 20261112T112020Z, IMG_20261112_112020,
+# 2026-11-12 11-20-20, 2026-11-12T11:20:20 (groups: date separator, date-time separator,
+# time separator, a UTC mark).
+STAMP = re.compile(r"\d{4}(-?)\d{2}\1\d{2}([T_ ])\d{2}([-:]?)\d{2}\3\d{2}(Z?)")
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "init",
         help=COMMANDS["init"],
         description="Write a field log for the given frames (image files, or one video) with every "
-        "section commented: the frames glob, the camera (--camera FILE, or inline keys to fill in), a desk "
-        "and a wall with markers to fill in, a two-plane light and the scan settings.",
+        "section commented: the frames glob, the camera (--camera FILE, or inline keys to fill in), the "
+        "reference planes and the light of the set-up (--light: a desk and a wall with markers and no light "
+        "to measure; a desk lamp located from pencil photos; or the sun from the site and the frames' "
+        "times), and the scan settings.",
     )
     p.add_argument("frames", nargs="+", type=Path, help="the frames (image files, or a quoted pattern such as "
                    "\"frames/*.jpg\") or one video")
     p.add_argument("--camera", type=Path, default=None, help="a camera file from `gnomon calibrate camera`")
+    p.add_argument("--light", choices=LIGHTS, default="two-plane",
+                   help="the set-up: two planes and no light to measure (default), a desk lamp, or the sun")
+    p.add_argument("--pencil", nargs="+", default=None, metavar="PHOTO",
+                   help="lamp: the pencil photos (files or a quoted pattern), listed in [pencil]")
+    p.add_argument("--board", default=None, metavar="COLSxROWS",
+                   help="lamp: the chessboard lying on the desk, inner corners (e.g. 9x6)")
+    p.add_argument("--square", type=float, default=None, help="lamp: the board's square, in the field log's units")
+    p.add_argument("--board-image", type=Path, default=None, metavar="PHOTO",
+                   help="lamp: the photo of the board on the desk (default: the capture's first frame)")
     p.add_argument("--out", type=Path, default=None, help="field log to write (default: field_log.toml "
                    "beside the frames' folder)")
     p.add_argument("--force", action="store_true", help="overwrite an existing field log")
     p.set_defaults(func=run)
+
+
+def _relative(path: Path, base: str) -> str:
+    return Path(os.path.relpath(os.path.abspath(path), base)).as_posix()
+
+
+def _toml_string(text: str) -> str:
+    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def filename_time_pattern(stems: list[str]) -> str | None:
+    """A ``strftime`` pattern every stem parses with (the first stem's date and time, its other
+    characters literal), or None. A literal Z after the time marks UTC."""
+    import datetime as dt
+
+    if not stems:
+        return None
+    m = STAMP.search(stems[0])
+    if m is None:
+        return None
+    ds, dts, ts, z = m.groups()
+    literal = lambda s: s.replace("%", "%%")  # noqa: E731
+    pattern = (literal(stems[0][:m.start()]) + f"%Y{ds}%m{ds}%d{dts}%H{ts}%M{ts}%S{z}"
+               + literal(stems[0][m.end():]))
+    try:
+        for stem in stems:
+            dt.datetime.strptime(stem, pattern)
+    except ValueError:
+        return None
+    return pattern
+
+
+def _sun_times(files: list[Path], video: bool, fps: float | None) -> str:
+    """The [capture] lines saying where each frame's time comes from."""
+    if not video:
+        from gnomon.errors import GnomonError
+        from gnomon.timestamps import frame_times
+
+        try:
+            frame_times(files[:1], "exif", site_tz="UTC")
+            return 'timestamps = "exif"  # each photo\'s EXIF DateTimeOriginal (and its offset, if written)\n'
+        except GnomonError:
+            pass
+        pattern = filename_time_pattern([f.stem for f in files])
+        if pattern is not None:
+            utc = "a UTC time" if pattern.endswith("Z") else "local time in [site] timezone"
+            return (f'timestamps = "filename"  # each frame\'s time from its name ({utc})\n'
+                    f"time_pattern = {_toml_string(pattern)}\n")
+    rate = f"{fps:g}" if fps else "nan"
+    return ('timestamps = "start+fps"  # frame 0\'s time and the frame rate'
+            + ("" if video else " (no EXIF time, no time in the file names)") + "\n"
+            + 'start = ""  # frame 0\'s time, ISO 8601 (e.g. "2026-06-21T09:00:00+02:00"): fill in\n'
+            + f"fps = {rate}  # frames per second of capture time"
+            + (" (the video's playback rate: for a time-lapse, one over the interval between shots)"
+               if video else ": fill in") + "\n")
+
+
+def _video_fps(path: Path) -> float | None:
+    """The video's announced frame rate (frames per second), or None when it gives none."""
+    import cv2
+
+    cap = cv2.VideoCapture(str(path))
+    try:
+        fps = float(cap.get(cv2.CAP_PROP_FPS))
+    finally:
+        cap.release()
+    return fps if 0 < fps < 1e4 else None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -115,6 +280,22 @@ def run(args: argparse.Namespace) -> int:
     files = sorted((f for a in args.frames for f in (expand_glob_argument(a, "frame") or (a,))), key=natural_key)
     for f in files:
         input_file(f, "frame")
+    if args.light != "lamp":
+        for flag, value in (("--pencil", args.pencil), ("--board", args.board), ("--square", args.square),
+                            ("--board-image", args.board_image)):
+            if value is not None:
+                raise GnomonError(f"{flag}: only with --light lamp")
+    pencils: list[Path] = []
+    for a in args.pencil or ():
+        pencils += sorted(expand_glob_argument(Path(a), "pencil photo") or (Path(a),), key=natural_key)
+    for f in pencils:
+        input_file(f, "pencil photo")
+    if args.board_image is not None:
+        input_file(args.board_image, "--board-image")
+    if args.board is not None and not re.fullmatch(r"\d+x\d+", args.board):
+        raise GnomonError(f"--board: {args.board!r} is not COLSxROWS (inner corners, e.g. 9x6)")
+    if args.square is not None and not args.square > 0:
+        raise GnomonError(f"--square: must be > 0, got {args.square:g}")
     if args.out is not None:
         check_output_file(args.out, "--out")
     video = len(files) == 1 and files[0].suffix.lower() in VIDEO_SUFFIXES
@@ -129,7 +310,7 @@ def run(args: argparse.Namespace) -> int:
     height, width = first.grey.shape[:2]
     base = os.path.abspath(out.parent)
     if video:
-        frames, what = Path(os.path.relpath(os.path.abspath(files[0]), base)).as_posix(), "video"
+        frames, what = _relative(files[0], base), "video"
         count = str(source.count) if source.count else "a"
     else:
         if len({f.parent.resolve() for f in files}) != 1:
@@ -138,15 +319,13 @@ def run(args: argparse.Namespace) -> int:
         spellings = Counter(f.suffix for f in files)
         one = len({s.lower() for s in spellings}) == 1
         suffix = max(spellings, key=lambda s: (spellings[s], s)) if one else ".*"
-        rel = Path(os.path.relpath(os.path.abspath(folder), base)).as_posix()
-        frames, count, what = f"{rel}/*{suffix}", str(len(files)), "frames"
+        frames, count, what = f"{_relative(folder, base)}/*{suffix}", str(len(files)), "frames"
     if args.camera is not None:
         if not args.camera.is_file():
             raise GnomonError(f"{args.camera}: camera file not found")
         from gnomon.calibration import load_camera_file, other_aspect
 
-        rel = Path(os.path.relpath(os.path.abspath(args.camera), base)).as_posix()
-        camera = f'file = "{rel}"  # from `gnomon calibrate camera`\n'
+        camera = f'file = "{_relative(args.camera, base)}"  # from `gnomon calibrate camera`\n'
         cal = load_camera_file(args.camera)
         if other_aspect((cal.width, cal.height), (width, height)):
             note = (f"the camera was calibrated at {cal.width}x{cal.height} (aspect {cal.width / cal.height:.3f}), "
@@ -160,9 +339,62 @@ def run(args: argparse.Namespace) -> int:
 
         f = round(0.5 * width / math.tan(math.radians(25.0)), 1)
         camera = INLINE_CAMERA.format(width=width, height=height, f=f, cx=(width - 1) / 2, cy=(height - 1) / 2)
-    text = TEMPLATE.format(name=out.name, frames=frames, count=count, what=what, width=width, height=height,
-                           camera=camera)
+
+    light, name = args.light, out.name
+    units = "m" if light == "sun" else "mm"
+    capture = CAPTURE.format(frames=frames, count=count, what=what, width=width, height=height, units=units)
+    if light == "sun":
+        capture += _sun_times(files, video, _video_fps(files[0]) if video else None)
+    howto = MARKERS_HOWTO.format(units=units)
+    if light == "two-plane":
+        planes = [MARKED_PLANE.format(what="The desk. Its markers' frame is the world frame: origin `point`, "
+                                      "axes `x_axis` and normal x x_axis.", howto=howto, name="desk", first_id=0,
+                                      regions=REGIONS_MASK.format(name="desk")),
+                  MARKED_PLANE.format(what="The wall, in its own frame (placed in the world by its own markers: "
+                                        "no pose to type).", howto="", name="wall", first_id=4,
+                                        regions="# mask = \"regions/wall_mask.png\"")]
+    elif light == "sun":
+        planes = [MARKED_PLANE.format(what="The ground. Its markers' frame is the world frame (z up; its x axis "
+                                      "is [site] heading_deg).", howto=howto, name="ground", first_id=0,
+                                      regions=REGIONS_MASK.format(name="ground")),
+                  MARKED_PLANE.format(what="The facade, in its own frame (placed in the world by its own "
+                                        "markers).", howto="", name="facade", first_id=4,
+                                        regions="# mask = \"regions/facade_mask.png\"")]
+    else:
+        if args.board is not None or args.square is not None or args.board_image is not None:
+            # a "COLSxROWS" left in the log is refused by name, a NaN square too: both stop the calibration
+            cols_rows = _toml_string(args.board) if args.board else '"COLSxROWS"'
+            board = (f"chessboard = {cols_rows}  # inner corners" + ("" if args.board else ": fill in") + "\n"
+                     + (f"square = {args.square:g}\n" if args.square is not None
+                        else f"square = nan  # its side, in {units}: fill in\n")
+                     + (f"image = {_toml_string(_relative(args.board_image, base))}\n" if args.board_image
+                        else "# image = \"calib/board_on_desk.jpg\"  # the board's photo, if not the first frame\n"))
+        else:
+            board = ('# chessboard = "9x6"  # inner corners (COLSxROWS)\n# square = 25.0\n'
+                     '# image = "calib/board_on_desk.jpg"\n')
+        planes = [LAMP_DESK.format(units=units, board=board.rstrip("\n"))]
+        if pencils:
+            photos = "\n".join(f"[[pencil.photos]]\nimage = {_toml_string(_relative(p, base))}\n"
+                               "# base = [u, v]  # the pencil's foot: fill in\n"
+                               "# tip = [u, v]  # its shadow's tip: fill in (or give `empty` above)\n"
+                               for p in pencils)
+        else:
+            photos = ('# [[pencil.photos]]  # one table per photo (at least 2; list them with --pencil)\n'
+                      '# image = "light/pencil_1.jpg"\n# base = [u, v]\n# tip = [u, v]\n')
+        planes.append(PENCIL.format(height="nan", units=units, photos=photos.rstrip("\n")))
+    extra = "normalize_illumination = true  # divide out the sun's and the sky's drift and skip clouded frames\n" \
+        if light == "sun" else ""
+    first_plane = {"two-plane": "desk", "lamp": "desk", "sun": "ground"}[light]
+    scan = SCAN.format(extra=extra, first=first_plane, crop="0.05" if units == "m" else "2.0",
+                       sigma="0.02" if units == "m" else "1.5")
+    setup = {"two-plane": "two-plane capture", "lamp": "desk-lamp capture", "sun": "sun capture"}[light]
+    sections = [capture, "[camera]\n" + camera, *planes, *([SITE] if light == "sun" else []),
+                LIGHT[light].format(name=name), scan]
+    text = HEADER.format(setup=setup, steps=STEPS[light].format(name=name)) + "\n".join(sections)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic.write_text(out, text)
-    print(f"wrote {out}: {count} {what} of {width}x{height}; fill in the markers, then `gnomon preview {out}`")
+    todo = {"two-plane": "fill in the markers", "lamp": "fill in the board and the pencil photos",
+            "sun": "fill in [site] and the markers"}[light]
+    print(f"wrote {out}: {count} {what} of {width}x{height}; {todo}, then "
+          + (f"`gnomon calibrate lamp {out}`" if light == "lamp" else f"`gnomon preview {out}`"))
     return 0
