@@ -294,3 +294,65 @@ def test_markers_that_do_not_fit_say_whether_the_camera_or_the_marks_are_at_faul
     misdrawn = focal_diagnosis(calibrated, marks, film(1000.0, moved), 2.0)
     assert "not where their plane coordinates put them" in misdrawn
     assert focal_diagnosis(calibrated, marks, film(1000.0, marks), 2.0) == ""
+
+
+def _board_video(path, cam, poses, *, still: int, moving: int, seed: int) -> list[str]:
+    """A video of the board held still in each pose for ``still`` frames, moved to the next over ``moving``
+    motion-blurred frames (rendered half-way, smeared 15 px along the motion): MJPEG in AVI. Returns each
+    frame's kind ("still K" or "moving")."""
+    rng = np.random.default_rng(seed)
+    rays = sim.SampleRays(cam, 2)
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (cam.width, cam.height))
+    kinds = []
+
+    def write(image):
+        noisy = np.clip(image + rng.normal(0, 1.5, image.shape), 0, 255).astype(np.uint8)
+        writer.write(cv2.cvtColor(noisy, cv2.COLOR_GRAY2BGR))
+
+    for k, (R, t) in enumerate(poses):
+        image = sim.render_view(rays, COLS, ROWS, SQ, R, t, noise_dn=0.0).astype(np.float64)
+        for _ in range(still):
+            write(image)
+            kinds.append(f"still {k}")
+        if k + 1 == len(poses):
+            break
+        R1, t1 = poses[k + 1]
+        for j in range(moving):
+            a = (j + 1) / (moving + 1)
+            rv = (1 - a) * cv2.Rodrigues(R)[0] + a * cv2.Rodrigues(R1)[0]
+            mid = sim.render_view(rays, COLS, ROWS, SQ, cv2.Rodrigues(rv)[0], (1 - a) * t + a * t1, noise_dn=0.0)
+            shift = cam.project((R1 @ np.zeros(3) + t1)[None])[0] - cam.project((R @ np.zeros(3) + t)[None])[0]
+            kernel = np.zeros((31, 31))
+            d = 7.5 * shift / np.linalg.norm(shift)
+            cv2.line(kernel, (round(15 - d[0]), round(15 - d[1])), (round(15 + d[0]), round(15 + d[1])), 1.0, 1)
+            write(cv2.filter2D(mid.astype(np.float64), -1, kernel / kernel.sum()))
+            kinds.append("moving")
+    writer.release()
+    return kinds
+
+
+@pytest.mark.slow
+def test_a_board_video_gives_its_sharp_distinct_frames_as_views(tmp_path, capsys):
+    """A phone user films the board in the capture's own video mode (its crop and scale are then the
+    camera's): the board held in 8 poses, moved between them. One view per pose is picked, none of the
+    motion-blurred frames, and the camera is the true one (the focal lengths to test_calibration's bar)."""
+    from gnomon.cli import main
+
+    cam = sim.default_truth_camera(640, 480)
+    poses = sim.random_poses(cam, COLS, ROWS, SQ, n=8, seed=11)
+    video = tmp_path / "board.avi"
+    kinds = _board_video(video, cam, poses, still=6, moving=3, seed=2)
+    out = tmp_path / "camera.toml"
+    assert main(["calibrate", "camera", str(video), "--board", f"{COLS}x{ROWS}", "--square", str(SQ),
+                 "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    used = [line.split()[0] for line in said.splitlines() if line.endswith("used")]
+    picked = [kinds[int(name.rsplit("#", 1)[1])] for name in used]
+    print(said, picked)
+    assert sorted(picked) == [f"still {k}" for k in range(8)]  # each pose once, no blurred frame
+    assert f"{video}: {len(kinds)} frames, {len(kinds)} examined" in said
+    cal, std = calibration.load_camera_file(out), calibration.load_calibration_info(out)["std"]
+    assert abs(cal.fx / cam.fx - 1) < 0.002 and abs(cal.fy / cam.fy - 1) < 0.002
+    # 8 views through MJPEG (the photos' test has 12 lossless ones): the principal point within 3 of its σ
+    assert abs(cal.cx - cam.cx) < 3 * std["cx"] and abs(cal.cy - cam.cy) < 3 * std["cy"]
+    assert out.with_suffix(".rrd").stat().st_size > 0  # the recording shows the picked frames

@@ -8,7 +8,8 @@
   per-view reprojection errors, parameter standard deviations and rejection of
   outlier views.
 * :func:`calibrate_images` — photos → :class:`CameraCalibration`, with either
-  Zhang's method or our Tsai implementation (:mod:`gnomon.tsai`).
+  Zhang's method or our Tsai implementation (:mod:`gnomon.tsai`); a video of
+  the board stands for its sharp, distinct frames (:func:`views_from_video`).
 * :func:`write_camera_file`, :func:`load_camera_file`, :func:`camera_from_table` —
   the camera file (TOML) that field logs reference.
 
@@ -55,7 +56,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -164,7 +165,8 @@ def fit_camera_to_frames(
             raise GnomonError(
                 f"{frame_name} is {width}x{height} but the camera's {w0}x{h0} ({where}) has another aspect ratio "
                 f"({w0 / h0:.3f} vs {width / height:.3f}): the frames are a crop of the sensor, which rescaling "
-                "cannot fix; calibrate the camera from frames of the capture itself, or, if they are its centred "
+                "cannot fix; calibrate the camera from frames of the capture itself (a video of the board in the "
+                "same video mode: gnomon calibrate camera BOARD.mp4 ...), or, if they are its centred "
                 "crop (a phone's video against its photos), add crop = \"centre\" to [camera] and check the "
                 "marks' fit (gnomon preview)"
             )
@@ -287,12 +289,18 @@ def detect_chessboard(image: np.ndarray, board: tuple[int, int], *, refine: bool
     our rendered views this halves the SB detector's error, to ≈0.03–0.06 px RMS).
     """
     grey = to_grey_u8(image)
-    cols, rows = board
     pts = _find_board(grey, board)
     if pts is None:
         return None
     if not refine:
         return pts
+    return refine_corners(grey, pts, board)
+
+
+def refine_corners(grey: np.ndarray, pts: np.ndarray, board: tuple[int, int]) -> np.ndarray:
+    """Corners ``pts`` (cols·rows, 2) of ``board`` in OpenCV's order, refined to sub-pixel on the 8-bit
+    ``grey`` image by ``cv2.cornerSubPix`` (see :func:`detect_chessboard`)."""
+    cols, rows = board
     grid = pts.reshape(rows, cols, 2)
     spacing = min(
         float(np.linalg.norm(np.diff(grid, axis=0), axis=2).min()),
@@ -452,10 +460,125 @@ class CameraCalibration:
     skipped: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
     per_view_tsai: tuple[Any, ...] = ()
+    # views taken from videos: name ("board.mp4#123") → its grey frame, and one line per video
+    # saying how its views were picked
+    video_frames: Mapping[str, np.ndarray] = field(default_factory=dict)
+    video_notes: tuple[str, ...] = ()
 
     @property
     def n_views(self) -> int:
         return len(self.names)
+
+
+VIDEO_VIEWS = 20
+"""How many views ``gnomon calibrate camera`` picks from a board video by default."""
+VIDEO_EXAMINED_PER_VIEW = 6  # frames examined per view wanted (evenly spaced through the video)
+VIDEO_DETECT_PX = 1000  # a video frame's long side for finding the board (then refined at full size)
+VIDEO_BLUR_FACTOR = 1.5  # a view whose edges are this much wider than the median view's is motion-blurred
+VIDEO_MIN_SHIFT = 0.02  # views whose corners moved less than this share of the image diagonal are one view
+
+
+@dataclass(frozen=True)
+class VideoViews:
+    """The views picked from a video of a board (see :func:`views_from_video`)."""
+
+    names: list[str]  # "board.mp4#123" (the frame's index)
+    corners: list[np.ndarray]  # (cols·rows, 2) each, full-size pixels, OpenCV's order
+    frames: list[np.ndarray]  # their grey frames
+    size: tuple[int, int]  # (w, h)
+    note: str  # how many frames were examined, showed the board, were sharp, were picked
+
+
+def _find_board_fast(grey: np.ndarray, board: tuple[int, int]) -> np.ndarray | None:
+    """The board's corners on a frame scaled to ``VIDEO_DETECT_PX`` (OpenCV's sector detector, plain
+    settings: tens of ms where the accurate ones take a second on a frame without a board), scaled back
+    to full size and refined there; None when not found."""
+    h, w = grey.shape[:2]
+    scale = min(1.0, VIDEO_DETECT_PX / max(w, h))
+    small = grey if scale == 1.0 else cv2.resize(grey, (round(w * scale), round(h * scale)),
+                                                  interpolation=cv2.INTER_AREA)
+    cols, rows = board
+    for size in ([(cols, rows)] if cols == rows else [(cols, rows), (rows, cols)]):
+        ok, found = cv2.findChessboardCornersSB(small, size, flags=cv2.CALIB_CB_NORMALIZE_IMAGE)
+        if ok and found is not None:
+            pts = _canonical_order(found.reshape(-1, 2).astype(np.float64), size, board)
+            # pixel centres: (x + 0.5) / scale − 0.5
+            return refine_corners(grey, (pts + 0.5) / scale - 0.5, board)
+    return None
+
+
+def _view_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Median distance between two views' corners (px), the board's 180° turn (its corners in reverse
+    order, the same pattern) counted as the same corners."""
+    return float(min(np.median(np.linalg.norm(a - b, axis=1)), np.median(np.linalg.norm(a - b[::-1], axis=1))))
+
+
+def pick_views(corners: Sequence[np.ndarray], blur_px: Sequence[float], max_views: int,
+               min_shift_px: float) -> list[int]:
+    """Indices of the views to calibrate from, in their original order: those not motion-blurred (edges
+    at most ``VIDEO_BLUR_FACTOR`` times as wide as the median view's, ``blur_px`` from
+    ``cv2.estimateChessboardSharpness``, the wider of the board's two directions), then, sharpest
+    first, each next the one farthest from those picked (``_view_distance``), until ``max_views`` or
+    until the farthest is within ``min_shift_px`` of one picked (the board held still: the same view
+    again adds nothing but weight)."""
+    if not corners:
+        return []
+    blur = np.asarray(blur_px, dtype=np.float64)
+    sharp = [k for k in range(len(corners)) if blur[k] <= VIDEO_BLUR_FACTOR * float(np.median(blur))]
+    picked = [min(sharp, key=lambda k: blur[k])]
+    nearest = {k: _view_distance(corners[k], corners[picked[0]]) for k in sharp}
+    while len(picked) < max_views:
+        far = max((k for k in sharp if k not in picked), key=lambda k: nearest[k], default=None)
+        if far is None or nearest[far] < min_shift_px:
+            break
+        picked.append(far)
+        for k in sharp:
+            nearest[k] = min(nearest[k], _view_distance(corners[k], corners[far]))
+    return sorted(picked)
+
+
+def views_from_video(path: str | os.PathLike, board: tuple[int, int], *, max_views: int = VIDEO_VIEWS,
+                     progress: Callable[[int, int, str], None] | None = None) -> VideoViews:
+    """Views of a board filmed on video: up to ``VIDEO_EXAMINED_PER_VIEW × max_views`` frames, evenly
+    spaced, are searched for the board (:func:`_find_board_fast`); of those showing it, the sharp and
+    distinct ones are picked (:func:`pick_views`). Frames are decoded as a scan decodes them
+    (:class:`gnomon.frames.FrameSource`: the video's rotation applied)."""
+    from gnomon.frames import FrameSource, frame_pass
+
+    p = Path(path)
+    source = FrameSource((), p, None)
+    wanted = set(np.linspace(0, source.count - 1, min(source.count, VIDEO_EXAMINED_PER_VIEW * max_views))
+                 .round().astype(int).tolist())
+    found: list[tuple[int, np.ndarray, np.ndarray]] = []
+    size: tuple[int, int] | None = None
+    examined = 0
+    with frame_pass(source) as frames:
+        for frame in frames:
+            if progress:
+                progress(frame.index, source.count, p.name)
+            if frame.index not in wanted:
+                continue
+            examined += 1
+            grey = to_grey_u8(frame.grey)
+            size = (grey.shape[1], grey.shape[0])
+            corners = _find_board_fast(grey, board)
+            if corners is not None:
+                found.append((frame.index, corners, grey))
+    if progress:
+        progress(source.count, source.count, "")
+    if size is None:
+        raise GnomonError(f"{p}: no frame decoded")
+    blur = []  # each view's edge width (px), the wider of its two directions' (a motion smears one)
+    for _, corners, grey in found:
+        pts = corners.astype(np.float32).reshape(-1, 1, 2)
+        widths = [cv2.estimateChessboardSharpness(grey, board, pts, vertical=v)[0] for v in (False, True)]
+        blur.append(max(float(np.asarray(w).ravel()[0]) for w in widths))  # a Scalar: (sharpness, ...)
+    picked = pick_views([c for _, c, _ in found], blur, max_views, VIDEO_MIN_SHIFT * float(np.hypot(*size)))
+    sharp = sum(b <= VIDEO_BLUR_FACTOR * float(np.median(blur)) for b in blur) if blur else 0
+    note = (f"{p}: {source.count} frames, {examined} examined, the board in {len(found)}, {sharp} sharp, "
+            f"{len(picked)} distinct views picked")
+    return VideoViews([f"{p}#{found[k][0]}" for k in picked], [found[k][1] for k in picked],
+                      [found[k][2] for k in picked], size, note)
 
 
 def detect_in_images(
@@ -463,30 +586,51 @@ def detect_in_images(
     board: tuple[int, int],
     *,
     progress: Callable[[int, int, str], None] | None = None,
-) -> tuple[list[str], list[np.ndarray], tuple[int, int], list[str], list[str]]:
-    """Read the images and find the board in each.
+    max_video_views: int = VIDEO_VIEWS,
+) -> tuple[list[str], list[np.ndarray], tuple[int, int], list[str], list[str], dict[str, np.ndarray], list[str]]:
+    """Read the images (and videos: :func:`views_from_video`) and find the board in each.
 
     Returns (names with a board, their corners, image size (w, h), names
-    skipped, warnings). Images of different sizes, or unreadable ones, are a
-    GnomonError naming the image; an image without a board is skipped with a
-    warning.
+    skipped, warnings, the video views' frames by name, one note per video).
+    Images of different sizes, or unreadable ones, are a GnomonError naming
+    the image; an image without a board is skipped with a warning.
     """
+    from gnomon.fieldlog import VIDEO_SUFFIXES
+
     if len(paths) == 0:
         raise GnomonError("no images given")
     names, corners, skipped, warns = [], [], [], []
+    video_frames: dict[str, np.ndarray] = {}
+    notes: list[str] = []
     size: tuple[int, int] | None = None
     first = ""
+
+    def same_size(name: str, w: int, h: int) -> None:
+        nonlocal size, first
+        if size is None:
+            size, first = (w, h), name
+        elif (w, h) != size:
+            raise GnomonError(f"{name}: image size {w}x{h} differs from {size[0]}x{size[1]} of {first}; all views "
+                              "must come from one camera setting")
+
     for k, path in enumerate(paths):
         p = Path(path)
+        if p.suffix.lower() in VIDEO_SUFFIXES:
+            views = views_from_video(p, board, max_views=max_video_views)
+            same_size(str(p), *views.size)
+            names += views.names
+            corners += views.corners
+            video_frames.update(zip(views.names, views.frames, strict=True))
+            notes.append(views.note)
+            if not views.names:
+                skipped.append(str(p))
+                warns.append(f"{p}: no {board[0]}x{board[1]} chessboard found (inner corners) in any frame examined")
+            continue
         if progress:
             progress(k, len(paths), p.name)
         img = read_grey(p)
         h, w = img.shape[:2]
-        if size is None:
-            size, first = (w, h), str(p)
-        elif (w, h) != size:
-            raise GnomonError(f"{p}: image size {w}x{h} differs from {size[0]}x{size[1]} of {first}; all views must "
-                              "come from one camera setting")
+        same_size(str(p), w, h)
         c = detect_chessboard(img, board)
         if c is None:
             skipped.append(str(p))
@@ -497,7 +641,7 @@ def detect_in_images(
     if progress:
         progress(len(paths), len(paths), "")
     assert size is not None
-    return names, corners, size, skipped, warns
+    return names, corners, size, skipped, warns, video_frames, notes
 
 
 def calibrate_images(
@@ -512,6 +656,7 @@ def calibrate_images(
     fix_k3: bool = False,
     reject_factor: float = 3.0,
     progress: Callable[[int, int, str], None] | None = None,
+    max_video_views: int = VIDEO_VIEWS,
 ) -> CameraCalibration:
     """Chessboard photos → a calibrated camera.
 
@@ -530,11 +675,17 @@ def calibrate_images(
     if model == "tsai" and pixel_pitch_mm is None:
         raise GnomonError("--model tsai needs the sensor's pixel pitch (--pixel-pitch DX[,DY] in mm, e.g. 0.0028): "
                           "Tsai's method takes dx, dy a priori")
-    names, corners, size, skipped, warns = detect_in_images(paths, board, progress=progress)
+    names, corners, size, skipped, warns, video_frames, notes = detect_in_images(
+        paths, board, progress=progress, max_video_views=max_video_views)
     obj = board_points(board[0], board[1], square)
     if model == "zhang":
         if len(names) < MIN_ZHANG_VIEWS:
             missing = f" (none in {', '.join(Path(s).name for s in skipped)})" if skipped else ""
+            if notes:
+                views = "1 distinct view shows" if len(names) == 1 else f"{len(names)} distinct views show"
+                raise GnomonError(f"only {views} the {board[0]}x{board[1]} chessboard{missing} "
+                                  f"({'; '.join(notes)}); Zhang's method needs at least {MIN_ZHANG_VIEWS}: "
+                                  "film the board turned and tilted in several ways")
             raise GnomonError(
                 f"only {len(names)} of {len(paths)} images show the {board[0]}x{board[1]} chessboard{missing}; "
                 f"Zhang's method needs at least {MIN_ZHANG_VIEWS}"
@@ -553,6 +704,8 @@ def calibrate_images(
             rejected=z.rejected,
             skipped=tuple(skipped),
             warnings=tuple(warns) + z.warnings,
+            video_frames=video_frames,
+            video_notes=tuple(notes),
         )
     from gnomon import tsai
 
@@ -578,6 +731,8 @@ def calibrate_images(
         skipped=tuple(skipped),
         warnings=tuple(warns) + r.warnings,
         per_view_tsai=r.per_view,
+        video_frames=video_frames,
+        video_notes=tuple(notes),
     )
 
 

@@ -39,13 +39,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Find a chessboard in each photo and calibrate the camera: Zhang's method (OpenCV's "
             "5-coefficient model, >= 3 views) or Tsai's two-stage method (one view or several). "
-            "Writes a camera file for field logs ([camera] file = ...)."
+            "A video of the board (filmed in the capture's own video mode) gives its sharp, distinct frames "
+            "as views. Writes a camera file for field logs ([camera] file = ...)."
         ),
     )
-    c.add_argument("images", nargs="+", metavar="IMAGE", help="chessboard photos (files or directories of images)")
+    c.add_argument("images", nargs="+", metavar="IMAGE", help="chessboard photos (files, directories of images or "
+                   "quoted patterns), or videos of the board")
     c.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners per row and per column, e.g. 9x6")
     c.add_argument("--square", required=True, type=float, metavar="S",
                    help="side of one square, in world units (e.g. mm)")
+    c.add_argument("--video-views", type=int, default=None, metavar="N",
+                   help="from each video, at most N distinct views (default 20)")
     c.add_argument("--model", choices=("zhang", "tsai"), default="zhang",
                    help="calibration method and camera model (default: zhang)")
     c.add_argument("--out", "-o", default="camera.toml", metavar="FILE",
@@ -169,7 +173,7 @@ def _record_calibration(cal, path: Path) -> None:
                        image_scale=1.0) as rec:
         rec.log_camera(cam.K, cam.width, cam.height, np.eye(3), np.zeros(3), "board units")
         for i, (name, pose, rms) in enumerate(zip(cal.names, cal.poses, cal.per_view_rms_px, strict=True)):
-            rec.log_frame(i, calibration.read_grey(name))
+            rec.log_frame(i, cal.video_frames[name] if name in cal.video_frames else calibration.read_grey(name))
             rec.log_image_points(i, cam.project(Pose(pose.R, pose.t).world_to_camera(board)), name="board")
             rec.log_metrics({"view_rms_px": float(rms)}, index=i)
         for w in cal.warnings:
@@ -197,6 +201,9 @@ def run(args: argparse.Namespace) -> int:
     pitch = None if args.pixel_pitch is None else _pitch(args.pixel_pitch)
     if args.model == "zhang" and (pitch is not None or args.full or args.sx != 1.0):
         raise GnomonError("--pixel-pitch, --sx and --full apply to --model tsai only")
+    video_views = calibration.VIDEO_VIEWS if args.video_views is None else args.video_views
+    if video_views < calibration.MIN_ZHANG_VIEWS:
+        raise GnomonError(f"--video-views {video_views}: must be ≥ {calibration.MIN_ZHANG_VIEWS}")
     paths = calibration.expand_image_args(args.images)
     with Progress("boards", len(paths)) as bar:
         cal = calibration.calibrate_images(
@@ -210,6 +217,7 @@ def run(args: argparse.Namespace) -> int:
             fix_k3=args.fix_k3,
             reject_factor=args.reject,
             progress=lambda k, n, name: bar.update(k),
+            max_video_views=video_views,
         )
     for w in cal.warnings:
         print(f"gnomon: warning: {w}", file=sys.stderr)
@@ -219,8 +227,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'view':40s} {'RMS px':>8s}  status")
     rms = dict(zip(cal.names, cal.per_view_rms_px, strict=True))
     rejected = dict(cal.rejected)
-    for p in paths:
-        key = str(p)
+    for note in cal.video_notes:
+        print(note)
+    of_video: dict[str, list[str]] = {}  # a video → its picked views, in frame order
+    for name in cal.video_frames:
+        of_video.setdefault(name.rsplit("#", 1)[0], []).append(name)
+    for key in (v for p in paths for v in of_video.get(str(p), [str(p)])):
         if key in rms:
             extra = ""
             if cal.per_view_tsai:
