@@ -116,12 +116,14 @@ class CaptureScore:
     volume_off: int = 0
 
     def summary(self) -> str:
-        """One line: each plane's planarity and coverage, the object's coverage, the false points."""
+        """One line: each plane's planarity and coverage, the object's coverage, the false points (without an
+        object outline, the points off both planes, the object's among them)."""
         planes = "; ".join(f"{p.name} {p.median_abs:.3f} / {p.rms:.3f} mm on {100 * p.coverage:.1f} %"
                            for p in self.planes)
-        obj = (f"; object {100 * self.object_points / self.object_pixels:.1f} %" if self.object_pixels else "")
-        return (f"{planes}{obj}; false points {100 * self.false_points / max(self.all_points, 1):.2f} % "
-                f"of {self.all_points}")
+        share = f"{100 * self.false_points / max(self.all_points, 1):.2f} % of {self.all_points}"
+        if not self.object_pixels:  # no outline: the object's own points are off both planes too
+            return f"{planes}; points off both planes by > 5 mm (object included: no outline) {share}"
+        return f"{planes}; object {100 * self.object_points / self.object_pixels:.1f} %; false points {share}"
 
     def lines(self) -> list[str]:
         out = [f"{self.name}"]
