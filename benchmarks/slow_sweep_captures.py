@@ -36,11 +36,13 @@ import time
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from gnomon import toml_io
 from gnomon.calibration import fit_camera_to_frames, load_camera_file, write_camera_file
+from gnomon.camera import Pose
 from real_captures import FROG_RECT, plane_table, regions_preview_scan, run
 from score import score_scan
 
@@ -87,6 +89,29 @@ def scan_sequence(mirror: Path, out: Path, name: str, camera: Path) -> None:
           f"{coverage['points']} points ({100 * coverage['fraction_of_image']:.1f} % of the image), "
           f"{coverage['ambiguous']} ambiguous pixels")
     print(score.summary())
+    far_points(scan, folder / "video_camera.toml", masks)
+
+
+def far_points(scan: Path, camera: Path, masks: dict[str, np.ndarray], far_mm: float = 10.0) -> None:
+    """Per plane, its region's points more than ``far_mm`` off the markers' plane: their share, where they
+    were timed, their predicted σ against the others', and how many of their σ they lie off."""
+    rep = json.loads((scan / "report.json").read_text())
+    depth, sigma = np.load(scan / "depth.npy"), np.load(scan / "sigma.npy")
+    shadow_time = np.load(scan / "shadow_time.npy")
+    rays = load_camera_file(camera).ray_map().astype(np.float64)
+    pts = rays * (depth / rays[..., 2])[..., None]
+    for plane in rep["reference_planes"]:
+        name = plane.get("name", plane.get("plane"))
+        R = Pose.from_rvec_tvec(np.array(plane["rvec"]), np.array(plane["tvec"])).R
+        d = np.abs((pts - np.array(plane["tvec"])) @ R[:, 2])
+        sel = masks[name] & np.isfinite(d)
+        far = sel & (d > far_mm)
+        if not far.any():
+            continue
+        print(f"  {name}: {100 * far.sum() / sel.sum():.1f} % of its points over {far_mm:g} mm off, timed at "
+              f"frames {' / '.join(f'{t:.0f}' for t in np.percentile(shadow_time[far], [5, 50, 95]))} (p5/50/95); "
+              f"their sigma median {np.median(sigma[far]):.1f} mm (the others' {np.median(sigma[sel & ~far]):.2f}), "
+              f"off by {np.median(d[far] / sigma[far]):.2f} of it (median)")
 
 
 def main(argv: list[str] | None = None) -> int:
