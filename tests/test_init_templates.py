@@ -75,6 +75,24 @@ def test_the_lamp_template_filled_in_calibrates_the_lamp_and_scans(tmp_path: Pat
     log["capture"]["gamma"] = original["capture"]["gamma"]
     toml_io.dump(log, out)
     assert main(["calibrate", "lamp", str(out)]) == 0
+    # the preview draws the desk's grid over the board's squares, where the board lay
+    assert main(["preview", str(out), "--out", str(work / "preview.png")]) == 0
+    preview = cv2.imread(str(work / "preview.png")).astype(int)
+    b, g, r = preview[..., 0], preview[..., 1], preview[..., 2]
+    grid = (r > 200) & (r - g > 80) & (r - b > 80)  # the first plane's grid colour, (60, 60, 255) BGR
+    corners = np.array([[-20.0, -20.0, 0.0], [180.0, -20.0, 0.0], [180.0, 120.0, 0.0], [-20.0, 120.0, 0.0]])
+    world = corners + board_origin
+    px = cv2.projectPoints((world @ truth["R"].T + truth["t"]).reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
+                           truth["K"], truth["dist"])[0].reshape(-1, 2)
+    board_area = np.zeros(grid.shape, np.uint8)
+    cv2.fillConvexPoly(board_area, np.round(px).astype(np.int32), 1)
+    board_area = cv2.dilate(board_area, np.ones((5, 5), np.uint8)) > 0
+    labelled = cv2.dilate(board_area.astype(np.uint8), np.ones((31, 31), np.uint8)) > 0  # its caption too
+    bands = np.zeros_like(grid)
+    for u0, v0, u1, v1 in original["planes"][0]["regions"]:
+        bands[v0:v1, u0:u1] = True
+    assert (grid & board_area).sum() > 600  # 7 lines over the board: 1016 px (its 2 corner circles alone: 245)
+    assert (grid & ~labelled & ~bands).sum() < 0.01 * (grid & board_area).sum()
     assert main(["scan", str(out), "--out", str(work / "scan"), "--quiet", "--no-rrd"]) == 0
 
     # the lamp, in the camera frame (free of the board's choice of origin and axes), within 1 % of its

@@ -71,10 +71,13 @@ def run(args: argparse.Namespace) -> int:
             lo, hi = xy.min(axis=0), xy.max(axis=0)
             pad = 0.15 * (hi - lo).max()
             extent = (lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad)
-        elif entry is not None:  # a chessboard: its corners
+        elif entry is not None:  # a chessboard (or ArUco markers, a ChArUco board): its first and last corners
             pix = np.array(entry["pixels"])
             marks = [MarkerMark("", p, None, float(np.hypot(*r))) for p, r in
                      zip(pix[[0, -1]], np.array(list(entry["residuals_px"].values()))[[0, -1]], strict=True)]
+            if plane.chessboard is not None and plane.square is not None:  # the grid over the board's squares
+                (cols, rows), sq = plane.chessboard, plane.square
+                extent = (-sq, cols * sq, -sq, rows * sq)
         mask = plane.region_mask(shape) if plane.has_regions else None
         drawings.append(PlaneDrawing(plane.name, plane.point, x_axis, np.cross(plane.normal, x_axis), plane.normal,
                                      mask, marks, extent))
