@@ -501,6 +501,52 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
                                                "--out", str(d / "c.toml"), "--no-rrd"), needle="--square",
                     check=absent(d / "c.toml")))
 
+    # calibrate camera from a video of the board: broken, boardless and one-pose videos
+    import cv2
+
+    d = fresh("cal-video")
+    (d / "camera.toml").write_text("# a good camera file, kept\n")
+    writer = cv2.VideoWriter(str(d / "blank.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (64, 48))
+    for _ in range(12):
+        writer.write(np.full((48, 64, 3), 120, np.uint8))
+    writer.release()
+    board = cv2.imread(str(sorted(Path(chess).glob("*.png"))[0]))
+    writer = cv2.VideoWriter(str(d / "still.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30.0,
+                             (board.shape[1], board.shape[0]))
+    for _ in range(12):
+        writer.write(board)
+    writer.release()
+    good = (d / "still.avi").read_bytes()
+    (d / "truncated.avi").write_bytes(good[: len(good) // 3])
+    (d / "text.mp4").write_text("not a video\n")
+    # (the truncated AVI has lost its index: its 4 readable frames are counted and used, one view)
+    for video, needle in (("blank.avi", "chessboard"), ("still.avi", "1 distinct view"),
+                          ("truncated.avi", "truncated.avi"), ("text.mp4", "text.mp4")):
+        out.append(Case(cal, f"board video: {video}",
+                        gnomon("calibrate", "camera", str(d / video), "--board", "9x6", "--square", "25",
+                               "--out", str(d / "camera.toml"), "--no-rrd", "--quiet"),
+                        needle=needle, check=unchanged(d, digest_tree(d))))
+    out.append(Case(cal, "--video-views 1", gnomon("calibrate", "camera", str(d / "still.avi"), "--board", "9x6",
+                                                   "--square", "25", "--out", str(d / "camera.toml"), "--no-rrd",
+                                                   "--video-views", "1"),
+                    needle="--video-views", check=unchanged(d, digest_tree(d))))
+
+    # init: the lamp's and the sun's options
+    ini = "init"
+    frames_glob = str(fx["cap"].parent / "frames" / "*.png")
+    d = fresh("init-options")
+    for name, args, needle in (
+        ("--pencil without --light lamp", ["--pencil", frames_glob], "--pencil"),
+        ("--board 9by6", ["--light", "lamp", "--board", "9by6"], "--board"),
+        ("--square -1", ["--light", "lamp", "--square", "-1"], "--square"),
+        ("--square nan", ["--light", "lamp", "--square", "nan"], "--square"),
+        ("--pencil missing.jpg", ["--light", "lamp", "--pencil", str(d / "missing.jpg")], "missing.jpg"),
+        ("--pencil no match", ["--light", "lamp", "--pencil", str(d / "none*.jpg")], "none*.jpg"),
+        ("--board-image missing", ["--light", "lamp", "--board-image", str(d / "board.jpg")], "board.jpg"),
+    ):
+        out.append(Case(ini, name, gnomon("init", frames_glob, "--out", str(d / "log.toml"), *args),
+                        needle=needle, check=absent(d / "log.toml")))
+
     # calibrate lamp: collinear pencils (degenerate) must not overwrite a good lamp.toml
     d = fresh("lamp-degenerate")
     shutil.copytree(fx["desk"].parent, d / "desk")

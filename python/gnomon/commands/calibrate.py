@@ -78,6 +78,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="FACTOR",
         help="zhang: reject views whose RMS exceeds FACTOR x the median (and 0.5 px); default 3",
     )
+    c.add_argument("--quiet", action="store_true", help="no progress bar")
     c.set_defaults(func=run)
 
     pts = sub.add_parser(
@@ -205,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
     if video_views < calibration.MIN_ZHANG_VIEWS:
         raise GnomonError(f"--video-views {video_views}: must be ≥ {calibration.MIN_ZHANG_VIEWS}")
     paths = calibration.expand_image_args(args.images)
-    with Progress("boards", len(paths)) as bar:
+    with Progress("boards", len(paths), enabled=not args.quiet) as bar:
         cal = calibration.calibrate_images(
             paths,
             board,
