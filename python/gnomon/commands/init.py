@@ -203,6 +203,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _marked_plane(name: str, what: str, howto: str, first_id: int, regions_help: bool) -> str:
+    """A [[planes]] table with markers to fill in (``regions_help``: with the regions' keys explained)."""
+    regions = REGIONS_MASK.format(name=name) if regions_help else f'# mask = "regions/{name}_mask.png"'
+    return MARKED_PLANE.format(what=f"The {name}. {what}", howto=howto, name=name, first_id=first_id,
+                               regions=regions)
+
+
 def _relative(path: Path, base: str) -> str:
     return Path(os.path.relpath(os.path.abspath(path), base)).as_posix()
 
@@ -346,20 +353,13 @@ def run(args: argparse.Namespace) -> int:
     if light == "sun":
         capture += _sun_times(files, video, _video_fps(files[0]) if video else None)
     howto = MARKERS_HOWTO.format(units=units)
-    if light == "two-plane":
-        planes = [MARKED_PLANE.format(what="The desk. Its markers' frame is the world frame: origin `point`, "
-                                      "axes `x_axis` and normal x x_axis.", howto=howto, name="desk", first_id=0,
-                                      regions=REGIONS_MASK.format(name="desk")),
-                  MARKED_PLANE.format(what="The wall, in its own frame (placed in the world by its own markers: "
-                                        "no pose to type).", howto="", name="wall", first_id=4,
-                                        regions="# mask = \"regions/wall_mask.png\"")]
-    elif light == "sun":
-        planes = [MARKED_PLANE.format(what="The ground. Its markers' frame is the world frame (z up; its x axis "
-                                      "is [site] heading_deg).", howto=howto, name="ground", first_id=0,
-                                      regions=REGIONS_MASK.format(name="ground")),
-                  MARKED_PLANE.format(what="The facade, in its own frame (placed in the world by its own "
-                                        "markers).", howto="", name="facade", first_id=4,
-                                        regions="# mask = \"regions/facade_mask.png\"")]
+    if light in ("two-plane", "sun"):
+        named = ("desk", "wall") if light == "two-plane" else ("ground", "facade")
+        where = ("origin `point`, axes `x_axis` and normal x x_axis" if light == "two-plane"
+                 else "z up; its x axis is [site] heading_deg")
+        planes = [_marked_plane(named[0], f"Its markers' frame is the world frame ({where}).", howto, 0, True),
+                  _marked_plane(named[1], "In its own frame (placed in the world by its own markers: no pose to "
+                                 "type).", "", 4, False)]
     else:
         if args.board is not None or args.square is not None or args.board_image is not None:
             # a "COLSxROWS" left in the log is refused by name, a NaN square too: both stop the calibration
