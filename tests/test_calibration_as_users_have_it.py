@@ -356,3 +356,16 @@ def test_a_board_video_gives_its_sharp_distinct_frames_as_views(tmp_path, capsys
     # 8 views through MJPEG (the photos' test has 12 lossless ones): the principal point within 3 of its σ
     assert abs(cal.cx - cam.cx) < 3 * std["cx"] and abs(cal.cy - cam.cy) < 3 * std["cy"]
     assert out.with_suffix(".rrd").stat().st_size > 0  # the recording shows the picked frames
+
+
+def test_views_are_picked_sharp_and_distinct():
+    """pick_views on corner sets: a view repeated (the board held still) counts once, a blurred view and
+    one whose sharpness could not be measured (NaN) are left out, a board turned by 180° (its corners in
+    reverse order) is the same view."""
+    grid = np.stack(np.meshgrid(np.arange(9.0), np.arange(6.0)), axis=-1).reshape(-1, 2) * 20 + 100
+    views = [grid, grid + 0.3, grid[::-1], grid + [200, 0], grid + [0, 150], grid + [300, 300]]
+    blur = [2.0, 2.1, 2.0, 2.2, 9.0, float("nan")]  # the 5th smeared by a motion, the 6th unmeasured
+    assert calibration.pick_views(views, blur, 10, min_shift_px=5.0) == [0, 3]
+    assert calibration.pick_views(views, blur, 1, min_shift_px=5.0) == [0]
+    assert calibration.pick_views(views[:2], [float("nan")] * 2, 10, min_shift_px=5.0) == []
+    assert calibration.pick_views([], [], 10, min_shift_px=5.0) == []

@@ -517,15 +517,14 @@ def pick_views(corners: Sequence[np.ndarray], blur_px: Sequence[float], max_view
                min_shift_px: float) -> list[int]:
     """Indices of the views to calibrate from, in their original order: those not motion-blurred (edges
     at most ``VIDEO_BLUR_FACTOR`` times as wide as the median view's, ``blur_px`` from
-    ``cv2.estimateChessboardSharpness``, the wider of the board's two directions), then, sharpest
+    :func:`_edge_width`; NaN: not measured, left out), then, sharpest
     first, each next the one farthest from those picked (``_view_distance``), until ``max_views`` or
     until the farthest is within ``min_shift_px`` of one picked (the board held still: the same view
     again adds nothing but weight)."""
-    if not corners:
+    sharp = _sharp(blur_px)
+    if not sharp:
         return []
-    blur = np.asarray(blur_px, dtype=np.float64)
-    sharp = [k for k in range(len(corners)) if blur[k] <= VIDEO_BLUR_FACTOR * float(np.median(blur))]
-    picked = [min(sharp, key=lambda k: blur[k])]
+    picked = [min(sharp, key=lambda k: blur_px[k])]
     nearest = {k: _view_distance(corners[k], corners[picked[0]]) for k in sharp}
     while len(picked) < max_views:
         far = max((k for k in sharp if k not in picked), key=lambda k: nearest[k], default=None)
@@ -549,7 +548,7 @@ def views_from_video(path: str | os.PathLike, board: tuple[int, int], *, max_vie
     source = FrameSource((), p, None)
     wanted = set(np.linspace(0, source.count - 1, min(source.count, VIDEO_EXAMINED_PER_VIEW * max_views))
                  .round().astype(int).tolist())
-    found: list[tuple[int, np.ndarray, np.ndarray]] = []
+    found: list[tuple[int, np.ndarray, float]] = []  # (frame index, corners, edge width in px)
     size: tuple[int, int] | None = None
     examined = 0
     with frame_pass(source) as frames:
@@ -563,22 +562,47 @@ def views_from_video(path: str | os.PathLike, board: tuple[int, int], *, max_vie
             size = (grey.shape[1], grey.shape[0])
             corners = _find_board_fast(grey, board)
             if corners is not None:
-                found.append((frame.index, corners, grey))
+                found.append((frame.index, corners, _edge_width(grey, corners, board)))
     if progress:
         progress(source.count, source.count, "")
     if size is None:
         raise GnomonError(f"{p}: no frame decoded")
-    blur = []  # each view's edge width (px), the wider of its two directions' (a motion smears one)
-    for _, corners, grey in found:
-        pts = corners.astype(np.float32).reshape(-1, 1, 2)
-        widths = [cv2.estimateChessboardSharpness(grey, board, pts, vertical=v)[0] for v in (False, True)]
-        blur.append(max(float(np.asarray(w).ravel()[0]) for w in widths))  # a Scalar: (sharpness, ...)
+    blur = [b for _, _, b in found]
     picked = pick_views([c for _, c, _ in found], blur, max_views, VIDEO_MIN_SHIFT * float(np.hypot(*size)))
-    sharp = sum(b <= VIDEO_BLUR_FACTOR * float(np.median(blur)) for b in blur) if blur else 0
+    sharp = len(_sharp(blur))
+    # the picked frames again (a second decoding pass: holding every searched 4K frame would take a GB)
+    index = {found[k][0]: k for k in picked}
+    greys: dict[int, np.ndarray] = {}
+    with frame_pass(source) as frames:
+        for frame in frames:
+            if frame.index in index:
+                greys[frame.index] = to_grey_u8(frame.grey)
+                if len(greys) == len(index):
+                    break
     note = (f"{p}: {source.count} frames, {examined} examined, the board in {len(found)}, {sharp} sharp, "
             f"{len(picked)} distinct views picked")
     return VideoViews([f"{p}#{found[k][0]}" for k in picked], [found[k][1] for k in picked],
-                      [found[k][2] for k in picked], size, note)
+                      [greys[found[k][0]] for k in picked], size, note)
+
+
+def _edge_width(grey: np.ndarray, corners: np.ndarray, board: tuple[int, int]) -> float:
+    """The board's edge width (px) by ``cv2.estimateChessboardSharpness``, the wider of the board's two
+    directions (it measures one at a time; a motion smears the edges across it only); NaN if unmeasured."""
+    pts = corners.astype(np.float32).reshape(-1, 1, 2)
+    widths = [float(np.asarray(cv2.estimateChessboardSharpness(grey, board, pts, vertical=v)[0]).ravel()[0])
+              for v in (False, True)]  # each a Scalar: (sharpness, min and max brightness, 0)
+    return max(widths) if all(np.isfinite(widths)) else float("nan")
+
+
+def _sharp(blur_px: Sequence[float]) -> list[int]:
+    """Indices of the views not motion-blurred: edge width measured and at most ``VIDEO_BLUR_FACTOR`` times
+    the median measured one."""
+    blur = np.asarray(blur_px, dtype=np.float64)
+    finite = blur[np.isfinite(blur)]
+    if finite.size == 0:
+        return []
+    limit = VIDEO_BLUR_FACTOR * float(np.median(finite))
+    return [k for k in range(len(blur)) if np.isfinite(blur[k]) and blur[k] <= limit]
 
 
 def detect_in_images(
