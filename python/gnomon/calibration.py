@@ -57,6 +57,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -66,7 +67,7 @@ import numpy as np
 from gnomon import toml_io
 from gnomon.camera import OpenCVCamera, Pose, TsaiCamera
 from gnomon.errors import GnomonError
-from gnomon.frames import apply_exif_orientation, exif_orientation, to_grey
+from gnomon.frames import FrameSource, apply_exif_orientation, exif_orientation, to_grey
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".pgm", ".ppm", ".webp")
 OPENCV_STD_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
@@ -537,15 +538,17 @@ def pick_views(corners: Sequence[np.ndarray], blur_px: Sequence[float], max_view
 
 
 def views_from_video(path: str | os.PathLike, board: tuple[int, int], *, max_views: int = VIDEO_VIEWS,
-                     progress: Callable[[int, int, str], None] | None = None) -> VideoViews:
+                     progress: Callable[[int, int, str], None] | None = None,
+                     source: FrameSource | None = None) -> VideoViews:
     """Views of a board filmed on video: up to ``VIDEO_EXAMINED_PER_VIEW × max_views`` frames, evenly
     spaced, are searched for the board (:func:`_find_board_fast`); of those showing it, the sharp and
     distinct ones are picked (:func:`pick_views`). Frames are decoded as a scan decodes them
-    (:class:`gnomon.frames.FrameSource`: the video's rotation applied)."""
-    from gnomon.frames import FrameSource, frame_pass
+    (:class:`gnomon.frames.FrameSource`: the video's rotation applied; ``source``: the video already
+    opened). ``progress(frames read, frames, name)`` as the video is read."""
+    from gnomon.frames import frame_pass
 
     p = Path(path)
-    source = FrameSource((), p, None)
+    source = source if source is not None else FrameSource((), p, None)
     wanted = set(np.linspace(0, source.count - 1, min(source.count, VIDEO_EXAMINED_PER_VIEW * max_views))
                  .round().astype(int).tolist())
     found: list[tuple[int, np.ndarray, float]] = []  # (frame index, corners, edge width in px)
@@ -554,7 +557,7 @@ def views_from_video(path: str | os.PathLike, board: tuple[int, int], *, max_vie
     with frame_pass(source) as frames:
         for frame in frames:
             if progress:
-                progress(frame.index, source.count, p.name)
+                progress(frame.index + 1, source.count, p.name)
             if frame.index not in wanted:
                 continue
             examined += 1
@@ -563,8 +566,6 @@ def views_from_video(path: str | os.PathLike, board: tuple[int, int], *, max_vie
             corners = _find_board_fast(grey, board)
             if corners is not None:
                 found.append((frame.index, corners, _edge_width(grey, corners, board)))
-    if progress:
-        progress(source.count, source.count, "")
     if size is None:
         raise GnomonError(f"{p}: no frame decoded")
     blur = [b for _, _, b in found]
@@ -618,11 +619,21 @@ def detect_in_images(
     skipped, warnings, the video views' frames by name, one note per video).
     Images of different sizes, or unreadable ones, are a GnomonError naming
     the image; an image without a board is skipped with a warning.
+    ``progress(done, total, name)`` counts an image as one and a video as its
+    frames.
     """
     from gnomon.fieldlog import VIDEO_SUFFIXES
 
     if len(paths) == 0:
         raise GnomonError("no images given")
+    videos = {k: FrameSource((), Path(p), None) for k, p in enumerate(paths)
+              if Path(p).suffix.lower() in VIDEO_SUFFIXES}
+    weight = [videos[k].count if k in videos else 1 for k in range(len(paths))]
+    total = sum(weight)
+
+    def progress_from(start: int, frames_read: int, frames: int, name: str) -> None:
+        assert progress is not None
+        progress(start + frames_read, total, name)
     names, corners, skipped, warns = [], [], [], []
     video_frames: dict[str, np.ndarray] = {}
     notes: list[str] = []
@@ -639,8 +650,10 @@ def detect_in_images(
 
     for k, path in enumerate(paths):
         p = Path(path)
-        if p.suffix.lower() in VIDEO_SUFFIXES:
-            views = views_from_video(p, board, max_views=max_video_views)
+        done = sum(weight[:k])
+        if k in videos:
+            views = views_from_video(p, board, max_views=max_video_views, source=videos[k],
+                                     progress=None if progress is None else partial(progress_from, done))
             same_size(str(p), *views.size)
             names += views.names
             corners += views.corners
@@ -651,7 +664,7 @@ def detect_in_images(
                 warns.append(f"{p}: no {board[0]}x{board[1]} chessboard found (inner corners) in any frame examined")
             continue
         if progress:
-            progress(k, len(paths), p.name)
+            progress(done, total, p.name)
         img = read_grey(p)
         h, w = img.shape[:2]
         same_size(str(p), w, h)
@@ -663,7 +676,7 @@ def detect_in_images(
         names.append(str(p))
         corners.append(c)
     if progress:
-        progress(len(paths), len(paths), "")
+        progress(total, total, "")
     assert size is not None
     return names, corners, size, skipped, warns, video_frames, notes
 

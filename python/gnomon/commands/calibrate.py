@@ -207,6 +207,11 @@ def run(args: argparse.Namespace) -> int:
         raise GnomonError(f"--video-views {video_views}: must be ≥ {calibration.MIN_ZHANG_VIEWS}")
     paths = calibration.expand_image_args(args.images)
     with Progress("boards", len(paths), enabled=not args.quiet) as bar:
+
+        def progress(done: int, total: int, name: str) -> None:
+            bar.total = total  # an image counts one, a video its frames (known once the videos are opened)
+            bar.update(done)
+
         cal = calibration.calibrate_images(
             paths,
             board,
@@ -217,7 +222,7 @@ def run(args: argparse.Namespace) -> int:
             full=args.full,
             fix_k3=args.fix_k3,
             reject_factor=args.reject,
-            progress=lambda k, n, name: bar.update(k),
+            progress=progress,
             max_video_views=video_views,
         )
     for w in cal.warnings:
