@@ -133,6 +133,12 @@ def test_the_sun_template_filled_in_gives_the_captures_times(tmp_path: Path, cap
     # unfilled: one line naming the first key to fill in
     assert main(["preview", str(out), "--out", str(tmp_path / "p.png")]) == 2
     assert "[site] latitude: expected a finite number, got nan" in _one_line_error(capsys)
+    # the commented [gnomon] and [pole] tables, uncommented, have the keys the simulator's log uses
+    text = out.read_text()
+    block = text[text.index("# [gnomon]"):text.index("[light]")]
+    tables = tomllib.loads("\n".join(line[2:] for line in block.splitlines() if line.startswith("# "))
+                           .replace("[u, v]", "[0, 0]").replace("[x, y, z]", "[0, 0, 0]"))
+    assert {k: set(v) for k, v in tables.items()} == {k: set(original[k]) for k in ("gnomon", "pole")}
     # filled in with the capture's own site, camera, planes and pole: the same frames at the same times
     from gnomon.fieldlog import load_field_log
     from gnomon.timestamps import frame_times

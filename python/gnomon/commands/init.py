@@ -154,7 +154,18 @@ longitude = nan  # degrees east: fill in
 altitude = 0.0  # m above sea level
 timezone = "UTC"  # IANA name (e.g. "Europe/Zurich") or offset, for timestamps without one
 heading_deg = nan  # the compass heading of the world x axis (the ground markers' x), degrees: fill in,
-                   # or measure it from a vertical pole's shadow with a [gnomon] table (field_logs/README.md)
+                   # or delete it and measure it from a vertical pole's shadow with [gnomon] below
+
+# [gnomon]  # the heading from a vertical pole seen in one frame (instead of heading_deg)
+# frame = "frames/IMG_0001.jpg"
+# base_px = [u, v]  # its foot
+# shadow_px = [u, v]  # a point on its shadow's centre line on the ground
+# top_px = [u, v]  # its top (informational)
+
+# [pole]  # a fixed pole whose shadow the sun sweeps: its shadow's centre then needs no reference plane
+# base = [x, y, z]  # world coordinates (m)
+# top = [x, y, z]
+# radius = 0.05
 '''
 
 SCAN = '''\
