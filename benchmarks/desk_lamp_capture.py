@@ -20,7 +20,10 @@ calibrate lamp`` on the pencils; the lamp's ``[light]`` into the field log;
 ``gnomon regions`` grown from the bands (its mask replaces them: the whole
 bare desk the shadow crosses; started from the board's outline instead, it
 takes the bowl's flat top for the desk in the frames the shadow crosses it);
-``gnomon preview`` and ``gnomon scan``. It scores the scan against the desk
+``gnomon preview`` and ``gnomon scan``. Before the clicked lamp, the lamp
+once more with the shadows' tips found by Gnomon (each clicked base as the
+hint, no tip, the photos' median as the empty desk): each tip's distance to
+the author's click, and that lamp. It scores the scan against the desk
 measured from the board: planarity of the swept bare desk (outside the bowl
 and its cast shadow, circles read off the first frame; swept: a shadow time
 at 80 % of the 15×15 pixels around, not the desk's sparse noise dips outside
@@ -31,6 +34,8 @@ the sweep), coverage, and false points (outside those circles, more than
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import re
 import sys
@@ -45,6 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from gnomon import toml_io
 from gnomon.calibration import load_camera_file
 from gnomon.camera import Pose
+from gnomon.cli import main as gnomon
 from real_captures import regions_preview_scan, run
 
 # Read off bowl_00.jpg (pixels): the bowl's rim and its cast shadow (circles), and two bare bands of desk
@@ -104,6 +110,41 @@ def score(folder: Path) -> None:
           f"the desk p5 / p50 / p95 {' / '.join(f'{h:.1f}' for h in np.percentile(-d[bowl], [5, 50, 95]))} mm")
 
 
+def auto_tips(mirror: Path, folder: Path, log: dict, tips: list, bases: list) -> None:
+    """The lamp with the shadows' tips found by Gnomon instead of clicked: each clicked base (the hint)
+    in its photo (the one darkest there against the photos' median), no tip, no empty-desk photo (the
+    photos' median stands for it). Prints each found tip's distance to the author's click and the lamp."""
+    files = sorted((mirror / "light").glob("*.jpg"))
+    greys = np.stack([cv2.imread(str(f), cv2.IMREAD_GRAYSCALE).astype(np.float32) for f in files])
+    ratio = (greys + 1.0) / (np.median(greys, axis=0) + 1.0)
+    photos = []
+    for b in bases:
+        u, v = int(round(b[0])), int(round(b[1]))
+        k = int(np.argmin(ratio[:, v - 3:v + 4, u - 3:u + 4].mean(axis=(1, 2))))
+        photos.append({"image": str(files[k].resolve()), "base": b})
+    if len({p["image"] for p in photos}) != len(photos):
+        raise SystemExit("two clicked bases fall in one photo: cannot tell which photo each click is from")
+    auto = dict(log, pencil=dict(log["pencil"], photos=photos))
+    path = folder / "field_log_auto_tips.toml"
+    toml_io.dump(auto, path)
+    print(f"$ gnomon calibrate lamp {path}", flush=True)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = gnomon(["calibrate", "lamp", str(path)])
+    text = out.getvalue()
+    print(text, end="", flush=True)
+    if code != 0:
+        raise SystemExit(f"gnomon calibrate lamp (automatic tips) failed with code {code}")
+    found = [line for line in text.splitlines() if "found against" in line]
+    off = np.array([np.hypot(*(np.array([float(x) for x in re.findall(r"-?\d+\.\d+", line)][2:4]) - t))
+                    for line, t in zip(found, tips, strict=True)])
+    lamp = toml_io.load(folder / "lamp.toml")
+    height = re.search(r"([\d.]+) mm above the plane", text)
+    print(f"automatic tips: {len(off)} found, {np.median(off):.2f} px from the author's clicks (median, max "
+          f"{off.max():.1f}); the lamp {height.group(1) if height else '?'} mm above the desk "
+          f"(chi2 {lamp['lamp_calibration']['chi2']:.3g} for {lamp['lamp_calibration']['dof']} dof)", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("mirror", type=Path, help="checkout of Leeiieeo/3D-photography-on-your-desk")
@@ -127,6 +168,7 @@ def main(argv: list[str] | None = None) -> int:
                       "photos": [{"base": b, "tip": t} for b, t in zip(bases, tips, strict=True)]}}
     path = folder / "field_log.toml"
     toml_io.dump(log, path)
+    auto_tips(args.mirror, folder, log, tips, bases)  # before the clicked lamp: both write lamp.toml
     run(["calibrate", "lamp", str(path)])
     log["light"] = toml_io.load(folder / "lamp.toml")["light"]
     toml_io.dump(log, path)

@@ -121,8 +121,9 @@ PENCIL = '''\
 [pencil]
 # For `gnomon calibrate lamp`: photos (from the scan's place, the lamp where it is for the sweep)
 # of a pencil standing upright on the desk, moved between photos to places spread around the
-# scene. For each: its base (foot) and the tip of its shadow, in pixels. With `empty`, a photo
-# of the desk without the pencil, the tip may be left out and found for you (base a rough pixel).
+# scene. For each: its base (foot) and the tip of its shadow, in pixels. The tip may be left out
+# and found for you (the base then a rough pixel) against `empty`, a photo of the desk without the
+# pencil, or, with 3 or more photos, against their median.
 height = {height}  # the pencil's length in {units}: measure it
 sigma_px = 1.0  # how well the base and tip are placed, pixels
 # empty = "light/empty.jpg"

@@ -46,9 +46,10 @@ the desk photographed from the scan's place), plus::
     ]
 
 ``image`` is informational when both pixels are given. A photo without
-``tip`` needs its ``image`` and ``[pencil] empty``: the shadow's tip is then
-found by comparing the two photos' irradiance, and the base (a hint, a few
-pixels off at most) is moved onto the shadow's axis
+``tip`` needs its ``image`` and ``[pencil] empty`` (or, without it, at least
+3 photos with their ``image``: their per-pixel median is the empty desk): the
+shadow's tip is then found by comparing the two photos' irradiance, and the
+base (a hint, a few pixels off at most) is moved onto the shadow's axis
 (:mod:`gnomon.pencil_detection`). ``[capture]``, ``[light]``,
 ``[scan]`` and ``[site]`` tables are ignored, so a scan's own field log may
 carry the ``[pencil]`` table; any other table is an error. The result is
@@ -452,10 +453,12 @@ def load_pencil_log(path: str | Path) -> PencilLog:
         image = pt.string("image") if "image" in pt.data else None
         for key, out in (("base", bases), ("tip", tips)):
             if key == "tip" and "tip" not in pt.data:
-                # found automatically: needs this photo and the empty desk
-                if empty is None or image is None:
+                # found automatically: needs this photo and the empty desk (or the photos' median)
+                median = len(photos) >= MEDIAN_PHOTOS and all(isinstance(x.get("image"), str) for x in photos)
+                if image is None or (empty is None and not median):
                     raise pt.error("tip", "missing: give the tip's pixel, or the photo's 'image' and "
-                                          "[pencil] 'empty' (a photo of the desk without the pencil)")
+                                          "[pencil] 'empty' (a photo of the desk without the pencil; or at "
+                                          f"least {MEDIAN_PHOTOS} photos, each with its 'image')")
                 out.append(np.array([np.nan, np.nan]))
                 continue
             uv = pt.vector(key, 2)
@@ -470,6 +473,27 @@ def load_pencil_log(path: str | Path) -> PencilLog:
         p, camera, pose, plane_name, point, normal, height, sigma_px, sigma_height, units,
         np.array(bases), np.array(tips), tuple(images), empty, gamma,
     )
+
+
+MEDIAN_PHOTOS = 3
+"""Without ``[pencil] empty``, this many photos (or more) stand for the empty desk: their median."""
+
+
+def _median_photo(folder: Path, log: PencilLog) -> np.ndarray:
+    """The per-pixel median of the pencil photos (as encoded: the median commutes with the decoding).
+    Each photo's pencil and shadow cover pixels the others leave bare, so with 3 or more photos spread
+    around the scene it is the desk without the pencil."""
+    from gnomon.calibration import read_grey
+
+    photos: list[np.ndarray] = []
+    for name in log.images:
+        assert name is not None
+        photo = read_grey(folder / name)
+        if photos and photo.shape != photos[0].shape:
+            raise GnomonError(f"{log.path}: [pencil] photo {name} is {photo.shape[1]}x{photo.shape[0]}, "
+                              f"{log.images[0]} {photos[0].shape[1]}x{photos[0].shape[0]}")
+        photos.append(photo)
+    return np.median(np.stack(photos), axis=0).round().astype(photos[0].dtype)
 
 
 def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
@@ -488,12 +512,19 @@ def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
     missing = np.flatnonzero(~np.isfinite(log.tips_px[:, 0]))
     if len(missing) == 0:
         return log, []
-    assert log.empty is not None
     folder = log.path.resolve().parent
-    empty_raw = read_grey(log.empty)
+    if log.empty is not None:
+        empty_raw, empty_name = read_grey(log.empty), log.empty.name
+    else:  # the desk as most photos see it: the pencil stands elsewhere in each (checked when the log was read)
+        assert len(log.images) >= MEDIAN_PHOTOS and all(name is not None for name in log.images)
+        empty_raw, empty_name = _median_photo(folder, log), f"the median of the {len(log.images)} photos"
     lut = decoding_lut(log.gamma, empty_raw.dtype)
     empty = lut[empty_raw]
     plane = PlaneInCamera.from_world(log.plane_point, log.plane_normal, log.pose)
+    # the pencil stands on the camera's side of the plane (a board's normal may point into the desk)
+    up = np.asarray(log.plane_normal, dtype=np.float64)
+    if (log.pose.camera_centre_world - log.plane_point) @ up < 0:
+        up = -up
     bases, tips, lines = log.bases_px.copy(), log.tips_px.copy(), []
     for i in missing:
         name = log.images[i]
@@ -505,12 +536,13 @@ def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
         foot = plane.intersect(log.camera.rays(bases[i][None]))[0]
         if not np.all(np.isfinite(foot)):
             raise GnomonError(f"{log.path}: [pencil] photo {name}: the base pixel does not see the plane")
-        top_world = log.pose.camera_to_world(foot) + log.height * log.plane_normal
+        foot_world = log.pose.camera_to_world(foot)
+        top_world = foot_world + log.height * up
         top_px = log.camera.project(log.pose.world_to_camera(top_world)[None])[0]
         found = detect_pencil(lut[photo_raw], empty, bases[i], top_px, source=f"{log.path}: {name}")
         bases[i], tips[i] = found.base_px, found.tip_px
         lines.append(f"photo {i + 1} ({name}): base {found.base_px.round(2).tolist()}, "
-                     f"tip {found.tip_px.round(2).tolist()} (found against {log.empty.name})")
+                     f"tip {found.tip_px.round(2).tolist()} (found against {empty_name})")
     return replace(log, bases_px=bases, tips_px=tips), lines
 
 

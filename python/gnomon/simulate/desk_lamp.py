@@ -254,12 +254,15 @@ class DeskLampConfig(SweepConfig):
     ``lamp_above_camera``: put the lamp this many mm straight above the camera's
     centre instead (the light nearly in line with the camera: every shadow
     plane passes within that distance of it, and the rays graze the planes).
+    ``pencil_albedo``: the pencil's albedo in its photos (default
+    ``gnomon.simulate.pencil.PENCIL_ALBEDO``, 0.55; a dark marker pen: 0.05–0.1).
     """
 
     lamp_side: str = "left"
     pencil_photos: int = 3
     lamp_height: float | None = None
     lamp_above_camera: float | None = None
+    pencil_albedo: float | None = None
 
     @property
     def scene_name(self) -> str:
@@ -276,6 +279,8 @@ class DeskLampConfig(SweepConfig):
             raise self.error(f"lamp_above_camera {self.lamp_above_camera}: must be 10 to 500 mm")
         if self.lamp_above_camera is not None and (self.lamp_height is not None or self.lamp_side != "left"):
             raise self.error("lamp_above_camera places the lamp itself: give neither lamp_height nor lamp_side")
+        if self.pencil_albedo is not None and not (math.isfinite(self.pencil_albedo) and 0 < self.pencil_albedo <= 1):
+            raise self.error(f"pencil_albedo {self.pencil_albedo}: must be in (0, 1]")
         if not (self.pencil_photos == 0 or 2 <= self.pencil_photos <= MAX_PENCIL_PHOTOS):
             raise self.error(f"--pencil-photos {self.pencil_photos}: must be 0 (none) or 2 to "
                              f"{MAX_PENCIL_PHOTOS}")

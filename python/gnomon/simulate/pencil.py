@@ -244,7 +244,8 @@ def pencil_linear_image(scene, pencil: Pencil) -> np.ndarray:
     for obj, _ in scene.objects.values():
         blocked |= obj.intersect(Pp + 1e-6 * n, to_s) < 1.0
     direct = np.where(blocked, 0.0, scene.E * np.maximum(cos_i, 0.0) / dist2)
-    L[on_pencil] = PENCIL_ALBEDO * (AMBIENT + direct)
+    albedo = getattr(scene.config, "pencil_albedo", None)
+    L[on_pencil] = (PENCIL_ALBEDO if albedo is None else albedo) * (AMBIENT + direct)
     return scene._finish(L, True)
 
 
@@ -300,6 +301,7 @@ class PencilPhotos:
     images: list[str] = field(default_factory=list)   # relative to the capture folder
     height: float = PENCIL_HEIGHT
     radius: float = PENCIL_RADIUS
+    albedo: float = PENCIL_ALBEDO
 
 
 def write_pencil_photos(scene, out: Path, n: int) -> PencilPhotos:
@@ -321,8 +323,9 @@ def write_pencil_photos(scene, out: Path, n: int) -> PencilPhotos:
         tips.append(pencil.shadow_tip(scene.S))
         paths.append(folder / name)
         images.append(f"pencil/{name}")
+    albedo = PENCIL_ALBEDO if getattr(c, "pencil_albedo", None) is None else float(c.pencil_albedo)
     return PencilPhotos(np.array(bases), np.array(tops), np.array(tips), scene.project(np.array(bases)),
-                        scene.project(np.array(tips)), paths, images)
+                        scene.project(np.array(tips)), paths, images, albedo=albedo)
 
 
 def ground_truth_arrays(ph: PencilPhotos | None) -> dict[str, np.ndarray]:
@@ -348,7 +351,7 @@ def ground_truth_summary(ph: PencilPhotos | None) -> dict:
         "height_mm": ph.height,
         "radius_mm": ph.radius,
         "cone_length_mm": CONE_LENGTH,
-        "albedo": PENCIL_ALBEDO,
+        "albedo": ph.albedo,
         "images": ph.images,
         "bases_world": ph.bases_world.tolist(),
         "tops_world": ph.tops_world.tolist(),
