@@ -93,8 +93,8 @@ def _shadow_direction(ratio: np.ndarray, hint: np.ndarray, dirs: np.ndarray, awa
     darkest ray over the first ``NEAR_PX`` does not do: on real photos (a soft lamp) the shadow is tens of
     px wide there, so every ray within ±30° of its axis is as dark, and a pencil seen from above is a dark
     blob around its foot (``body_px``: how far its top's image lies from the hint; the shadow is then read
-    from past it). The half-width: 0.75 of
-    the shadow's width across that ray near the base, at least ``HALF_WIDTH_PX``.
+    from past it). The half-width: 0.75 of the shadow's width across that ray near the base, at least
+    ``HALF_WIDTH_PX``.
     """
     h, w = ratio.shape
     r = np.arange(NEAR_PX[0], float(np.hypot(w, h)), STEP_PX)
