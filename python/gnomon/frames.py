@@ -341,6 +341,16 @@ def video_size(path: Path) -> tuple[int, int]:
         cap.release()
 
 
+def video_fps(path: Path) -> float | None:
+    """A video's announced frame rate (frames per second), or None when it announces none (0, NaN)."""
+    cap = cv2.VideoCapture(str(path))
+    try:
+        fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
+    finally:
+        cap.release()
+    return fps if np.isfinite(fps) and fps > 0 else None
+
+
 def _any_case(suffix: str) -> str:
     return "".join(f"[{c.lower()}{c.upper()}]" if c.isalpha() else c for c in suffix)
 

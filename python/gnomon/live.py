@@ -57,7 +57,7 @@ import numpy as np
 from gnomon.errors import FrameError
 from gnomon.fieldlog import load_field_log
 from gnomon.fitting import fit_line_robust
-from gnomon.frames import Frame, FrameSource, to_grey
+from gnomon.frames import Frame, FrameSource, to_grey, video_fps
 from gnomon.fusion import fuse_depths
 from gnomon.pipeline import ScanResult, scan, write_scan
 from gnomon.publish import staged_outputs
@@ -218,11 +218,7 @@ def source_fps(source: FrameSource, fallback: float | None) -> float:
     if isinstance(source, CaptureSource):
         fps = source.fps
     elif source.video is not None:
-        cap = cv2.VideoCapture(str(source.video))
-        try:
-            fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0) or None
-        finally:
-            cap.release()
+        fps = video_fps(source.video)
     if fps is None or not np.isfinite(fps) or fps <= 0:
         fps = fallback
     return float(fps) if fps else 30.0

@@ -277,22 +277,10 @@ def _sun_times(files: list[Path], video: bool, fps: float | None) -> str:
                if video else ": fill in") + "\n")
 
 
-def _video_fps(path: Path) -> float | None:
-    """The video's announced frame rate (frames per second), or None when it gives none."""
-    import cv2
-
-    cap = cv2.VideoCapture(str(path))
-    try:
-        fps = float(cap.get(cv2.CAP_PROP_FPS))
-    finally:
-        cap.release()
-    return fps if 0 < fps < 1e4 else None
-
-
 def run(args: argparse.Namespace) -> int:
     from gnomon import atomic
     from gnomon.errors import GnomonError
-    from gnomon.frames import FrameSource, expand_glob_argument, natural_key
+    from gnomon.frames import FrameSource, expand_glob_argument, natural_key, video_fps
     from gnomon.publish import check_output_file
     from gnomon.validate import input_file
 
@@ -363,7 +351,8 @@ def run(args: argparse.Namespace) -> int:
     units = "m" if light == "sun" else "mm"
     capture = CAPTURE.format(frames=frames, count=count, what=what, width=width, height=height, units=units)
     if light == "sun":
-        capture += _sun_times(files, video, _video_fps(files[0]) if video else None)
+        fps = video_fps(files[0]) if video else None  # a rate of 10^4 or more is a container's time base
+        capture += _sun_times(files, video, fps if fps is not None and fps < 1e4 else None)
     howto = MARKERS_HOWTO.format(units=units)
     if light in ("two-plane", "sun"):
         named = ("desk", "wall") if light == "two-plane" else ("ground", "facade")
