@@ -259,15 +259,18 @@ _SB_FALLBACK_FLAGS = (_SB_FLAGS, cv2.CALIB_CB_EXHAUSTIVE)
 _CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
 
 
-def _find_board(grey: np.ndarray, board: tuple[int, int]) -> np.ndarray | None:
+def _find_board(grey: np.ndarray, board: tuple[int, int], *, sb_flags: tuple[int, ...] = _SB_FALLBACK_FLAGS,
+                classic: bool = True) -> np.ndarray | None:
+    """The board's corners in ``board``'s order, found in either orientation: the sector detector with each
+    of ``sb_flags`` in turn, then (``classic``) the classic detector; None when none finds it."""
     cols, rows = board
     sizes = [(cols, rows)] if cols == rows else [(cols, rows), (rows, cols)]
-    for flags in _SB_FALLBACK_FLAGS:
+    for flags in sb_flags:
         for size in sizes:
             ok, corners = cv2.findChessboardCornersSB(grey, size, flags=flags)
             if ok and corners is not None:
                 return _canonical_order(corners.reshape(-1, 2).astype(np.float64), size, board)
-    for size in sizes:
+    for size in sizes if classic else ():
         ok, corners = cv2.findChessboardCorners(grey, size, flags=_CLASSIC_FLAGS)
         if ok and corners is not None:
             pts = corners.reshape(-1, 2).astype(np.float64)
@@ -498,14 +501,10 @@ def _find_board_fast(grey: np.ndarray, board: tuple[int, int]) -> np.ndarray | N
     scale = min(1.0, VIDEO_DETECT_PX / max(w, h))
     small = grey if scale == 1.0 else cv2.resize(grey, (round(w * scale), round(h * scale)),
                                                   interpolation=cv2.INTER_AREA)
-    cols, rows = board
-    for size in ([(cols, rows)] if cols == rows else [(cols, rows), (rows, cols)]):
-        ok, found = cv2.findChessboardCornersSB(small, size, flags=cv2.CALIB_CB_NORMALIZE_IMAGE)
-        if ok and found is not None:
-            pts = _canonical_order(found.reshape(-1, 2).astype(np.float64), size, board)
-            # pixel centres: (x + 0.5) / scale − 0.5
-            return refine_corners(grey, (pts + 0.5) / scale - 0.5, board)
-    return None
+    pts = _find_board(small, board, sb_flags=(cv2.CALIB_CB_NORMALIZE_IMAGE,), classic=False)
+    if pts is None:
+        return None
+    return refine_corners(grey, (pts + 0.5) / scale - 0.5, board)  # pixel centres: (x + 0.5) / scale − 0.5
 
 
 def _view_distance(a: np.ndarray, b: np.ndarray) -> float:
