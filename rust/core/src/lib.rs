@@ -23,6 +23,7 @@
 //! `Result<_, KernelError>`.
 
 pub mod camera;
+pub mod crossing;
 pub mod error;
 pub mod geometry;
 pub mod intensity;
@@ -31,6 +32,7 @@ pub mod live;
 pub mod mesh;
 pub mod noise;
 pub mod retime;
+mod ring;
 pub mod sample;
 pub mod simd;
 pub mod surface;

@@ -35,11 +35,12 @@
 //!
 //! [`finish`]: crate::TemporalTracker::finish
 
+use crate::crossing::{find_crossing, Edge};
 use crate::error::KernelError;
 use crate::intensity::Intensity;
+use crate::ring::FrameRing;
 use crate::sample::Sample;
 use crate::simd::{Portable, SimdPath, Vector};
-use crate::tracker::{find_crossing, Edge, FrameRing};
 
 /// Per-pixel phase of the watch (stored in the sample type, so that a
 /// row's whole state is in one lane width and the update vectorises).

@@ -72,8 +72,12 @@ use rayon::prelude::*;
 use crate::error::KernelError;
 use crate::intensity::Intensity;
 use crate::live::{FinishedPixel, Watch, WatchParams};
+use crate::ring::FrameRing;
 use crate::sample::Sample;
 use crate::simd::{Portable, SimdPath, Vector};
+
+// Defined in `crossing` (which `live` shares); public here as before.
+pub use crate::crossing::{find_crossing, Crossing, Edge};
 
 /// Samples copied into the ring per parallel task.
 const STORE_PIECE: usize = 1 << 18;
@@ -197,143 +201,6 @@ pub struct ShadowTimes {
     /// 1 where the dip's levels or a sample interpolated at a crossing is
     /// clipped (`0` or the type's maximum): the times may be biased.
     pub clipped: Vec<u8>,
-}
-
-/// One threshold crossing in a window of samples.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Crossing {
-    /// The crossing lies between samples `index` and `index + 1`.
-    pub index: usize,
-    /// `(v_k − thr) / (v_k − v_{k+1})`: in `[0, 1)` for a fall, `(0, 1]` for a rise.
-    pub fraction: f32,
-    /// `|v_k − v_{k+1}|` (units of the samples per frame).
-    pub slope: f32,
-}
-
-/// Which way the intensity crosses the threshold.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Edge {
-    /// Falling into the shadow: `v_k ≥ thr > v_{k+1}`.
-    Enter,
-    /// Rising out of it: `v_k < thr ≤ v_{k+1}`.
-    Leave,
-}
-
-/// The crossing of `threshold` in `values` nearest the centre of the window.
-///
-/// `values` are `2m` consecutive samples whose centre pair is `(m−1, m)`;
-/// candidate pairs are tried at growing distance `d` from it, the earlier pair
-/// (`m−1−d`) before the later (`m−1+d`). Pairs of equal samples (as produced by
-/// clamping at the ends of the sequence) never cross. `None` if no pair crosses.
-pub fn find_crossing(values: &[f32], threshold: f32, edge: Edge) -> Option<Crossing> {
-    if values.len() < 2 {
-        return None;
-    }
-    let pairs = values.len() - 1;
-    let centre = (values.len() / 2).saturating_sub(1);
-    let crosses = |k: usize| {
-        let (a, b) = (values[k], values[k + 1]);
-        match edge {
-            Edge::Enter => a >= threshold && threshold > b,
-            Edge::Leave => a < threshold && threshold <= b,
-        }
-    };
-    let reach = centre.max(pairs - 1 - centre);
-    (0..=reach)
-        .flat_map(|d| [centre.checked_sub(d), Some(centre + d).filter(|_| d > 0)])
-        .flatten()
-        .filter(|&k| k < pairs)
-        .find(|&k| crosses(k))
-        .map(|k| {
-            let (a, b) = (values[k], values[k + 1]);
-            Crossing {
-                index: k,
-                fraction: (a - threshold) / (a - b),
-                slope: (a - b).abs(),
-            }
-        })
-}
-
-/// The last `slots` frames, frame `j` in slot `j % slots`.
-///
-/// Slots are `stride ≥ frame_len` samples apart: whole 4 KiB pages plus
-/// [`SLOT_SKEW`] bytes. Slots a whole number of pages apart (a 1024×768 frame
-/// of either type) put the same pixel of every frame at one offset in its
-/// page, so the block pass, which reads a few dozen frames at one pixel,
-/// evicts its own lines from the first-level cache (whose set is chosen by
-/// that offset). Measured on the frog-sized capture (one thread): per frame,
-/// 1.35 → 1.1 ms of CPU plain and 3.4 → 2.8 ms normalised with second dips;
-/// 1920×1080 `u8`, already a quarter page apart, unchanged. (A skew of one
-/// cache line, 512 or 1536 bytes measured slower than a quarter page.)
-#[derive(Debug, Clone)]
-pub(crate) struct FrameRing<T> {
-    samples: Vec<T>,
-    width: usize,
-    frame_len: usize,
-    stride: usize,
-    slots: usize,
-}
-
-/// Ask Linux to back `samples` (freshly allocated, not yet touched) with huge
-/// pages where it can: the ring is written frame by frame, and faulting it in
-/// by 4 KiB pages cost about as much CPU as the normalised store itself
-/// (a hint: nothing changes if it is refused; no effect elsewhere).
-fn advise_huge_pages<T>(samples: &[T]) {
-    #[cfg(target_os = "linux")]
-    {
-        let start = samples.as_ptr() as usize;
-        let end = start + std::mem::size_of_val(samples);
-        let (first, last) = (start.div_ceil(PAGE) * PAGE, end / PAGE * PAGE);
-        if last > first {
-            // SAFETY: madvise only hints how the pages of this allocation (whole pages
-            // within it) are backed; it does not change their contents or validity.
-            unsafe {
-                libc::madvise(
-                    first as *mut libc::c_void,
-                    last - first,
-                    libc::MADV_HUGEPAGE,
-                );
-            }
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = samples;
-}
-
-/// Bytes of a memory page, and how many more than whole pages a ring slot
-/// takes ([`FrameRing`]).
-const PAGE: usize = 4096;
-const SLOT_SKEW: usize = 1024;
-
-impl<T: Sample> FrameRing<T> {
-    fn new(height: usize, width: usize, slots: usize) -> Self {
-        let frame_len = height * width;
-        let size = std::mem::size_of::<T>();
-        // whole 4 KiB pages, plus one cache line
-        // whole 4 KiB pages, plus a quarter page
-        let stride = ((frame_len * size).div_ceil(PAGE) * PAGE + SLOT_SKEW) / size;
-        let samples = vec![T::MIN; stride * slots];
-        advise_huge_pages(&samples);
-        FrameRing {
-            samples,
-            width,
-            frame_len,
-            stride,
-            slots,
-        }
-    }
-
-    /// The slot of frame `index` (overwriting frame `index − slots`).
-    fn slot_mut(&mut self, index: usize) -> &mut [T] {
-        let start = (index % self.slots) * self.stride;
-        &mut self.samples[start..start + self.frame_len]
-    }
-
-    #[inline(always)]
-    pub(crate) fn row(&self, frame: usize, row: usize) -> &[T] {
-        let start = (frame % self.slots) * self.stride + row * self.width;
-        &self.samples[start..start + self.width]
-    }
 }
 
 /// The state of one image row.
@@ -992,7 +859,7 @@ impl<T: Sample> TemporalTracker<T> {
         if let Some(watch) = &mut self.watch {
             let (ring, config) = (&self.ring, &watch.config);
             let newest = self.frames_seen - 1;
-            let oldest = self.frames_seen.saturating_sub(ring.slots);
+            let oldest = self.frames_seen.saturating_sub(ring.slots());
             watch
                 .rows
                 .par_iter_mut()
