@@ -9,29 +9,17 @@
 
 use std::fmt::Debug;
 
-use crate::simd::{Portable, Vector};
+use crate::simd::{Lane, Portable, Vector};
 
-mod sealed {
-    pub trait Sealed {}
-    impl Sealed for u8 {}
-    impl Sealed for u16 {}
-}
-
-/// An unsigned grey-level sample (digital number, DN).
-pub trait Sample: Copy + Ord + Debug + Default + Send + Sync + 'static + sealed::Sealed {
-    /// The darkest and brightest representable values.
-    const MIN: Self;
-    const MAX: Self;
+/// An unsigned grey-level sample (digital number, DN): a [`Lane`] (whence
+/// `MIN`, `MAX` and the saturating arithmetic; sealed through it: `u8`, `u16`).
+pub trait Sample: Lane + Debug + Default {
     /// Marks "no offset" among block-local frame offsets.
     const NO_OFFSET: Self;
     /// Length of a decoding LUT indexed by this sample: `MAX + 1`.
     const LUT_LEN: usize;
     /// The numpy dtype name, for messages.
     const DTYPE: &'static str;
-    /// `self − other`, or 0 if negative.
-    fn saturating_sub(self, other: Self) -> Self;
-    /// `self + other`, or `MAX` if larger.
-    fn saturating_add(self, other: Self) -> Self;
     /// A block-local frame offset `k < NO_OFFSET` (checked by the caller).
     fn from_offset(k: usize) -> Self;
     /// The value as an offset or a LUT index.
@@ -56,19 +44,9 @@ macro_rules! impl_sample {
             #[cfg(target_arch = "x86_64")]
             type Avx2 = $avx2;
             type Portable = Portable<$t, 16>;
-            const MIN: Self = <$t>::MIN;
-            const MAX: Self = <$t>::MAX;
             const NO_OFFSET: Self = <$t>::MAX;
             const LUT_LEN: usize = 1 << $bits;
             const DTYPE: &'static str = $dtype;
-            #[inline(always)]
-            fn saturating_sub(self, other: Self) -> Self {
-                <$t>::saturating_sub(self, other)
-            }
-            #[inline(always)]
-            fn saturating_add(self, other: Self) -> Self {
-                <$t>::saturating_add(self, other)
-            }
             #[inline(always)]
             fn from_offset(k: usize) -> Self {
                 debug_assert!(k < usize::from(Self::NO_OFFSET));

@@ -19,10 +19,12 @@
 //!
 //! The path is detected once; the environment variable `GNOMON_SIMD`
 //! (`avx2`, `sse2`, `portable`) forces a lower one, for benchmarks and tests.
+//!
+//! The vectors are generic over [`Lane`], the scalar arithmetic they fold
+//! (defined here); [`crate::sample::Sample`] builds on it and names each
+//! sample type's vectors, so this module depends on no other of the crate.
 
 use std::sync::OnceLock;
-
-use crate::sample::Sample;
 
 /// An instruction set the tracker's hot loops can run on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -100,6 +102,49 @@ impl SimdPath {
     }
 }
 
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for u8 {}
+    impl Sealed for u16 {}
+}
+
+/// The scalar in each lane of a [`Vector`]: an unsigned integer with
+/// saturating arithmetic, `u8` or `u16` (sealed). [`crate::sample::Sample`]
+/// is a `Lane` with what the tracker needs besides.
+///
+/// Invariants the masks rely on: `MIN` is 0 (no bit set) and `MAX` has every
+/// bit set, so that a mask's lane (all ones or zero) is `MAX` or `MIN`, and
+/// [`Portable`]'s lane-by-lane masks equal the intrinsics' bitwise ones.
+pub trait Lane: Copy + Ord + Send + Sync + 'static + sealed::Sealed {
+    /// The darkest and brightest representable values.
+    const MIN: Self;
+    const MAX: Self;
+    /// `self − other`, or 0 if negative.
+    fn saturating_sub(self, other: Self) -> Self;
+    /// `self + other`, or `MAX` if larger.
+    fn saturating_add(self, other: Self) -> Self;
+}
+
+/// The two lane types differ only in width: one implementation for both.
+macro_rules! impl_lane {
+    ($($t:ty),+) => {$(
+        impl Lane for $t {
+            const MIN: Self = <$t>::MIN;
+            const MAX: Self = <$t>::MAX;
+            #[inline(always)]
+            fn saturating_sub(self, other: Self) -> Self {
+                <$t>::saturating_sub(self, other)
+            }
+            #[inline(always)]
+            fn saturating_add(self, other: Self) -> Self {
+                <$t>::saturating_add(self, other)
+            }
+        }
+    )+};
+}
+
+impl_lane!(u8, u16);
+
 /// A vector of `LANES` samples. Comparisons return masks: all bits set in
 /// the lanes where they hold, zero elsewhere.
 ///
@@ -107,7 +152,7 @@ impl SimdPath {
 /// Implementations for an instruction set may only be used on a CPU that has
 /// it (see [`SimdPath::is_supported`]); the loads and stores read and write
 /// `LANES` samples from the pointer.
-pub trait Vector<T: Sample>: Copy {
+pub trait Vector<T: Lane>: Copy {
     const LANES: usize;
     /// `LANES` samples from `ptr` (no alignment needed).
     ///
@@ -147,7 +192,7 @@ pub trait Vector<T: Sample>: Copy {
 #[derive(Clone, Copy)]
 pub struct Portable<T, const N: usize>([T; N]);
 
-impl<T: Sample, const N: usize> Portable<T, N> {
+impl<T: Lane, const N: usize> Portable<T, N> {
     #[inline(always)]
     fn map2(self, o: Self, f: impl Fn(T, T) -> T) -> Self {
         let mut out = self.0;
@@ -158,7 +203,7 @@ impl<T: Sample, const N: usize> Portable<T, N> {
     }
 }
 
-impl<T: Sample, const N: usize> Vector<T> for Portable<T, N> {
+impl<T: Lane, const N: usize> Vector<T> for Portable<T, N> {
     const LANES: usize = N;
     #[inline(always)]
     unsafe fn load(ptr: *const T) -> Self {
