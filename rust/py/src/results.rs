@@ -1,51 +1,112 @@
-//! The tracker's result types as frozen classes of read-only numpy arrays: `ShadowTimes` and
-//! `SecondDips` (the live watch's `FinishedPixels` is in [`crate::live`]).
+//! The kernel's result types as frozen classes of read-only numpy arrays, each class's fields
+//! declared once ([`result_class!`]): the tracker's `ShadowTimes` and `SecondDips` here, the
+//! live watch's `FinishedPixels` in [`crate::live`].
 
-use gnomon_core::{SecondDips, ShadowTimes};
-use numpy::{PyArray2, PyUntypedArrayMethods};
+use numpy::PyUntypedArrayMethods;
 use pyo3::prelude::*;
 
-use crate::arrays::{image, mask};
+use gnomon_core::{SecondDips, ShadowTimes};
 
-/// The tracker's per-pixel results: (H, W) arrays, read-only attributes.
-#[pyclass(module = "gnomon._kernel", name = "ShadowTimes", frozen)]
-pub(crate) struct PyShadowTimes {
-    /// Brightest level of the deepest dip (DN of the input; fractional when normalised).
-    #[pyo3(get)]
-    imax: Py<PyArray2<f32>>,
-    /// Darkest sample of the dip (DN of the input).
-    #[pyo3(get)]
-    imin: Py<PyArray2<f32>>,
-    /// `imax - imin` (DN), 0 = no dip.
-    #[pyo3(get)]
-    contrast: Py<PyArray2<f32>>,
-    /// Mid-level in linear irradiance (in the light of the dip).
-    #[pyo3(get)]
-    threshold: Py<PyArray2<f32>>,
-    /// Entering-edge time (frames), NaN = none.
-    #[pyo3(get)]
-    enter: Py<PyArray2<f32>>,
-    /// Leaving-edge time (frames), NaN = none.
-    #[pyo3(get)]
-    leave: Py<PyArray2<f32>>,
-    /// Linear irradiance change per frame at the entering crossing.
-    #[pyo3(get)]
-    enter_slope: Py<PyArray2<f32>>,
-    /// Linear irradiance change per frame at the leaving crossing.
-    #[pyo3(get)]
-    leave_slope: Py<PyArray2<f32>>,
-    /// Depth of the deepest other dip (DN), 0 = none.
-    #[pyo3(get)]
-    rival: Py<PyArray2<f32>>,
-    /// A dip with `contrast >= min_contrast` that is not ambiguous.
-    #[pyo3(get)]
-    valid: Py<PyArray2<bool>>,
-    /// `contrast >= min_contrast` and the rival dip at least `ambiguity` times as deep.
-    #[pyo3(get)]
-    ambiguous: Py<PyArray2<bool>>,
-    /// The dip's levels or an interpolated sample at 0 or the dtype's maximum.
-    #[pyo3(get)]
-    clipped: Py<PyArray2<bool>>,
+/// A frozen class (its docs and `name` given) whose read-only attributes are numpy arrays,
+/// one per field (its docs the attribute's), with `new` making it from the kernel's result:
+///
+/// * `grid of Type`: (height, width) arrays of the fields grouped by how they are made,
+///   `image f32 { … }` (values) or `mask bool { … }` (0/1 flags; see [`crate::arrays`]), from
+///   `Type`'s row-major fields of the same names and its `height`, `width` (groups of one
+///   kind may follow each other: the levels, the crossings);
+/// * `columns of Item`: 1-D arrays, one entry per `Item` of a slice, each its field of the
+///   same name (converted with `From`).
+macro_rules! result_class {
+    (
+        $(#[$doc:meta])* $name:literal $class:ident: grid of $source:ty {
+            $($array:ident $elem:ty { $($(#[$field_doc:meta])* $field:ident,)+ })+
+        }
+    ) => {
+        $crate::results::result_class!(@class $(#[$doc])* $name $class: PyArray2 {
+            $($($(#[$field_doc])* $field: $elem,)+)+
+        });
+
+        impl $class {
+            /// The kernel's result as numpy arrays.
+            pub(crate) fn new(py: Python<'_>, result: $source) -> PyResult<Self> {
+                let (h, w) = (result.height, result.width);
+                Ok($class {
+                    $($($field: $crate::arrays::$array(py, result.$field, h, w)?.unbind(),)+)+
+                })
+            }
+        }
+    };
+    (
+        $(#[$doc:meta])* $name:literal $class:ident: columns of $source:ty {
+            $($(#[$field_doc:meta])* $field:ident: $elem:ty,)+
+        }
+    ) => {
+        $crate::results::result_class!(@class $(#[$doc])* $name $class: PyArray1 {
+            $($(#[$field_doc])* $field: $elem,)+
+        });
+
+        impl $class {
+            /// The kernel's items as columns.
+            pub(crate) fn new(py: Python<'_>, items: &[$source]) -> Self {
+                use numpy::{ndarray::Array1, IntoPyArray};
+                $class {
+                    $($field: Array1::from_iter(items.iter().map(|i| <$elem>::from(i.$field)))
+                        .into_pyarray(py)
+                        .unbind(),)+
+                }
+            }
+        }
+    };
+    (
+        @class $(#[$doc:meta])* $name:literal $class:ident: $dims:ident {
+            $($(#[$field_doc:meta])* $field:ident: $elem:ty,)+
+        }
+    ) => {
+        $(#[$doc])*
+        #[pyclass(module = "gnomon._kernel", name = $name, frozen)]
+        pub(crate) struct $class {
+            $($(#[$field_doc])* #[pyo3(get)] $field: Py<numpy::$dims<$elem>>,)+
+        }
+    };
+}
+pub(crate) use result_class;
+
+result_class! {
+    /// The tracker's per-pixel results: (H, W) arrays, read-only attributes.
+    "ShadowTimes" PyShadowTimes: grid of ShadowTimes {
+        image f32 {
+            /// Brightest level of the deepest dip (DN of the input; fractional when normalised).
+            imax,
+            /// Darkest sample of the dip (DN of the input).
+            imin,
+            /// `imax - imin` (DN), 0 = no dip.
+            contrast,
+            /// Mid-level in linear irradiance (in the light of the dip).
+            threshold,
+        }
+        image f32 {
+            /// Entering-edge time (frames), NaN = none.
+            enter,
+            /// Leaving-edge time (frames), NaN = none.
+            leave,
+            /// Linear irradiance change per frame at the entering crossing.
+            enter_slope,
+            /// Linear irradiance change per frame at the leaving crossing.
+            leave_slope,
+        }
+        image f32 {
+            /// Depth of the deepest other dip (DN), 0 = none.
+            rival,
+        }
+        mask bool {
+            /// A dip with `contrast >= min_contrast` that is not ambiguous.
+            valid,
+            /// `contrast >= min_contrast` and the rival dip at least `ambiguity` times as deep.
+            ambiguous,
+            /// The dip's levels or an interpolated sample at 0 or the dtype's maximum.
+            clipped,
+        }
+    }
 }
 
 #[pymethods]
@@ -63,75 +124,15 @@ impl PyShadowTimes {
     }
 }
 
-impl PyShadowTimes {
-    /// The kernel's result as numpy arrays.
-    pub(crate) fn new(py: Python<'_>, times: ShadowTimes) -> PyResult<Self> {
-        let (h, w) = (times.height, times.width);
-        Ok(PyShadowTimes {
-            imax: image(py, times.imax, h, w)?.unbind(),
-            imin: image(py, times.imin, h, w)?.unbind(),
-            contrast: image(py, times.contrast, h, w)?.unbind(),
-            threshold: image(py, times.threshold, h, w)?.unbind(),
-            enter: image(py, times.enter, h, w)?.unbind(),
-            leave: image(py, times.leave, h, w)?.unbind(),
-            enter_slope: image(py, times.enter_slope, h, w)?.unbind(),
-            leave_slope: image(py, times.leave_slope, h, w)?.unbind(),
-            rival: image(py, times.rival, h, w)?.unbind(),
-            valid: mask(py, times.valid, h, w)?.unbind(),
-            ambiguous: mask(py, times.ambiguous, h, w)?.unbind(),
-            clipped: mask(py, times.clipped, h, w)?.unbind(),
-        })
-    }
-}
-
-/// Every pixel's second candidate dip: (H, W) arrays, read-only attributes
-/// (same meanings as `ShadowTimes`'; NaN times and 0 levels where there is none).
-#[pyclass(module = "gnomon._kernel", name = "SecondDips", frozen)]
-pub(crate) struct PySecondDips {
-    #[pyo3(get)]
-    imax: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    imin: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    contrast: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    threshold: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    enter: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    leave: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    enter_slope: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    leave_slope: Py<PyArray2<f32>>,
-    /// The best dip's times and slopes wherever it exists (also ambiguous ones).
-    #[pyo3(get)]
-    best_enter: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    best_leave: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    best_enter_slope: Py<PyArray2<f32>>,
-    #[pyo3(get)]
-    best_leave_slope: Py<PyArray2<f32>>,
-}
-
-impl PySecondDips {
-    /// The kernel's result as numpy arrays.
-    pub(crate) fn new(py: Python<'_>, d: SecondDips) -> PyResult<Self> {
-        let (h, w) = (d.height, d.width);
-        Ok(PySecondDips {
-            imax: image(py, d.imax, h, w)?.unbind(),
-            imin: image(py, d.imin, h, w)?.unbind(),
-            contrast: image(py, d.contrast, h, w)?.unbind(),
-            threshold: image(py, d.threshold, h, w)?.unbind(),
-            enter: image(py, d.enter, h, w)?.unbind(),
-            leave: image(py, d.leave, h, w)?.unbind(),
-            enter_slope: image(py, d.enter_slope, h, w)?.unbind(),
-            leave_slope: image(py, d.leave_slope, h, w)?.unbind(),
-            best_enter: image(py, d.best_enter, h, w)?.unbind(),
-            best_leave: image(py, d.best_leave, h, w)?.unbind(),
-            best_enter_slope: image(py, d.best_enter_slope, h, w)?.unbind(),
-            best_leave_slope: image(py, d.best_leave_slope, h, w)?.unbind(),
-        })
+result_class! {
+    /// Every pixel's second candidate dip: (H, W) arrays, read-only attributes
+    /// (same meanings as `ShadowTimes`'; NaN times and 0 levels where there is none).
+    "SecondDips" PySecondDips: grid of SecondDips {
+        image f32 {
+            imax, imin, contrast, threshold, enter, leave, enter_slope, leave_slope,
+            /// The best dip's times and slopes wherever it exists (also ambiguous ones).
+            best_enter,
+            best_leave, best_enter_slope, best_leave_slope,
+        }
     }
 }
