@@ -1,11 +1,11 @@
 //! `gnomon._kernel`: thin PyO3 bindings of `gnomon-core`, one module per area.
 //!
 //! Arrays are borrowed (copied only when not C-contiguous) and the GIL is
-//! released around every kernel call ([`arrays`]). Errors are the exception classes of
+//! released around every kernel call (`arrays`). Errors are the exception classes of
 //! `gnomon.errors`, one per `KernelError` variant (all `GnomonError`s and
 //! `ValueError`s), each message naming what was expected and what was given:
-//! bad arrays raise `KernelArrayError` ([`errors`]). The tracker's results are typed
-//! classes of arrays ([`results`]). No numerics here: see `gnomon-core`.
+//! bad arrays raise `KernelArrayError` (`errors`). The tracker's results are typed
+//! classes of arrays (`results`). No numerics here: see `gnomon-core`.
 
 use pyo3::prelude::*;
 
