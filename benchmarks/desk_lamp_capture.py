@@ -47,10 +47,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon import toml_io
-from gnomon.calibration import load_camera_file
-from gnomon.camera import Pose
+from gnomon.camera.calibration import load_camera_file
+from gnomon.camera.models import Pose
 from gnomon.cli import main as gnomon
+from gnomon.util import toml_io
 from real_captures import regions_preview_scan, run
 
 # Read off bowl_00.jpg (pixels): the bowl's rim and its cast shadow (circles), and two bare bands of desk

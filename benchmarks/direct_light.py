@@ -44,11 +44,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon.frames import FrameSource
-from gnomon.pipeline import ScanResult
-from gnomon.preview import COVERAGE_CLASSES
-from gnomon.scan_setup import ScanSetup, frame_source
-from gnomon.tracking import decoding_lut
+from gnomon.capture.frames import FrameSource
+from gnomon.capture.tracking import decoding_lut
+from gnomon.config.setup import ScanSetup, frame_source
+from gnomon.outputs.images import COVERAGE_CLASSES
+from gnomon.runs.scan import ScanResult
 from score import frog_arguments, scan_field_log
 
 #: Frames searched before the enter crossing and after the leave crossing.
@@ -189,8 +189,8 @@ def step_timed(result: ScanResult, setup: ScanSetup, light: np.ndarray, k_fall: 
     as "edges disagree" or "no neighbour at its depth"; and the share whose two step-timed depths agree (within
     3 of their edges' combined σ or 1 % of the depth)."""
     from edge_widening import kept_neighbour_depth
-    from gnomon.preview import EDGES_DISAGREE, NO_NEIGHBOUR
-    from gnomon.triangulation import triangulate
+    from gnomon.geometry.triangulation import triangulate
+    from gnomon.outputs.images import EDGES_DISAGREE, NO_NEIGHBOUR
 
     edges = {e.name: e for e in result.edges}
     if set(edges) != {"enter", "leave"}:

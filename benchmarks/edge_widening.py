@@ -39,10 +39,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon.fusion import CONFLICT_SIGMAS
-from gnomon.pipeline import EdgeResult
-from gnomon.tracking import decoding_lut, linear
-from gnomon.triangulation import triangulate
+from gnomon.capture.tracking import decoding_lut, linear
+from gnomon.geometry.triangulation import triangulate
+from gnomon.reconstruct.edges import EdgeResult
+from gnomon.reconstruct.fusion import CONFLICT_SIGMAS
 from score import frog_arguments, scan_field_log
 
 

@@ -6,7 +6,7 @@ any size), this script
 1. encodes its frames as a 30 fps video beside the capture (Motion JPEG with
    OpenCV, or H.264 CRF 12 with PyAV) and writes a field log pointing at it;
 2. runs ``gnomon scan`` on that field log (``gnomon.api.scan``);
-3. runs ``gnomon live`` on it (``gnomon.live.run_live``), with ``--realtime``
+3. runs ``gnomon live`` on it (``gnomon.runs.live.run_live``), with ``--realtime``
    pacing at the video's 30 fps unless ``--no-realtime``;
 4. prints: frames dropped; the latency, per pixel, from the frame in which the
    shadow leaves it (ground truth: the first frame after ``leave_time``) to the
@@ -87,8 +87,8 @@ def main() -> None:
     args = ap.parse_args()
 
     import gnomon
-    from gnomon.accuracy import depth_accuracy
-    from gnomon.live import LiveOptions, run_live
+    from gnomon.runs.accuracy import depth_accuracy
+    from gnomon.runs.live import LiveOptions, run_live
 
     out = args.out or args.capture / "bench_live"
     shutil.rmtree(out, ignore_errors=True)

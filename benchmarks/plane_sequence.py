@@ -20,7 +20,7 @@ This script scans the capture in memory and prints:
 * a completion test on the measured frames: the first and the last ``block``
   two-plane frames of each edge completed as if one-line, from the line the
   real completed frames use, (a) through the light located from the other
-  measured frames (the scan's own completion, :func:`gnomon.shadow_planes.completion_light`),
+  measured frames (the scan's own completion, :func:`gnomon.light.shadow_planes.completion_light`),
   (b) with ε extrapolated linearly from the 10 nearest kept frames, (c) from
   the other edge's plane of the same frame, turned about the line by the
   median turn between the two edges over the 10 nearest kept frames; the
@@ -44,10 +44,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon.pipeline import EdgeResult
-from gnomon.reference_lines import ReferenceLines
-from gnomon.shadow_planes import complete_from_light, completion_light, two_plane_shadow_planes
-from gnomon.triangulation import triangulate
+from gnomon.geometry.reference_lines import ReferenceLines
+from gnomon.geometry.triangulation import triangulate
+from gnomon.light.shadow_planes import complete_from_light, completion_light, two_plane_shadow_planes
+from gnomon.reconstruct.edges import EdgeResult
 from score import scan_field_log
 
 

@@ -27,7 +27,7 @@ The captures and their conventions (read off the repository's own scripts):
   ``dist``).
 
 The crosses are given as exact pixels (``pixel = [u, v]``): each is the
-centre of the pen strokes (:func:`gnomon.markers.find_cross`) near a rough
+centre of the pen strokes (:func:`gnomon.camera.plane_pose.find_cross`) near a rough
 position, which is the repository's own click (its extrinsics re-projected
 through its own intrinsics, scaled ×2 where they were made on a half-size
 display; the clicks are up to ~75 px off the crosses) — for ``candle-mug``,
@@ -73,9 +73,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon import toml_io
+from gnomon.camera.plane_pose import find_cross
 from gnomon.cli import main as gnomon
-from gnomon.markers import find_cross
+from gnomon.util import toml_io
 from score import score_scan
 
 FROG_MARKERS = {  # rough pixels of the printed markers in frame 1 (refined by the scan)
@@ -294,9 +294,9 @@ def hinged_wall(camera_file: Path, desk_pixels: np.ndarray, fold_pixels: np.ndar
     normal and x axis in the desk frame, θ ± σ, the residuals, and the hinge's own fit."""
     from scipy.optimize import least_squares
 
-    from gnomon.calibration import load_camera_file
-    from gnomon.fitting import fit_line_robust
-    from gnomon.markers import fit_plane_pose
+    from gnomon.camera.calibration import load_camera_file
+    from gnomon.camera.plane_pose import fit_plane_pose
+    from gnomon.util.fitting import fit_line_robust
 
     cam = load_camera_file(camera_file)
     rect = np.array([[0, 0], [PHONE_RECT[0], 0], [PHONE_RECT[0], PHONE_RECT[1]], [0, PHONE_RECT[1]]], float)
@@ -377,8 +377,8 @@ def hinge_the_wall(name: str, log_path: Path, first: np.ndarray, first_name: str
             plane["regions"] = [{"polygon": px["wall"].tolist()}]
     toml_io.dump(log, log_path, header=f"The wall hinged on the desk–wall fold (benchmarks/real_captures.py "
                  f"hinge_the_wall): {h['angle_to_desk_deg']:.2f}° to the desk ± {h['sigma_theta_deg']:.1f}°")
-    from gnomon.calibration import load_camera_file
-    from gnomon.markers import fit_plane_pose
+    from gnomon.camera.calibration import load_camera_file
+    from gnomon.camera.plane_pose import fit_plane_pose
 
     rect = np.array([[0, 0], [PHONE_RECT[0], 0], [PHONE_RECT[0], PHONE_RECT[1]], [0, PHONE_RECT[1]]], float)
     desk = fit_plane_pose(load_camera_file(camera_file), rect, px["desk"]).pose
@@ -388,12 +388,12 @@ def hinge_the_wall(name: str, log_path: Path, first: np.ndarray, first_name: str
 
 
 def refit_focal(name: str, log_path: Path, folder: Path) -> None:
-    """The focal length fitted to the capture's crosses (gnomon.scan_setup.fit_focal, printed as evidence);
+    """The focal length fitted to the capture's crosses (gnomon.config.setup.fit_focal, printed as evidence);
     when it differs from the camera's by more than 3 of its σ, the capture was filmed at another focal
     length than the stills' calibration: ``gnomon calibrate focal`` writes the camera file with it and the
     field log uses that, saying so."""
-    from gnomon.fieldlog import load_field_log
-    from gnomon.scan_setup import fit_focal, frame_source, marked_points
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.config.setup import fit_focal, frame_source, marked_points
 
     log = load_field_log(log_path)
     fit = fit_focal(log.camera, marked_points(log, frame_source(log)))

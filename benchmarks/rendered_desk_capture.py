@@ -59,11 +59,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon import toml_io
-from gnomon.calibration import load_camera_file
-from gnomon.markers import PlanePose, plane_pose_from_chessboard
-from gnomon.pipeline import ScanOptions, ScanResult, run_scan
-from gnomon.ply import read_ply
+from gnomon.camera.calibration import load_camera_file
+from gnomon.camera.plane_pose import PlanePose, plane_pose_from_chessboard
+from gnomon.outputs.ply import read_ply
+from gnomon.runs.scan import ScanOptions, ScanResult, run_scan
+from gnomon.util import toml_io
 from real_captures import run
 
 SENSOR_MM = 36.0  # Blender's default sensor width (its "auto" fit: the width of a landscape image)
@@ -217,8 +217,8 @@ def own_calibration(out: Path, source: Path, camera: Path, R: np.ndarray, t: np.
     the board (a field log plane with ``chessboard`` and ``image``), the same regions. The authors give no
     square size: it is set so that the board puts the camera at the renderer's height above the ground;
     the lamp is carried into the board's frame through the renderer's camera."""
-    from gnomon.fieldlog import load_field_log
-    from gnomon.scan_setup import frame_source, resolve_scan
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.config.setup import frame_source, resolve_scan
 
     folder = out / "own_calibration"
     folder.mkdir(exist_ok=True)

@@ -29,12 +29,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from gnomon.calibration import load_camera_file
-from gnomon.camera import Pose
-from gnomon.fieldlog import FieldLog, load_field_log
-from gnomon.pipeline import ScanResult
-from gnomon.pipeline import scan as scan_in_memory
-from gnomon.scan_setup import ScanSetup, frame_source, resolve_scan
+from gnomon.camera.calibration import load_camera_file
+from gnomon.camera.models import Pose
+from gnomon.config.fieldlog import load_field_log
+from gnomon.config.setup import ScanSetup, frame_source, resolve_scan
+from gnomon.config.specs import FieldLog
+from gnomon.runs.scan import ScanResult
+from gnomon.runs.scan import scan as scan_in_memory
 
 
 def frog_arguments(doc: str, argv: list[str] | None) -> argparse.Namespace:
@@ -265,7 +266,7 @@ def score_scan(name: str, scan_dir: Path, camera_file: Path,
         result.object_swept = int((tight & swept).sum())
         result.object_swept_points = int((tight & swept & has).sum())
         if (scan_dir / "coverage.npy").exists():
-            from gnomon.preview import COVERAGE_CLASSES
+            from gnomon.outputs.images import COVERAGE_CLASSES
 
             coverage = np.load(scan_dir / "coverage.npy")
             result.object_reasons = {name: int((tight & (coverage == k)).sum())

@@ -40,9 +40,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon import toml_io
-from gnomon.calibration import fit_camera_to_frames, load_camera_file, write_camera_file
-from gnomon.camera import Pose
+from gnomon.camera.calibration import fit_camera_to_frames, load_camera_file, write_camera_file
+from gnomon.camera.models import Pose
+from gnomon.util import toml_io
 from real_captures import FROG_RECT, plane_table, regions_preview_scan, run
 from score import score_scan
 

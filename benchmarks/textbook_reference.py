@@ -312,10 +312,10 @@ def main(argv: list[str] | None = None) -> int:
 def gnomon_losses(cap: Path, ref_times: np.ndarray, groups: dict[str, np.ndarray]) -> None:
     """Run Gnomon's scan in memory on the capture's field log and count, per group of pixels, where the
     pixels with a reference shadow time are lost, stage by stage (first failing stage wins)."""
-    from gnomon.fieldlog import load_field_log
-    from gnomon.pipeline import scan
-    from gnomon.scan_setup import frame_source, resolve_scan
-    from gnomon.validity import contrast_above_noise
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.config.setup import frame_source, resolve_scan
+    from gnomon.geometry.validity import contrast_above_noise
+    from gnomon.runs.scan import scan
 
     log = load_field_log(cap / "field_log.toml")
     source = frame_source(log)
@@ -323,7 +323,7 @@ def gnomon_losses(cap: Path, ref_times: np.ndarray, groups: dict[str, np.ndarray
     captured = {}
 
     def track(*a, **k):
-        from gnomon.tracking import track_source
+        from gnomon.capture.tracking import track_source
 
         captured["tracked"] = tr = track_source(*a, **k)
         captured["times"] = {f: getattr(tr.times, f).copy() for f in ("contrast", "ambiguous", "valid", "enter",

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 
-from gnomon import toml_io
+from gnomon.util import toml_io
 
 # Tests never talk to the network and never open a viewer: rerun 0.41 turns its
 # analytics off when CI is set, and a viewer can only start with a display.
@@ -141,7 +141,7 @@ def desk_lamp_full_scan(desk_lamp_full, tmp_path_factory):
     ``(root, ScanResult, ground truth arrays)``; the scan is in ROOT/scan."""
     import numpy as np
 
-    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.runs.scan import ScanOptions, run_scan
 
     root = tmp_path_factory.mktemp("desk_lamp_full_scan")
     result = run_scan(desk_lamp_full / "field_log.toml", root / "scan", ScanOptions(progress=False, rrd=False))

@@ -46,7 +46,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "python"))
 
 from conftest import write_tiny_capture  # noqa: E402
-from gnomon import toml_io  # noqa: E402
+from gnomon.util import toml_io  # noqa: E402
 
 PY = sys.executable
 TIME_LIMIT_S = 120.0
@@ -357,8 +357,8 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
     log_click = copy_capture(fx["two"].parent, d_click / "cap")
 
     def click_off(dd: dict) -> None:  # a clicked pixel 12 px right of where marker 2 is found
-        from gnomon.fieldlog import load_field_log
-        from gnomon.scan_setup import frame_source, resolve_reference_planes
+        from gnomon.config.fieldlog import load_field_log
+        from gnomon.config.setup import frame_source, resolve_reference_planes
         fl = load_field_log(fx["two"])
         found = resolve_reference_planes(fl, frame_source(fl))[1][0]["pixels"][2]
         m = dd["planes"][0]["markers"][2]
@@ -463,7 +463,7 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
     merge_bad("report.json binary", lambda b: (b / "report.json").write_bytes(b"\xff\xfe\x00"), "report.json")
 
     def bad_uv(b: Path) -> None:
-        from gnomon import ply
+        from gnomon.outputs import ply
         pts = ply.read_ply(b / "points.ply")
         n = len(pts["xyz"]) if "xyz" in pts else len(next(iter(pts.values())))
         uv = np.full((n, 2), 1e6, np.float32)
@@ -656,7 +656,7 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
         return any(p.name.startswith(".gnomon-commit-") for p in o.iterdir())
 
     def not_mixed(o=o, before=before, log=fx["desk"]) -> str | None:
-        from gnomon.publish import recover
+        from gnomon.outputs.publish import recover
         recover(o)
         now = digest_tree(o)
         if (o / "notes.txt").read_text() != "mine":

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gnomon.accuracy import depth_accuracy
-from gnomon.merge import merge_scans
-from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.runs.accuracy import depth_accuracy
+from gnomon.runs.merge import merge_scans
+from gnomon.runs.scan import ScanOptions, run_scan
 from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
 
 OPTS = ScanOptions(progress=False, rrd=False)

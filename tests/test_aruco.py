@@ -1,6 +1,6 @@
-"""Reference planes from ArUco markers and ChArUco boards, found by their IDs (gnomon.aruco).
+"""Reference planes from ArUco markers and ChArUco boards, found by their IDs (gnomon.camera.aruco).
 
-Ground truth from gnomon.simulate.markers (own ray casting and projection; the
+Ground truth from gnomon.simulate.marker_images (own ray casting and projection; the
 marker bitmaps and the ChArUco layout are OpenCV's published definitions).
 Scene: the desk-and-wall scene of tests/test_markers.py, with 4 ArUco
 markers (DICT_4X4_50, 50 mm, ids 0–3 desk, 10–13 wall) instead of the 2×2
@@ -16,11 +16,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from gnomon import aruco
-from gnomon.camera import OpenCVCamera
+from gnomon.camera import aruco
+from gnomon.camera.models import OpenCVCamera
 from gnomon.errors import GnomonError
 from gnomon.simulate import chessboard as simcb
-from gnomon.simulate import markers as simmk
+from gnomon.simulate import marker_images as simmk
 
 SIZE = 50.0
 
@@ -140,7 +140,7 @@ def test_charuco_board_partly_covered(scene):
 
 def _log_with(tmp_path, plane_extra):
     from conftest import write_tiny_capture
-    from gnomon import toml_io
+    from gnomon.util import toml_io
 
     log_path = write_tiny_capture(tmp_path / "cap")
     data = toml_io.load(log_path)
@@ -150,7 +150,7 @@ def _log_with(tmp_path, plane_extra):
 
 
 def test_field_log_reads_aruco_and_charuco(tmp_path):
-    from gnomon.fieldlog import load_field_log
+    from gnomon.config.fieldlog import load_field_log
 
     aru = {"aruco": {"dictionary": "DICT_5X5_100", "size": 40.0,
                      "markers": [{"id": 3, "plane_xy": [0.0, 0.0]}, {"id": 9, "plane_xy": [100.0, 50.0]}]}}

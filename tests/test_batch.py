@@ -25,7 +25,7 @@ from conftest import write_tiny_capture
 pytest.importorskip("distributed")
 
 import gnomon
-from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.runs.scan import ScanOptions, run_scan
 
 PYTHON_DIR = str(Path(gnomon.__file__).resolve().parent.parent)
 COMPARED = ("depth.npy", "sigma.npy", "shadow_time.npy", "undersampled.npy", "points.ply", "mesh.ply", "mesh.png")
@@ -291,7 +291,7 @@ def test_batch_plan_errors_are_one_line_before_any_cluster_starts(tmp_path, caps
 
 
 def test_batch_file_names_scans_and_merges(tmp_path):
-    from gnomon.batch import plan_batch
+    from gnomon.runs.batch import plan_batch
 
     write_tiny_capture(tmp_path / "d1")
     write_tiny_capture(tmp_path / "d2")
@@ -309,8 +309,8 @@ def test_batch_file_names_scans_and_merges(tmp_path):
 
 _UNTILED = """
 import json, sys
-from gnomon.pipeline import ScanOptions, run_scan
-from gnomon.tiles import current_rss_bytes, peak_rss_bytes, reset_peak_rss
+from gnomon.runs.scan import ScanOptions, run_scan
+from gnomon.capture.tiles import current_rss_bytes, peak_rss_bytes, reset_peak_rss
 reset_peak_rss()
 start = current_rss_bytes()
 run_scan(sys.argv[1], sys.argv[2], ScanOptions(progress=False))

@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 
 from gnomon import _kernel
-from gnomon.bench import format_scan_table, format_table, run_bench, run_scan_bench
 from gnomon.cli import main
+from gnomon.runs.bench import format_scan_table, format_table, run_bench, run_scan_bench
 
 
 def test_small_bench_reports_the_simd_path_and_both_trackers():

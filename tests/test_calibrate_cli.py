@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from gnomon import calibration
+from gnomon.camera import calibration
 from gnomon.errors import GnomonError
 from gnomon.simulate import chessboard as sim
 

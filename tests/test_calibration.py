@@ -1,4 +1,4 @@
-"""Zhang's calibration through OpenCV, chessboard detection, the camera file (gnomon.calibration).
+"""Zhang's calibration through OpenCV, chessboard detection, the camera file (gnomon.camera.calibration).
 
 Ground truth from gnomon.simulate.chessboard (its own projection, distortion
 inversion and ray-cast rendering). Point-level scene for the acceptance bars:
@@ -17,10 +17,11 @@ import cv2
 import numpy as np
 import pytest
 
-from gnomon import calibration, toml_io
-from gnomon.camera import OpenCVCamera, TsaiCamera
+from gnomon.camera import calibration
+from gnomon.camera.models import OpenCVCamera, TsaiCamera
 from gnomon.errors import GnomonError
 from gnomon.simulate import chessboard as sim
+from gnomon.util import toml_io
 
 NOISE = 0.2
 RMS_2D = NOISE * np.sqrt(2)  # the RMS length of 2-D noise with σ per axis

@@ -16,12 +16,13 @@ import pytest
 from PIL import Image, ImageOps
 
 from conftest import write_tiny_capture
-from gnomon import calibration, toml_io
-from gnomon.camera import OpenCVCamera, TsaiCamera
+from gnomon.camera import calibration
+from gnomon.camera.models import OpenCVCamera, TsaiCamera
+from gnomon.capture.frames import FrameSource, decode_image_file, glob_frames, image_size
+from gnomon.config.fieldlog import load_field_log
 from gnomon.errors import GnomonError
-from gnomon.fieldlog import load_field_log
-from gnomon.frames import FrameSource, decode_image_file, glob_frames, image_size
 from gnomon.simulate import chessboard as sim
+from gnomon.util import toml_io
 
 COLS, ROWS, SQ = 9, 6, 25.0
 
@@ -217,8 +218,8 @@ def test_a_quoted_pattern_names_its_files_on_the_command_line(tmp_path, capsys, 
     """`gnomon init "frames/*.png"` and `gnomon calibrate camera "calib/*.jpg"` (a shell that does not
     expand the pattern, or a user who quoted it) take the files it matches as the field log's frames glob
     does: any-case suffix, natural order; a pattern that matches nothing is one line naming it."""
+    from gnomon.capture.frames import expand_glob_argument
     from gnomon.cli import main
-    from gnomon.frames import expand_glob_argument
 
     write_tiny_capture(tmp_path / "cap", n_frames=12)
     frames = tmp_path / "cap" / "frames"
@@ -272,7 +273,7 @@ def test_markers_that_do_not_fit_say_whether_the_camera_or_the_marks_are_at_faul
     off its place across the rectangle's long side: no focal length halves the residual, and the diagnosis
     names the marks (with only 4 marks a focal length can mimic one misplaced mark, and the diagnosis says
     so). Exact marks: nothing."""
-    from gnomon.scan_setup import focal_diagnosis
+    from gnomon.config.setup import focal_diagnosis
 
     marks = np.array([[0.0, 0.0], [76.0, 0.0], [152.0, 0.0], [152.0, 121.0], [76.0, 121.0], [0.0, 121.0]])
     R = cv2.Rodrigues(np.array([np.radians(135.0), 0.0, 0.0]))[0]

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 
 from gnomon import _kernel
-from gnomon.camera import (
+from gnomon.camera.models import (
     _UNDISTORT_CRITERIA,
     RAY_MAP_TOL_PX,
     OpenCVCamera,

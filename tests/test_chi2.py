@@ -1,4 +1,4 @@
-"""gnomon.chi2: the χ² tail in closed form for whole degrees of freedom, against scipy.stats's
+"""gnomon.util.chi2: the χ² tail in closed form for whole degrees of freedom, against scipy.stats's
 (an independent implementation: the regularised incomplete gamma function by series and continued
 fractions)."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from gnomon.chi2 import chi2_isf, chi2_sf
+from gnomon.util.chi2 import chi2_isf, chi2_sf
 
 DOFS = [*range(1, 41), 59, 60, 199, 200, 2000]
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from conftest import write_tiny_capture
-from gnomon import toml_io
 from gnomon.cli import main
+from gnomon.util import toml_io
 
 
 def run_scan(log: Path, out: Path, capsys) -> tuple[int, str]:

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gnomon import toml_io
-from gnomon.crop import Crop, crop_mask
+from gnomon.config.fieldlog import load_field_log
 from gnomon.errors import GnomonError
-from gnomon.fieldlog import load_field_log
+from gnomon.geometry.crop import Crop, crop_mask
+from gnomon.util import toml_io
 
 
 def _with_output(path: Path, output: dict) -> Path:
@@ -79,8 +79,8 @@ def test_two_plane_scan_with_max_sigma_keeps_the_certain_points(two_plane_small,
     counted as cropped; and the points it drops are the less accurate ones (truth of the simulator: their
     RMS depth error exceeds the kept points')."""
     from conftest import copy_capture
-    from gnomon.pipeline import ScanOptions, run_scan
-    from gnomon.preview import CROPPED
+    from gnomon.outputs.images import CROPPED
+    from gnomon.runs.scan import ScanOptions, run_scan
 
     options = ScanOptions(progress=False, rrd=False)
     capture = copy_capture(two_plane_small, tmp_path / "capture")
@@ -127,7 +127,7 @@ def test_desk_scan_cropped_2mm_above_the_desk_keeps_the_objects(cropped_desk) ->
     is at least the crop height: a height crop cannot keep the few lower ones (where the box
     and the cylinder stand on the desk), and must not.
     """
-    from gnomon.preview import CROPPED, POINT, UNDERSAMPLED
+    from gnomon.outputs.images import CROPPED, POINT, UNDERSAMPLED
 
     root, scan = cropped_desk
     gt = np.load(root / "ground_truth.npz")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gnomon.deblock import block_grid, deblock_times
+from gnomon.capture.deblock import block_grid, deblock_times
 
 
 def _sweep(h: int = 240, w: int = 320) -> tuple[np.ndarray, np.ndarray]:

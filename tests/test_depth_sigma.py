@@ -1,4 +1,4 @@
-"""σZ by first-order propagation (gnomon.uncertainty.depth_sigma): the kernel's per-pixel pass against
+"""σZ by first-order propagation (gnomon.geometry.uncertainty.depth_sigma): the kernel's per-pixel pass against
 the numpy definition, and the value on a plane whose depth moves at a known rate."""
 
 from __future__ import annotations
@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnomon.camera import OpenCVCamera
-from gnomon.triangulation import triangulate
-from gnomon.uncertainty import _depth_sigma_numpy, depth_sigma
+from gnomon.camera.models import OpenCVCamera
+from gnomon.geometry.triangulation import triangulate
+from gnomon.geometry.uncertainty import _depth_sigma_numpy, depth_sigma
 
 
 def _scene(seed: int) -> tuple[np.ndarray, ...]:
@@ -91,7 +91,7 @@ def test_a_ray_that_leaves_the_planes_within_the_step_has_a_large_sigma() -> Non
 
 
 def test_unmodelled_time_scatter_is_what_the_lines_show_beyond_the_noise() -> None:
-    from gnomon.validity import LineResiduals, unmodelled_time_scatter
+    from gnomon.geometry.validity import LineResiduals, unmodelled_time_scatter
 
     desk = LineResiduals("desk", residual_frames=0.25, expected_frames=0.07, frames=40)
     wall = LineResiduals("wall", residual_frames=0.5, expected_frames=0.3, frames=40)

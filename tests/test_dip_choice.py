@@ -1,11 +1,11 @@
-"""Choosing between two candidate dips by the surfaces they make (gnomon.dip_choice)."""
+"""Choosing between two candidate dips by the surfaces they make (gnomon.light.dip_choice)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from gnomon.dip_choice import LINK_SHARE, STRICT_OFF_SHARE, choose_dips
+from gnomon.light.dip_choice import LINK_SHARE, STRICT_OFF_SHARE, choose_dips
 
 H, W = 60, 80
 JUMP = 0.02

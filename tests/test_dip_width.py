@@ -3,7 +3,7 @@
 A pixel's dip is found within the tracker's width ``W`` (``TrackerSettings.max_width``); a shadow that
 stays longer is cut in two events and the pixel is left out as ambiguous. A slow sweep with a wide stick
 does that (a public phone capture stays 33–53 frames on its pixels against 32), so a scan measures how
-long its pixels stayed in shadow (:func:`gnomon.tracking.dwell`) and tracks again wider when many reach
+long its pixels stayed in shadow (:func:`gnomon.capture.tracking.dwell`) and tracks again wider when many reach
 the width (``[scan] max_dip_frames = "auto"``, the default), or warns when the field log fixed it.
 
 The frames: a dark band with linear soft edges sweeping at constant speed, so every pixel's true enter
@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 
 from conftest import write_tiny_capture
-from gnomon import toml_io
+from gnomon.capture.tracking import LONG_DWELL, Dwell, dwell, track
 from gnomon.cli import main
-from gnomon.tracking import LONG_DWELL, Dwell, dwell, track
+from gnomon.util import toml_io
 
 # The band: dark core ±HALF px, linear 6 px edges, lit 200 DN, dark 40 DN (the tiny capture's levels),
 # moving SPEED px per frame; its mid-level (the threshold, gamma 1) is HALF + 3 px from its centre.
@@ -114,8 +114,8 @@ def test_a_width_the_field_log_fixes_is_kept_and_its_limit_named(tmp_path: Path)
 
 
 def test_who_sets_the_width(tmp_path: Path) -> None:
-    from gnomon.fieldlog import load_field_log
-    from gnomon.scan_setup import dip_width_policy
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.config.setup import dip_width_policy
 
     assert dip_width_policy(load_field_log(write_tiny_capture(tmp_path / "a"))) == "auto"
     fixed = write_tiny_capture(tmp_path / "b", extra={"scan": {"max_dip_frames": 48}})

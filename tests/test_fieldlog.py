@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gnomon import toml_io
+from gnomon.config.fieldlog import load_field_log
 from gnomon.errors import GnomonError
-from gnomon.fieldlog import load_field_log
+from gnomon.util import toml_io
 
 
 def rewrite(path: Path, edit) -> Path:
@@ -79,8 +79,8 @@ def test_a_tsai_camera_file_flows_into_the_scan(tmp_path: Path) -> None:
     import numpy as np
 
     from conftest import write_tiny_capture
-    from gnomon.camera import TsaiCamera
-    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.camera.models import TsaiCamera
+    from gnomon.runs.scan import ScanOptions, run_scan
 
     log_path = write_tiny_capture(tmp_path / "cap")
     pitch = 0.005  # mm per pixel: f = 60 px · pitch
@@ -103,9 +103,9 @@ def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
     import numpy as np
 
     from conftest import write_tiny_capture
+    from gnomon.capture.frames import FrameSource
     from gnomon.cli import main
-    from gnomon.frames import FrameSource
-    from gnomon.scan_setup import resolve_reference_planes
+    from gnomon.config.setup import resolve_reference_planes
 
     assert main(["simulate", "chessboard", "--out", str(tmp_path / "cb"), "--width", "640", "--height", "480"]) == 0
     truth = tomllib.loads((tmp_path / "cb" / "truth.toml").read_text())
@@ -130,13 +130,15 @@ def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
 def test_regions_as_rectangles_polygons_and_a_mask(tiny_capture: Path) -> None:
     import cv2
 
+    from gnomon.config.setup import plane_region_mask
+
     mask = np.zeros((36, 48), dtype=np.uint8)
     mask[20:25, 40:46] = 255
     cv2.imwrite(str(tiny_capture.parent / "desk_mask.png"), mask)
     rewrite(tiny_capture, lambda d: d["planes"][0].update(
         regions=[[0, 0, 10, 4], {"polygon": [[20, 10], [30, 10], [30, 20]]}], mask="desk_mask.png"))
     plane = load_field_log(tiny_capture).planes[0]
-    m = plane.region_mask((36, 48))
+    m = plane_region_mask(plane, (36, 48))
     assert m[0:4, 0:10].all() and not m[4, 0]
     assert m[12, 29] and not m[19, 21]  # inside / outside the triangle (pixel centres)
     assert m[20:25, 40:46].all()

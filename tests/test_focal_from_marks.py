@@ -1,4 +1,4 @@
-"""The focal length from the reference planes' marks (gnomon.scan_setup.fit_focal, gnomon calibrate focal).
+"""The focal length from the reference planes' marks (gnomon.config.setup.fit_focal, gnomon calibrate focal).
 
 Synthetic marks: the corners of a 152 × 121 mm rectangle on a desk and on a wall 90° to it (as the
 phone captures of the CMU 15-463 assignment), filmed by a 1920×1080 camera at 1400 px whose camera file
@@ -10,10 +10,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from gnomon import toml_io
-from gnomon.camera import OpenCVCamera
+from gnomon.camera.models import OpenCVCamera
 from gnomon.cli import main as gnomon
-from gnomon.scan_setup import fit_focal
+from gnomon.config.setup import fit_focal
+from gnomon.util import toml_io
 
 RECT = np.array([[0.0, 0.0], [152.0, 0.0], [152.0, 121.0], [0.0, 121.0]])
 # plane → camera: the desk tilted 55° away below the optical axis, the wall above it turned 30° and 25°

@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 import pytest
 
+from gnomon.capture.frames import FRAMES_IN_FLIGHT, FrameSource, decode_workers
 from gnomon.errors import FrameError
-from gnomon.frames import FRAMES_IN_FLIGHT, FrameSource, decode_workers
 
 
 def write_frames(folder: Path, n: int, size: tuple[int, int] = (96, 64)) -> list[Path]:
@@ -200,7 +200,7 @@ def _variants(raw: bytes) -> list[bytes]:
 
 
 def test_truncation_verdicts_are_the_definitions() -> None:
-    from gnomon.frames import _truncation_problem_scan, truncation_problem
+    from gnomon.capture.frames import _truncation_problem_scan, truncation_problem
 
     checked = 0
     for raw in _encoded_images():
@@ -216,7 +216,7 @@ def test_truncation_verdicts_are_the_definitions() -> None:
 
 
 def test_exif_orientation_is_pillows_and_skips_it_without_app1() -> None:
-    from gnomon.frames import _exif_orientation_pillow, _jpeg_has_app1, exif_orientation
+    from gnomon.capture.frames import _exif_orientation_pillow, _jpeg_has_app1, exif_orientation
 
     images = _encoded_images()
     assert not _jpeg_has_app1(images[0]) and not _jpeg_has_app1(images[1])  # OpenCV's: the fast path

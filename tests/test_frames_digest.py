@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
-from gnomon import toml_io
+from gnomon.capture.frames import FrameSource
 from gnomon.cli import main
-from gnomon.frames import FrameSource
+from gnomon.util import toml_io
 
 
 def independent_digest(files: list[Path]) -> str:

@@ -1,11 +1,11 @@
-"""Points whose σ the scan's depth-jump test cannot vouch for are flagged (gnomon.fusion.beyond_trust)."""
+"""Points whose σ the scan's depth-jump test cannot vouch for are flagged (gnomon.reconstruct.fusion.beyond_trust)."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.special import erfc
 
-from gnomon.fusion import TRUST_SIGMAS, beyond_trust, trust_limit
+from gnomon.reconstruct.fusion import TRUST_SIGMAS, beyond_trust, trust_limit
 
 
 def _pairs_torn_apart(depth: np.ndarray, jump: float) -> float:

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gnomon import toml_io
-from gnomon.camera import OpenCVCamera
+from gnomon.camera.models import OpenCVCamera
+from gnomon.util import toml_io
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from conftest import copy_capture
-from gnomon import toml_io
-from gnomon.accuracy import depth_accuracy
-from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.runs.accuracy import depth_accuracy
+from gnomon.runs.scan import ScanOptions, run_scan
+from gnomon.util import toml_io
 
 
 @pytest.mark.slow
@@ -67,7 +67,7 @@ def _day_frames(clouds: dict[int, float], n: int = 120, seed: int = 0):
 
 
 def test_normaliser_skips_clouds_not_dawn_or_dusk() -> None:
-    from gnomon.tracking import IlluminationNormalizer, decoding_lut
+    from gnomon.capture.tracking import IlluminationNormalizer, decoding_lut
 
     # clouds: one at mid-morning, one at noon, one just before dusk (the light falls fast
     # meanwhile: after it the level is far below the one before)
@@ -88,7 +88,7 @@ def test_normaliser_skips_clouds_not_dawn_or_dusk() -> None:
 
 
 def test_normaliser_takes_a_lasting_darkening_as_a_new_level() -> None:
-    from gnomon.tracking import IlluminationNormalizer, decoding_lut
+    from gnomon.capture.tracking import IlluminationNormalizer, decoding_lut
 
     rng = np.random.default_rng(1)
     scene = rng.uniform(0.1, 0.8, (40, 50))
@@ -131,7 +131,7 @@ def test_cloud_frames_are_levelled_pixel_by_pixel() -> None:
     """A shadow passing under a cloud is found at its time on both surfaces (one global gain per
     frame could level only one of them), and the strip already in a shadow, which brightens under
     the cloud, shows no dip."""
-    from gnomon.tracking import ShadowTracker, TrackerSettings
+    from gnomon.capture.tracking import ShadowTracker, TrackerSettings
 
     clouds = {40: 0.8, 41: 0.55, 42: 0.35, 43: 0.3, 44: 0.4, 45: 0.6, 46: 0.85}
     frames, shaded = _cloudy_sweep(clouds)
@@ -166,7 +166,7 @@ def test_cloud_frames_are_levelled_pixel_by_pixel() -> None:
 def test_levelled_cloud_frames_in_a_tile_and_at_the_end() -> None:
     """A tile's levels come from the whole frame (its times equal the same pixels' in an untiled
     pass), and the frames of a dip the capture ends in are skipped and counted."""
-    from gnomon.tracking import ShadowTracker, TrackerSettings
+    from gnomon.capture.tracking import ShadowTracker, TrackerSettings
 
     clouds = {40: 0.8, 41: 0.55, 42: 0.35, 43: 0.3, 44: 0.4, 45: 0.6, 46: 0.85, 93: 0.5, 94: 0.4, 95: 0.4}
     frames, _ = _cloudy_sweep(clouds)

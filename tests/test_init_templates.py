@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from gnomon import toml_io
 from gnomon.cli import main
 from gnomon.commands.init import filename_time_pattern
+from gnomon.util import toml_io
 
 FIELD_LOGS = Path(__file__).resolve().parents[1] / "field_logs"
 
@@ -108,7 +108,7 @@ def test_the_lamp_template_filled_in_calibrates_the_lamp_and_scans(tmp_path: Pat
     # the depth (camera Z, free of the world frame): the desk bar of 0.1 % of the distance at 800 px wide,
     # scaled to this capture's 320 px (a pixel sees 2.5 times the desk, so the same time noise costs 2.5 times
     # the depth), on ≥ 95 % of the swept pixels
-    from gnomon.accuracy import depth_accuracy
+    from gnomon.runs.accuracy import depth_accuracy
 
     acc = depth_accuracy(np.load(work / "scan" / "depth.npy"), truth["depth"], truth["swept"],
                          float(truth["camera_distance_mm"]))
@@ -140,8 +140,8 @@ def test_the_sun_template_filled_in_gives_the_captures_times(tmp_path: Path, cap
                            .replace("[u, v]", "[0, 0]").replace("[x, y, z]", "[0, 0, 0]"))
     assert {k: set(v) for k, v in tables.items()} == {k: set(original[k]) for k in ("gnomon", "pole")}
     # filled in with the capture's own site, camera, planes and pole: the same frames at the same times
-    from gnomon.fieldlog import load_field_log
-    from gnomon.timestamps import frame_times
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.light.timestamps import frame_times
 
     log["site"] = original["site"]
     log["camera"] = original["camera"]

@@ -8,8 +8,15 @@ import numpy as np
 import pytest
 
 from gnomon import _kernel
-from gnomon.tracking import ShadowTimes, ShadowTracker, TrackerSettings, contrast_floor, decoding_lut, linear
-from gnomon.validity import MIN_CONTRAST_SIGMAS
+from gnomon.capture.tracking import (
+    MIN_CONTRAST_SIGMAS,
+    ShadowTimes,
+    ShadowTracker,
+    TrackerSettings,
+    contrast_floor,
+    decoding_lut,
+    linear,
+)
 
 
 def encode(linear_irradiance: np.ndarray, gamma: float, dtype) -> np.ndarray:
@@ -171,7 +178,7 @@ def test_the_live_watch_reports_in_finish_units_when_normalised() -> None:
 def test_linear_levels_are_the_tables_interpolation() -> None:
     """tracking.linear looks whole codes up directly: the same float32 values as np.interp over the decoding
     table, bit for bit, for whole codes, fractional levels, NaN (→ code 0) and levels beyond the table."""
-    from gnomon.tracking import linear
+    from gnomon.capture.tracking import linear
 
     rng = np.random.default_rng(2)
     lut = (np.linspace(0.0, 1.0, 256) ** 2.2).astype(np.float32)

@@ -16,10 +16,12 @@ import numpy as np
 import pytest
 
 from conftest import copy_capture
-from gnomon import toml_io
-from gnomon.camera import OpenCVCamera, Pose
+from gnomon.camera.models import OpenCVCamera, Pose
+from gnomon.config.pencil_log import load_pencil_log
 from gnomon.errors import GnomonError
-from gnomon.light import calibrate_lamp_cli, calibrate_lamp_from_pencil, load_pencil_log
+from gnomon.light import calibrate_lamp_from_pencil
+from gnomon.runs.calibrate_lamp import calibrate_lamp_cli
+from gnomon.util import toml_io
 
 SIGMA_PX = 0.3
 
@@ -326,8 +328,8 @@ def test_tips_found_against_the_empty_desk(desk_lamp_full, tmp_path) -> None:
     """[pencil] empty = ...: photos give only a base hint; the shadow tips are found automatically."""
     import tomllib
 
-    from gnomon import toml_io
     from gnomon.cli import main
+    from gnomon.util import toml_io
 
     cap = copy_capture(desk_lamp_full, tmp_path / "capture")  # the lamp file is written beside the log
     log = tomllib.loads((cap / "pencil_log.toml").read_text())
@@ -366,8 +368,8 @@ def test_tips_found_against_the_photos_median(desk_lamp_full, dark_pencil, tmp_p
     lamp within 3 of its σ on each axis."""
     import tomllib
 
-    from gnomon import toml_io
     from gnomon.cli import main
+    from gnomon.util import toml_io
 
     cap = copy_capture(desk_lamp_full if pencil == "pale" else dark_pencil, tmp_path / "capture")
     log = tomllib.loads((cap / "pencil_log.toml").read_text())
@@ -394,8 +396,8 @@ def test_a_missing_tip_needs_the_empty_desk_or_three_photos(tmp_path, capsys) ->
     import tomllib
     from pathlib import Path
 
-    from gnomon import toml_io
     from gnomon.cli import main
+    from gnomon.util import toml_io
 
     src = Path(__file__).resolve().parents[1] / "field_logs" / "desk_lamp_small" / "pencil_log.toml"
     log = tomllib.loads(src.read_text())

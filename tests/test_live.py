@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from conftest import encode_h264, write_tiny_capture
-from gnomon import ply
+from gnomon.capture.frames import FrameSource
 from gnomon.cli import main
-from gnomon.frames import FrameSource
-from gnomon.live import LiveFrames, LiveStats, _StopOnInterrupt
+from gnomon.outputs import ply
+from gnomon.runs.live import LiveFrames, LiveStats, _StopOnInterrupt
 
 av = pytest.importorskip("av")  # PyAV: an H.264 encoder to make the test video (the `test` extra)
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from gnomon import _kernel
+from gnomon.capture.tracking import decoding_lut
 from gnomon.errors import KernelParameterError
-from gnomon.tracking import decoding_lut
 
 LIT, DARK = 200.0, 40.0
 

@@ -1,6 +1,6 @@
-"""Reference planes from printed markers, a chessboard or a pose (gnomon.markers).
+"""Reference planes from printed markers, a chessboard or a pose (gnomon.camera.plane_pose).
 
-Ground truth from gnomon.simulate.markers / chessboard (own ray casting and
+Ground truth from gnomon.simulate.marker_images / chessboard (own ray casting and
 projection). Scene: a 640×480 webcam-like camera ≈0.8–1 m from a desk and a
 wall, 4 printed 2×2 markers (30 mm) on each, hints up to 6 px off. Markers are
 found to ≈0.03 px (0.1 px at the distorted image corner); the planes come out
@@ -13,11 +13,11 @@ import cv2
 import numpy as np
 import pytest
 
-from gnomon import markers
-from gnomon.camera import OpenCVCamera, Pose, TsaiCamera
+from gnomon.camera import plane_pose as markers
+from gnomon.camera.models import OpenCVCamera, Pose, TsaiCamera
 from gnomon.errors import GnomonError
 from gnomon.simulate import chessboard as simcb
-from gnomon.simulate import markers as simmk
+from gnomon.simulate import marker_images as simmk
 
 
 def angle_deg(a, b) -> float:
@@ -210,7 +210,7 @@ def test_hand_drawn_cross_found_through_jpeg_and_a_pen_line() -> None:
     0.05: the point of the ink's point symmetry, which the pen line 4 px beside the centre does not pull
     as it pulls a centroid, by 1 px); without following, the window's border holds it > 2 px away
     (measured 4.4)."""
-    from gnomon.markers import find_cross
+    from gnomon.camera.plane_pose import find_cross
 
     rng = np.random.default_rng(11)
     k = 8  # supersampling
@@ -235,14 +235,14 @@ def test_hand_drawn_cross_found_through_jpeg_and_a_pen_line() -> None:
 
 
 def test_pose_refinement_reaches_scipys_least_squares_minimum() -> None:
-    """The markers' pose refinement (gnomon.fitting.levenberg_marquardt, no scipy.optimize import) against
+    """The markers' pose refinement (gnomon.util.fitting.levenberg_marquardt, no scipy.optimize import) against
     scipy's MINPACK Levenberg–Marquardt from the same start: 4–11 noisy (0.7 px) points on planes 0.6–1.5 m
     away through a distorted 1920×1080 camera. Sums of squares equal to 1e-10 relative, the poses within
     1e-5 (rad, mm: far below what 0.7 px determines), Jacobians at the solution within 1e-6 of the largest
     entry (the plane's covariance comes from it)."""
     from scipy.optimize import least_squares
 
-    from gnomon.fitting import levenberg_marquardt
+    from gnomon.util.fitting import levenberg_marquardt
 
     rng = np.random.default_rng(1)
     cam = OpenCVCamera(1920, 1080, 1500.0, 1480.0, 960.0, 540.0, (-0.12, 0.05, 0.001, -0.0008, 0.0))

@@ -6,12 +6,14 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from gnomon import toml_io
 from gnomon.cli import main
+from gnomon.config.fieldlog import load_field_log
 from gnomon.errors import GnomonError
-from gnomon.fieldlog import MESH_FORMATS, load_field_log, mesh_formats
+from gnomon.outputs.formats import MESH_FORMATS, mesh_formats
+from gnomon.util import toml_io
 
 MESH_FILES = {"obj": {"mesh.obj", "mesh.mtl"}, "stl": {"mesh.stl"}}
 
@@ -60,3 +62,26 @@ def test_bad_mesh_formats_option_is_a_usage_error(tiny_capture: Path, tmp_path: 
         main(["scan", str(tiny_capture), "--out", str(tmp_path / "a"), "--mesh-formats", "fbx"])
     assert exc.value.code == 2 and "--mesh-formats" in capsys.readouterr().err
     assert not (tmp_path / "a").exists()
+
+
+def test_a_new_format_is_one_module_and_one_registry_line(tiny_capture: Path, tmp_path: Path, monkeypatch) -> None:
+    """tests/xyz_format.py and the one line below: the field log, the command line, the writers and the
+    publishing of the folder all take the new format from the registry."""
+    from gnomon.outputs.formats import FORMATS, MeshFormat
+    from gnomon.outputs.ply import read_ply
+    from xyz_format import write_scan_xyz
+
+    monkeypatch.setitem(FORMATS, "xyz", MeshFormat("xyz", ("mesh.xyz",), write_scan_xyz))  # the registry line
+
+    assert mesh_formats("XYZ") == ("ply", "xyz") and "xyz" in mesh_formats("all")
+    assert load_field_log(_with_output(tiny_capture, {"mesh_formats": ["xyz"]})).output.mesh_formats == ("ply", "xyz")
+    out = tmp_path / "scan"
+    assert main(["scan", str(tiny_capture), "--out", str(out), "--quiet", "--no-rrd"]) == 0
+    assert _mesh_files(out) == {"mesh.ply", "mesh.png", "mesh.xyz"}
+    xyz = [line.split() for line in (out / "mesh.xyz").read_text().splitlines()[1:]]
+    vertices = read_ply(out / "mesh.ply")["xyz"]
+    assert len(xyz) == len(vertices) > 0
+    assert np.abs(np.array(xyz, dtype=np.float64) - vertices).max() < 1e-5
+    # a rescan into the same folder without the format drops the stale file: publishing knows it too
+    assert main(["scan", str(tiny_capture), "--out", str(out), "--quiet", "--no-rrd", "--mesh-formats", "ply"]) == 0
+    assert _mesh_files(out) == {"mesh.ply", "mesh.png"}

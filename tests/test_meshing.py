@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from gnomon.errors import GnomonError
-from gnomon.meshing import grid_mesh, non_manifold_vertex_count
-from gnomon.triangulation import supported_by_neighbours
+from gnomon.geometry.meshing import grid_mesh, non_manifold_vertex_count
+from gnomon.geometry.triangulation import supported_by_neighbours
 
 
 def grid_points(depth: np.ndarray) -> np.ndarray:
@@ -75,7 +75,7 @@ def _bumpy_surface(seed: int, h: int = 40, w: int = 50) -> tuple[np.ndarray, np.
 
 
 def test_kernel_faces_and_clean_up_equal_the_numpy_definitions() -> None:
-    from gnomon.meshing import _grid_faces_numpy, _remove_small_components_numpy, remove_small_components
+    from gnomon.geometry.meshing import _grid_faces_numpy, _remove_small_components_numpy, remove_small_components
 
     for seed in range(4):
         depth, sigma, valid = _bumpy_surface(seed)
@@ -93,7 +93,7 @@ def test_kernel_faces_and_clean_up_equal_the_numpy_definitions() -> None:
 
 def test_kernel_obj_text_equals_the_numpy_text() -> None:
     from gnomon import _kernel
-    from gnomon.meshing import _decimals_for, _obj_body_numpy
+    from gnomon.outputs.obj import _decimals_for, _obj_body_numpy
 
     rng = np.random.default_rng(3)
     v = rng.normal(0, 1, (300, 3)) * np.array([1.0, 1e3, 1e-3])
@@ -145,7 +145,7 @@ def _normals_by_loops(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, 
 
 
 def test_kernel_grid_normals_equal_a_per_pixel_computation() -> None:
-    from gnomon.meshing import _grid_normals_numpy, grid_normals
+    from gnomon.geometry.meshing import _grid_normals_numpy, grid_normals
 
     centre = np.array([20.0, -15.0, -400.0])
     for seed in range(3):
@@ -167,8 +167,8 @@ def test_kernel_grid_normals_equal_a_per_pixel_computation() -> None:
 def test_kernel_world_points_equal_the_camera_points_moved_to_the_world() -> None:
     """build_surface's world points (the kernel, per pixel) are points_from_depth then Pose.camera_to_world."""
     from gnomon import _kernel
-    from gnomon.camera import Pose
-    from gnomon.pipeline import points_from_depth
+    from gnomon.camera.models import Pose
+    from gnomon.geometry.surface import points_from_depth
 
     rng = np.random.default_rng(3)
     h, w = 17, 29
@@ -189,7 +189,7 @@ def test_kernel_world_points_equal_the_camera_points_moved_to_the_world() -> Non
 
 
 def test_kernel_stl_records_equal_a_per_face_computation(tmp_path) -> None:
-    from gnomon.meshing import _stl_table_numpy, write_stl
+    from gnomon.outputs.stl import _stl_table_numpy, write_stl
 
     rng = np.random.default_rng(7)
     v = (rng.normal(0, 1, (60, 3)) * np.array([10.0, 1.0, 100.0])).astype(np.float32)
@@ -215,7 +215,7 @@ def test_kernel_fusion_equals_fuse_depths_then_neighbour_support() -> None:
     """_kernel.fuse_supported is fuse_depths (Gaussian weights) then supported_by_neighbours: random
     depths with missing estimates, conflicts, isolated pixels and a depth step."""
     from gnomon import _kernel
-    from gnomon.fusion import fuse_depths
+    from gnomon.reconstruct.fusion import fuse_depths
 
     rng = np.random.default_rng(8)
     h, w = 33, 41

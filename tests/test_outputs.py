@@ -9,7 +9,7 @@ import plyfile
 import pytest
 import trimesh
 
-from gnomon.camera import Pose
+from gnomon.camera.models import Pose
 
 
 def _camera_centre(scan) -> np.ndarray:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 import gnomon
-from gnomon import toml_io
+from gnomon.util import toml_io
 
 ROOT = Path(__file__).resolve().parents[1]
 

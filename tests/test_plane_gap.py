@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnomon.pipeline import MAX_PLANE_GAP, _far_from_planes
+from gnomon.reconstruct.edges import MAX_PLANE_GAP
+from gnomon.reconstruct.edges import far_from_planes as _far_from_planes
 
 
 def _direct(times: np.ndarray, depth: np.ndarray, have: np.ndarray) -> np.ndarray:
@@ -47,7 +48,7 @@ def test_capture_frames_are_the_interpolated_indices(skipped: bool) -> None:
     """pipeline._capture_frames (the lit colours' frame times) is np.interp over the kept frames' capture
     indices bit for bit: with no frame skipped through its identity shortcut, else the interpolation;
     NaN and ±inf give NaN, times beyond the kept frames clamp."""
-    from gnomon.pipeline import _capture_frames
+    from gnomon.capture.colours import capture_frames as _capture_frames
 
     rng = np.random.default_rng(1)
     n = 50

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gnomon.errors import GnomonError
-from gnomon.ply import read_ply, units_comment, write_mesh_ply, write_points_ply
+from gnomon.outputs.ply import read_ply, units_comment, write_mesh_ply, write_points_ply
 
 
 def _cloud(n: int = 1000, seed: int = 0):
@@ -136,7 +136,7 @@ def test_write_is_atomic(tmp_path, monkeypatch):
             self.fh.write(data[:10])
             raise OSError("disk full")
 
-    monkeypatch.setattr("gnomon.ply.open", Failing, raising=False)
+    monkeypatch.setattr("gnomon.outputs.ply.open", Failing, raising=False)
     with pytest.raises(OSError, match="disk full"):
         write_points_ply(p, xyz, rgb, sigma, uv)
     monkeypatch.undo()

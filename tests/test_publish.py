@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from conftest import write_tiny_capture
-from gnomon import publish
 from gnomon.cli import main
 from gnomon.errors import OutputError
+from gnomon.outputs import publish
 
 NAMES = ("a.txt", "b.txt", "c.txt")
 

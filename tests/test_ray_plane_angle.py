@@ -9,8 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from gnomon.camera import OpenCVCamera
-from gnomon.pipeline import GRAZING_DEG, _ray_plane_angles_numpy, ray_plane_angles
+from gnomon.camera.models import OpenCVCamera
+from gnomon.geometry.surface import _ray_plane_angles_numpy, ray_plane_angles
+from gnomon.reconstruct.edges import GRAZING_DEG
 
 
 def test_angles_follow_the_plane_interpolated_at_each_pixels_time() -> None:

@@ -34,8 +34,8 @@ def test_shipped_field_logs_run(tmp_path) -> None:
 
     import numpy as np
 
-    from gnomon.accuracy import depth_accuracy
-    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.runs.accuracy import depth_accuracy
+    from gnomon.runs.scan import ScanOptions, run_scan
 
     logs = sorted((ROOT / "field_logs").glob("*/field_log.toml"))
     assert {p.parent.name for p in logs} >= {"desk_lamp_small", "facade_sun_small"}

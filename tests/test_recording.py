@@ -13,7 +13,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from gnomon.recording import ENTITY, ScanRecording, display_to_pixels
+from gnomon.recording.recorder import ENTITY, ScanRecording, display_to_pixels
 
 # rerun's usage analytics are off when CI is set (re_analytics); TELEMETRY_ENABLED
 # gates rerun's OpenTelemetry tracing (off by default). RERUN_TELEMETRY_ENABLED is
@@ -277,7 +277,7 @@ def test_colours_packed_as_rerun_packs_them():
     """The recorder packs colours itself (rerun's own packing is slow on millions): the same uint32s."""
     from rerun._color_conversion import u8_array_to_rgba
 
-    from gnomon.recording import _packed_rgba
+    from gnomon.recording.recorder import _packed_rgba
 
     rgb = np.random.default_rng(3).integers(0, 256, (1000, 3), dtype=np.uint8)
     rgb[0], rgb[1] = (0, 0, 0), (255, 255, 255)
@@ -506,7 +506,7 @@ def test_command_line_options(tmp_path):
     import argparse
 
     from gnomon.errors import GnomonError
-    from gnomon.recording import add_recording_arguments, recording_from_args
+    from gnomon.recording.recorder import add_recording_arguments, recording_from_args
 
     parser = argparse.ArgumentParser()
     add_recording_arguments(parser)
@@ -546,7 +546,7 @@ def test_world_is_z_up_and_depth_sits_under_the_camera(scan):
 
 
 def test_coverage_is_a_segmentation_image_with_named_classes(scan):
-    from gnomon.preview import COVERAGE_CLASSES
+    from gnomon.outputs.images import COVERAGE_CLASSES
 
     _, _, data = scan
     fmt = one(data, ENTITY["coverage"], "SegmentationImage:format")[0]
@@ -563,8 +563,8 @@ def test_recording_worker_keeps_order_and_reports_a_failure_with_no_file(tmp_pat
     unfinished file is removed (nothing half-written)."""
     import threading
 
-    from gnomon.pipeline import RecordingWorker
-    from gnomon.recording import ScanRecording
+    from gnomon.recording.recorder import ScanRecording
+    from gnomon.recording.worker import RecordingWorker
 
     seen: list[tuple[int, str]] = []
     worker = RecordingWorker(lambda: ScanRecording(tmp_path / "ok.rrd", recording_name="ok"))

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnomon.camera import OpenCVCamera, Pose
-from gnomon.reference_lines import (
+from gnomon.camera.models import OpenCVCamera, Pose
+from gnomon.geometry.reference_lines import (
     PlaneInCamera,
     ReferencePlane,
     fit_line_robust,
@@ -14,7 +14,7 @@ from gnomon.reference_lines import (
     measure_reference_lines,
     region_mask,
 )
-from gnomon.shadow_planes import lamp_shadow_planes
+from gnomon.light.shadow_planes import lamp_shadow_planes
 
 CAMERA = OpenCVCamera(160, 120, 150.0, 152.0, 80.3, 59.1, (-0.2, 0.08, 0.001, -0.002, 0.0))
 # Camera 400 mm above the desk, tilted 20° about x.
@@ -94,7 +94,7 @@ def test_lamp_planes_contain_lamp_and_line() -> None:
 def test_one_fit_over_a_mask_with_holes_and_a_gap() -> None:
     """Regions of any shape are one set: a polygon with a hole (a marker) and a
     disjoint rectangle give one line per frame, fitted over all crossings."""
-    from gnomon.reference_lines import lines_on_plane, region_mask
+    from gnomon.geometry.reference_lines import lines_on_plane, region_mask
 
     times = desk_times()
     poly = np.array([[5.0, 2.0], [150.0, 2.0], [150.0, 40.0], [5.0, 40.0]])
@@ -116,7 +116,7 @@ def test_short_lines_take_their_direction_from_neighbours() -> None:
     """A line seen only over a short stretch (most of it hidden) is not trusted
     for its direction: that comes from the neighbouring long lines, and its
     offset is still measured."""
-    from gnomon.reference_lines import PlaneInCamera, lines_on_plane
+    from gnomon.geometry.reference_lines import PlaneInCamera, lines_on_plane
 
     times = desk_times()
     rng = np.random.default_rng(3)
@@ -140,7 +140,7 @@ def test_kernel_fits_equal_the_numpy_fits() -> None:
     frames, inliers, pixels and points, the same sense, points and directions within 1e-12 mm (1e-12)
     and RMS and extents within round-off; on noisy times with a hidden stretch (extrapolated frames),
     then with wrong times in 1 % of the pixels and the sweep reversed."""
-    from gnomon.reference_lines import PlaneInCamera, lines_on_plane
+    from gnomon.geometry.reference_lines import PlaneInCamera, lines_on_plane
 
     plane = PlaneInCamera.from_world(np.zeros(3), np.array([0, 0, 1.0]), POSE)
     for seed, sign, outliers in ((0, 1.0, 0.0), (1, -1.0, 0.01)):
@@ -167,7 +167,7 @@ def test_kernel_fits_equal_the_numpy_fits() -> None:
 def test_speeds_are_each_frames_speed() -> None:
     """ReferenceLines.speeds() gives speed(t) of every frame bit for bit (the first and last lines have one
     neighbour, the frames next to a missing line one), and the sweep's 5 mm per frame."""
-    from gnomon.reference_lines import PlaneInCamera, lines_on_plane
+    from gnomon.geometry.reference_lines import PlaneInCamera, lines_on_plane
 
     times = desk_times() + np.random.default_rng(2).normal(0, 0.02, (120, 160))
     plane = PlaneInCamera.from_world(np.zeros(3), np.array([0, 0, 1.0]), POSE)
@@ -185,7 +185,7 @@ def test_kernel_crossings_equal_the_numpy_definition() -> None:
     """The kernel's isochrone crossings are the numpy definition's, value for value and in order: sweeps
     along the rows and along the columns, in both senses, with noise, wrong single-pixel times (lines
     crossing a frame twice), missing times and times outside the frames; with and without ``unique``."""
-    from gnomon.reference_lines import _isochrone_crossings_numpy, isochrone_crossings
+    from gnomon.geometry.reference_lines import _isochrone_crossings_numpy, isochrone_crossings
 
     rng = np.random.default_rng(5)
     v, u = np.mgrid[0:47, 0:63].astype(np.float64)
@@ -210,7 +210,7 @@ def test_a_frame_whose_crossings_scatter_far_more_than_the_planes_lines_has_no_l
     """Where a sweep stops, a frame's few crossings may line up only roughly (a real desk-lamp capture:
     25 crossings at 19-24 times the plane's typical line RMS): such a frame has no line, rather than a
     plane tens of mm off; the frames around keep theirs."""
-    from gnomon.reference_lines import MAX_LINE_SCATTER, PlaneInCamera, lines_on_plane
+    from gnomon.geometry.reference_lines import MAX_LINE_SCATTER, PlaneInCamera, lines_on_plane
 
     times = desk_times()
     rng = np.random.default_rng(5)

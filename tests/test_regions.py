@@ -15,10 +15,10 @@ import cv2
 import numpy as np
 import pytest
 
-from gnomon import toml_io
 from gnomon.cli import main
+from gnomon.config.fieldlog import load_field_log
 from gnomon.errors import GnomonError
-from gnomon.fieldlog import load_field_log
+from gnomon.util import toml_io
 
 DESK, WALL = 0, 4  # the simulator's object ids
 
@@ -63,8 +63,8 @@ def test_proposed_regions_are_bare_plane(proposed) -> None:
 @pytest.mark.slow
 def test_a_scan_with_the_proposed_regions(proposed, tmp_path: Path) -> None:
     """As accurate as with the simulator's own regions (bands it knows are bare), and covering as much."""
-    from gnomon.accuracy import depth_accuracy
-    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.runs.accuracy import depth_accuracy
+    from gnomon.runs.scan import ScanOptions, run_scan
 
     log_path, _, truth = proposed
     log = tomllib.loads(log_path.read_text())
@@ -87,8 +87,8 @@ def test_a_scan_with_the_proposed_regions(proposed, tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_preview_draws_the_corner_where_it_is(two_plane_small: Path, tmp_path: Path) -> None:
     """The yellow line where the measured planes meet lies on the true corner's image."""
-    from gnomon.check import COLOURS  # noqa: F401  (the preview's palette)
-    from gnomon.simulate.two_plane import WALL_Y
+    from gnomon.runs.setup_preview import COLOURS  # noqa: F401  (the preview's palette)
+    from gnomon.simulate.two_plane_scene import WALL_Y
 
     truth = dict(np.load(two_plane_small / "ground_truth.npz"))
     png = tmp_path / "preview.png"
@@ -146,7 +146,7 @@ def test_init_writes_a_template_that_loads_once_filled(two_plane_small: Path, tm
 
 @pytest.mark.slow
 def test_a_plane_without_regions_cannot_be_scanned(two_plane_small: Path, tmp_path: Path) -> None:
-    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.runs.scan import ScanOptions, run_scan
 
     path = _without_regions(two_plane_small, "bare.toml")
     with pytest.raises(GnomonError, match="gnomon regions"):
@@ -157,7 +157,7 @@ def test_shadow_plane_ransac_ignores_an_object_inside_a_region() -> None:
     """One frame's crossings on a desk (z = 0) and a wall (y = 0): the shadow plane's lines on both, plus
     an object's isochrone back-projected onto the desk (half of the desk's crossings, on a curve that a
     line fit of the desk alone would follow). The joint fit keeps the lines' crossings and none of the curve."""
-    from gnomon.regions import ransac_shadow_plane
+    from gnomon.runs.regions import ransac_shadow_plane
 
     rng = np.random.default_rng(3)
     n = np.array([0.9, 0.2, 0.3])
@@ -185,8 +185,8 @@ def test_predicted_times_ignore_lines_off_the_sweep() -> None:
     plane: on the stand capture's wall it reversed the sweep's sense and left every pixel unpredicted), in
     frame 2 one far behind its start and in frame 30 one behind its neighbours. Every pixel the true
     lines pass gets its time (to 1e-9 frame), and the wrong lines are the ones left out."""
-    from gnomon.reference_lines import PlaneInCamera, ReferenceLines
-    from gnomon.regions import monotone_sweep, predicted_times
+    from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines
+    from gnomon.runs.regions import monotone_sweep, predicted_times
 
     n_frames = 50
     # Plane z = 1000 mm in the camera frame; plane coordinates (x, y) = camera (x, y) via e1, e2.
@@ -225,8 +225,8 @@ def _fast_sweep_with_a_fold(fold_deg: float) -> dict:
     interpolated between the two frames around it, so most pixels get k + 0.5 (a staircase, ±0.5 frame).
     Returns the times of both edges (the trailing edge 60 mm behind), the wall, the camera, the fold's
     pixels and how far each pixel's surface is in front of the wall (mm)."""
-    from gnomon.camera import OpenCVCamera
-    from gnomon.reference_lines import PlaneInCamera
+    from gnomon.camera.models import OpenCVCamera
+    from gnomon.geometry.reference_lines import PlaneInCamera
 
     w, h, f = 200, 120, 800.0
     camera = OpenCVCamera(w, h, f, f, w / 2, h / 2)
@@ -267,15 +267,15 @@ def test_regions_on_retimed_times_leave_out_a_fold() -> None:
     """A fold 20° off the wall over its last 30 rows (up to 13 mm in front) bends the isochrones by up to
     0.75 frame, which the staircase of a fast sweep (±0.5 frame per pixel) hides: on the tracker's own
     times the proposed wall takes nearly all of the fold. On the times re-timed between the isochrones (as
-    the scan, and so `gnomon regions`, uses them: gnomon.pipeline.edge_time_maps) the residuals on the bare
+    the scan, and so `gnomon regions`, uses them: gnomon.reconstruct.edges.edge_time_maps) the residuals on the bare
     wall are a few hundredths of a frame, the tolerance is its 0.25-frame floor, and the region stops
     where the fold leaves the wall by more than that: a time off by 0.25 frame is 2.5 mm along the wall,
     which a point δ in front of it makes as δ·600/1000 (the lamp 600 mm aside, the wall 1000 mm away),
     so what it keeps of the fold is within 4.2 mm of the wall (but at the image's sides, where a frame's
     line is mostly on the fold). The bare wall is kept whole but for the columns the sweep's first and
     last lines do not bracket."""
-    from gnomon.regions import propose_regions
-    from gnomon.retiming import retime_between_isochrones
+    from gnomon.reconstruct.retiming import retime_between_isochrones
+    from gnomon.runs.regions import propose_regions
 
     scene = _fast_sweep_with_a_fold(20.0)
     fold, bare = scene["fold"], ~scene["fold"]
@@ -303,9 +303,9 @@ def test_one_plane_seeded_over_a_flat_topped_object_leaves_its_top_out() -> None
     """A single plane (the paper's desk and lamp) seeded over an object with a flat top and its cast
     shadow: the top's isochrones are straight too, but off the desk's lines; the proposal keeps the desk
     beside it and leaves the top out."""
-    from gnomon.camera import OpenCVCamera, Pose
-    from gnomon.reference_lines import PlaneInCamera
-    from gnomon.regions import propose_regions
+    from gnomon.camera.models import OpenCVCamera, Pose
+    from gnomon.geometry.reference_lines import PlaneInCamera
+    from gnomon.runs.regions import propose_regions
 
     cam = OpenCVCamera(200, 150, 180.0, 180.0, 99.5, 74.5, (0.0,) * 5)
     pose = Pose.from_rvec_tvec(np.array([np.pi, 0.0, 0.0]), np.array([0.0, 0.0, 300.0]))  # looking down
@@ -342,12 +342,12 @@ def test_one_plane_seeded_over_a_flat_topped_object_leaves_its_top_out() -> None
 
 
 def test_short_lines_off_the_sweep_are_moved_to_where_their_long_neighbours_put_them() -> None:
-    """:func:`gnomon.regions.follow_the_sweep`: frames whose (short) line sits on an object's top, tens of
+    """:func:`gnomon.runs.regions.follow_the_sweep`: frames whose (short) line sits on an object's top, tens of
     mm off the line the long lines before and after predict, are refitted to their crossings near the
     prediction; a frame with none there loses its line; the others are left as they are."""
-    from gnomon.camera import OpenCVCamera, Pose
-    from gnomon.reference_lines import PlaneInCamera, ReferenceLines
-    from gnomon.regions import follow_the_sweep
+    from gnomon.camera.models import OpenCVCamera, Pose
+    from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines
+    from gnomon.runs.regions import follow_the_sweep
 
     cam = OpenCVCamera(200, 150, 180.0, 180.0, 99.5, 74.5, (0.0,) * 5)
     pose = Pose.from_rvec_tvec(np.array([np.pi, 0.0, 0.0]), np.array([0.0, 0.0, 400.0]))  # looking down

@@ -28,9 +28,9 @@ import pytest
 
 import gnomon
 from conftest import write_tiny_capture
-from gnomon import toml_io
 from gnomon.cli import main
 from gnomon.errors import GnomonError
+from gnomon.util import toml_io
 
 ROOT = Path(__file__).resolve().parents[1]
 # Subprocesses import gnomon from where this process does (the checkout's
@@ -334,7 +334,7 @@ def test_merge_spoilt_input(scanned: Path, tmp_path: Path, capsys, spoil, needle
 def test_merge_point_pixels_out_of_range(scanned: Path, tmp_path: Path, capsys) -> None:
     import shutil
 
-    from gnomon import ply
+    from gnomon.outputs import ply
 
     b = tmp_path / "b"
     shutil.copytree(scanned, b)
@@ -459,8 +459,8 @@ def test_held_interrupts_wait_for_the_block_even_when_another_thread_takes_the_s
     whose mask blocking does not cover) is raised as Terminated only when the held block ends."""
     import threading
 
-    from gnomon import cli, interrupts
-
+    from gnomon import cli
+    from gnomon.util import interrupts
     previous = cli._install_signal_handlers()
     stop = threading.Event()
     other = threading.Thread(target=stop.wait, daemon=True)  # started before the block: signals unblocked
@@ -483,9 +483,9 @@ def test_an_interrupt_while_the_first_frame_s_pass_closes_is_raised_not_swallowe
     SIGHUP 0.35 s into a scan did so) must reach the caller. Closed by the garbage collector (a `for`
     loop left by `return`, as before), Python only printed it ('Exception ignored in: <generator
     object FrameSource.__iter__>') and the scan ran on and published its outputs."""
+    from gnomon.capture.frames import FrameSource
     from gnomon.cli import Terminated
-    from gnomon.frames import FrameSource
-    from gnomon.scan_setup import first_frame
+    from gnomon.config.setup import first_frame
 
     class Interrupted(FrameSource):
         def __iter__(self):
@@ -503,7 +503,7 @@ def test_a_signal_inside_importlib_is_sent_again_a_moment_later() -> None:
     """A signal that comes while the main thread imports (importlib's code on its stack: its lock
     bookkeeping, or a module's body it runs) is not raised there but sent to the main thread again after
     REDELIVER_S; elsewhere it is raised at once."""
-    from gnomon import interrupts
+    from gnomon.util import interrupts
 
     def module_body():  # a module's code, run by importlib
         return sys._getframe()
@@ -569,7 +569,7 @@ def test_full_disk_does_not_hang(tmp_path: Path) -> None:
 
 KILL_AT = textwrap.dedent("""
     import os, signal, sys
-    import gnomon.publish as pub
+    import gnomon.outputs.publish as pub
     stage = sys.argv[1]
     real_replace, real_rmtree = os.replace, pub.shutil.rmtree
     moved = []
@@ -594,7 +594,7 @@ KILL_AT = textwrap.dedent("""
 def test_kill_during_publication_never_mixes(tmp_path: Path, stage: str) -> None:
     """SIGKILL in the middle of publishing over an earlier scan: the folder is whole-old or, once the next
     run (or a reader such as merge) has recovered it, whole-new — never new points beside old maps."""
-    from gnomon.publish import recover
+    from gnomon.outputs.publish import recover
 
     small = write_tiny_capture(tmp_path / "small")
     big = write_tiny_capture(tmp_path / "big", width=64, height=48)
@@ -639,7 +639,7 @@ def fuzz_base(tmp_path_factory) -> tuple[Path, dict]:
 
 
 def _parse_ok_or_gnomon_error(path: Path) -> None:
-    from gnomon.fieldlog import load_field_log
+    from gnomon.config.fieldlog import load_field_log
 
     try:
         load_field_log(path)
@@ -746,7 +746,7 @@ GRPC_SERVER = textwrap.dedent("""
 TEE = textwrap.dedent("""
     import sys
     import numpy as np
-    import gnomon.recording as recording
+    import gnomon.recording.recorder as recording
     recording.VIEWER_FLUSH_TIMEOUT_S = 1.0
     path, url = sys.argv[1], sys.argv[2]
     rng = np.random.default_rng(1)
@@ -784,7 +784,7 @@ def test_recording_streamed_to_a_viewer_is_written_by_gnomon(tmp_path: Path, vie
     wait forever)."""
     import errno
 
-    from gnomon.review import read_points
+    from gnomon.recording.review import read_points
 
     port = _free_port()
     server = None
@@ -838,8 +838,8 @@ def _marker_log(capture: Path, name: str, edit_markers) -> Path:
 
 
 def _found_marker_pixels(log: Path) -> np.ndarray:
-    from gnomon.fieldlog import load_field_log
-    from gnomon.scan_setup import frame_source, resolve_reference_planes
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.config.setup import frame_source, resolve_reference_planes
 
     fl = load_field_log(log)
     return np.array(resolve_reference_planes(fl, frame_source(fl))[1][0]["pixels"])
@@ -852,7 +852,7 @@ def test_a_marker_a_few_pixels_off_is_a_warning_everywhere(two_plane_small: Path
     one: the scan runs and says so on stderr, in report.json and in the recording's warnings."""
     from rerun.chunk import RrdReader
 
-    from gnomon.scan_setup import CLICKED_SIGMA_PX, MARKER_SIGMA_PX
+    from gnomon.config.setup import CLICKED_SIGMA_PX, MARKER_SIGMA_PX
 
     found = _found_marker_pixels(two_plane_small / "field_log.toml")
 
@@ -877,8 +877,8 @@ def test_a_marker_a_few_pixels_off_is_a_warning_everywhere(two_plane_small: Path
     assert f"found to {MARKER_SIGMA_PX:g} px and clicked to {CLICKED_SIGMA_PX:g} px" in warning
     assert rms > allowed and 0.5 < float(warning.split("the plane is ")[1].split("°")[0]) < 5.0
     # the same capture with its markers as simulated passes the check on both planes
-    from gnomon.fieldlog import load_field_log
-    from gnomon.scan_setup import frame_source, resolve_reference_planes
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.config.setup import frame_source, resolve_reference_planes
 
     good = load_field_log(two_plane_small / "field_log.toml")
     entries = resolve_reference_planes(good, frame_source(good))[1]

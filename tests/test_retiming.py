@@ -1,11 +1,11 @@
-"""Re-timing a fast sweep's pixels between the isochrones (gnomon.retiming)."""
+"""Re-timing a fast sweep's pixels between the isochrones (gnomon.reconstruct.retiming)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from gnomon.retiming import retime_between_isochrones
+from gnomon.reconstruct.retiming import retime_between_isochrones
 
 
 def _fast_sweep(speed_px: float, penumbra_px: float, width: int = 200, rows: int = 6, frames: int = 60,
@@ -147,7 +147,7 @@ def _ragged_sweep(seed: int, h: int = 14, w: int = 90, frames: int = 30) -> np.n
 
 
 def test_kernel_retiming_equals_a_per_pixel_computation_and_the_numpy_definition() -> None:
-    from gnomon.retiming import _retime_numpy
+    from gnomon.reconstruct.retiming import _retime_numpy
 
     for seed in range(4):
         m = _ragged_sweep(seed)
@@ -170,7 +170,7 @@ def test_kernel_retiming_equals_a_per_pixel_computation_and_the_numpy_definition
 def test_kernel_retiming_with_sigma_equals_the_definition() -> None:
     """retime_with_sigma (one kernel pass) gives retime_between_isochrones' times and RetimedTimes.sigma's σ,
     in every orientation and with a mask."""
-    from gnomon.retiming import retime_with_sigma
+    from gnomon.reconstruct.retiming import retime_with_sigma
 
     for seed in range(3):
         m = _ragged_sweep(seed)
@@ -195,7 +195,7 @@ def test_averaging_across_the_sweep_takes_out_each_rows_own_error_and_keeps_dept
     ±8 % (1σ) and is asserted within 3σ of 1/√5. Noise-free, the average changes nothing, also where the
     time changes linearly across the rows (a tilted edge), and a depth edge across the rows (the staircase
     two frames later below it) is not averaged over."""
-    from gnomon.retiming import average_across_sweep
+    from gnomon.reconstruct.retiming import average_across_sweep
 
     times, true = _fast_sweep(6.0, 1.5, rows=400)
     noisy = times + np.random.default_rng(7).normal(0.0, 0.05, (400, 1))
@@ -233,7 +233,7 @@ def test_averaging_across_the_sweep_takes_out_each_rows_own_error_and_keeps_dept
 def test_the_kernels_average_across_the_sweep_is_the_numpy_definition(along_rows: bool) -> None:
     """``_kernel.average_across`` against :func:`_average_across_sweep_numpy` bit for bit: re-timed maps with
     noise, NaN holes, pixels not re-timed, pairs on both sides of the bend limit, short maps."""
-    from gnomon.retiming import _average_across_sweep_numpy, average_across_sweep
+    from gnomon.reconstruct.retiming import _average_across_sweep_numpy, average_across_sweep
 
     rng = np.random.default_rng(11)
     for shape, half in [((60, 70), 2), ((5, 3), 2), ((4, 9), 3), ((1, 8), 2), ((33, 1), 1)]:

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from gnomon.errors import GnomonError
-from gnomon.ply import read_ply, units_comment, write_points_ply
-from gnomon.recording import ScanRecording
-from gnomon.review import compare, export_points, nearest_distances, read_points, summarize
+from gnomon.outputs.ply import read_ply, units_comment, write_points_ply
+from gnomon.recording.recorder import ScanRecording
+from gnomon.recording.review import compare, export_points, nearest_distances, read_points, summarize
 
 OFFLINE_ENV = {"CI": "1", "TELEMETRY_ENABLED": "false", "RERUN_TELEMETRY_ENABLED": "false"}
 T0 = datetime(2024, 9, 1, 8, 30, 0, tzinfo=UTC)

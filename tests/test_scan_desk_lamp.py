@@ -16,7 +16,7 @@ import json
 import numpy as np
 import pytest
 
-from gnomon.accuracy import depth_accuracy
+from gnomon.runs.accuracy import depth_accuracy
 
 
 @pytest.fixture(scope="module")

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gnomon import toml_io
-from gnomon.accuracy import depth_accuracy
 from gnomon.cli import main
-from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.runs.accuracy import depth_accuracy
+from gnomon.runs.scan import ScanOptions, run_scan
 from gnomon.simulate import FacadeSunConfig, simulate_facade_sun
+from gnomon.util import toml_io
 
 OPTS = ScanOptions(progress=False, rrd=False)
 
@@ -156,7 +156,7 @@ def test_sun_below_the_horizon(small_facade, capsys) -> None:
 def test_sun_scan_is_georeferenced(small_facade) -> None:
     """report.json gives the site and world → ENU; points_enu.ply holds the cloud in ENU metres."""
     import gnomon
-    from gnomon import ply
+    from gnomon.outputs import ply
 
     s = gnomon.scan(small_facade / "capture" / "field_log.toml", out=small_facade / "scan_geo", rrd=False)
     truth = np.load(small_facade / "capture" / "ground_truth.npz")

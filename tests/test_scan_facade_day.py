@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnomon.accuracy import depth_accuracy
-from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.runs.accuracy import depth_accuracy
+from gnomon.runs.scan import ScanOptions, run_scan
 from gnomon.simulate import FacadeSunConfig, simulate_facade_sun
 
 
@@ -89,7 +89,7 @@ def test_coverage_of_the_cloud_free_passages(day) -> None:
 @pytest.mark.slow
 def test_coverage_of_the_cloud_passages(day) -> None:
     """30 % of the swept pixels (9,256 of 30,349) see the pole's shadow pass while a cloud dims the
-    sun; their frames are levelled pixel by pixel (gnomon.cloud_levels) instead of skipped, so
+    sun; their frames are levelled pixel by pixel (gnomon.capture.cloud_levels) instead of skipped, so
     their dips are found (measured: 82.8 % of them; 29 % when the cloud frames were skipped)."""
     _, truth, result, _ = day
     cloudy = truth["swept"] & ~truth["cloud_free_passage"]

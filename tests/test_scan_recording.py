@@ -9,9 +9,9 @@ import sys
 import numpy as np
 import pytest
 
-from gnomon import ply
 from gnomon.cli import main
-from gnomon.review import summarize
+from gnomon.outputs import ply
+from gnomon.recording.review import summarize
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +102,7 @@ def test_scan_warnings_are_on_the_frame_timeline(scanned) -> None:
 def test_scan_recording_has_coverage_and_depth_under_the_camera(scanned) -> None:
     from rerun.chunk import RrdReader
 
-    from gnomon.preview import COVERAGE_CLASSES
+    from gnomon.outputs.images import COVERAGE_CLASSES
 
     seen = {}
     for chunk in RrdReader(scanned / "scan" / "scan.rrd").stream():

@@ -12,8 +12,8 @@ import tomllib
 import numpy as np
 import pytest
 
-from gnomon.accuracy import depth_accuracy
-from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.runs.accuracy import depth_accuracy
+from gnomon.runs.scan import ScanOptions, run_scan
 from gnomon.simulate import TwoPlaneConfig, simulate_two_plane
 
 
@@ -81,7 +81,7 @@ def test_markers_set_the_camera_pose(two_plane, tmp_path) -> None:
     """Without [camera.pose], the printed markers give it; the scan is as good."""
     import shutil
 
-    from gnomon import toml_io
+    from gnomon.util import toml_io
 
     root, result, truth = two_plane
     cap = tmp_path / "capture"
@@ -105,8 +105,8 @@ def test_every_plane_from_its_own_markers(two_plane) -> None:
     if clicked) place the wall in it; regions as a polygon and a mask image."""
     import cv2
 
-    from gnomon import toml_io
-    from gnomon.reference_lines import region_mask
+    from gnomon.geometry.reference_lines import region_mask
+    from gnomon.util import toml_io
 
     root, reference, truth = two_plane
     log = tomllib.loads((root / "capture" / "field_log.toml").read_text())
@@ -146,7 +146,7 @@ def test_every_plane_from_its_own_markers(two_plane) -> None:
 def test_coverage_map_gives_the_reasons_the_report_counts(two_plane) -> None:
     """The coverage map's classes add up to the report's counts, and the pixels refused because no
     neighbour shares their depth were measured worse than the points kept (against the truth)."""
-    from gnomon.preview import EDGES_DISAGREE, NO_NEIGHBOUR, POINT, UNDERSAMPLED
+    from gnomon.outputs.images import EDGES_DISAGREE, NO_NEIGHBOUR, POINT, UNDERSAMPLED
 
     _, result, truth = two_plane
     cov, counts = result.coverage, result.report["coverage"]

@@ -2,7 +2,7 @@
 
 The field log names each plane's markers by ID and centre only; the planes'
 poses, and the camera's, come from the markers found in the first frame
-(gnomon.aruco). Bars as for the checker markers with hints
+(gnomon.camera.aruco). Bars as for the checker markers with hints
 (tests/test_scan_two_plane.py): each plane within 0.2° and 0.2 % of its true
 normal and distance in the camera frame; the camera pose within 0.1° and
 0.2 % of the camera distance; depth RMS ≤ 0.15 % of the camera distance over
@@ -16,10 +16,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from gnomon import toml_io
-from gnomon.accuracy import depth_accuracy
-from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.runs.accuracy import depth_accuracy
+from gnomon.runs.scan import ScanOptions, run_scan
 from gnomon.simulate import TwoPlaneConfig, simulate_two_plane
+from gnomon.util import toml_io
 
 
 @pytest.fixture(scope="module")

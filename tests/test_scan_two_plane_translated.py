@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnomon.accuracy import depth_accuracy
-from gnomon.pipeline import ScanOptions, run_scan
+from gnomon.runs.accuracy import depth_accuracy
+from gnomon.runs.scan import ScanOptions, run_scan
 from gnomon.simulate import TwoPlaneConfig, simulate_two_plane
 
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gnomon.reference_lines import PlaneInCamera, ReferenceLines
-from gnomon.shadow_planes import complete_from_light
-from gnomon.validity import light_point_or_line
+from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines
+from gnomon.geometry.validity import light_point_or_line
+from gnomon.light.shadow_planes import complete_from_light
 
 
 def _plane(normal, point) -> PlaneInCamera:
@@ -70,7 +70,7 @@ def test_a_stick_tilting_a_little_completes_from_the_lamp_point() -> None:
     more); the lamp point, though poorly located along the stick, gives the exact plane. The choice is
     measured on the two-plane frames (each completed from one of its lines, the light located without it):
     the point wins, and the completed frames are exact (1e-6)."""
-    from gnomon.shadow_planes import completion_light
+    from gnomon.light.shadow_planes import completion_light
 
     desk = _plane([0.0, -0.9, -0.44], [0.0, 300.0, 1500.0])
     wall = _plane([0.0, 0.2, -1.0], [0.0, 0.0, 2000.0])
@@ -110,7 +110,7 @@ def test_a_stick_tilting_a_little_completes_from_the_lamp_point() -> None:
 def test_a_stick_moved_parallel_to_itself_completes_from_the_line() -> None:
     """The planes of a stick moved parallel to itself share its direction exactly: both models complete the
     two-plane frames exactly (the least-squares point lies on the line), so the tie keeps the line."""
-    from gnomon.shadow_planes import completion_light
+    from gnomon.light.shadow_planes import completion_light
 
     desk = _plane([0.0, -0.9, -0.44], [0.0, 300.0, 1500.0])
     wall = _plane([0.0, 0.2, -1.0], [0.0, 0.0, 2000.0])
@@ -135,7 +135,7 @@ def test_completion_sigma_is_the_depth_change_of_the_plane_turned_about_its_line
     camera Z that :func:`completion_depth_sigma` predicts for a 1σ of that angle, at every distance from
     the line (first order: the second-order terms are ~angle·tan(ray-plane angle), under 1e-3 here), and
     the interpolated plane between a completed and a measured row carries its weight's share."""
-    from gnomon.uncertainty import completion_depth_sigma
+    from gnomon.geometry.uncertainty import completion_depth_sigma
 
     angle = 1e-4
     p0 = np.array([0.0, 100.0, 1800.0])  # the completing line (camera frame, mm): a point and a direction
@@ -167,7 +167,7 @@ def test_kernel_completion_sigma_is_its_numpy_definition() -> None:
     """The kernel's completion σ (``_kernel.completion_sigma``) equals the numpy definition value for value,
     on rows completed and measured, times between them, at and beyond both ends and NaN, depths NaN, a
     missing plane row and a ray grazing its plane (the cosine floor)."""
-    from gnomon.uncertainty import _completion_depth_sigma_numpy, completion_depth_sigma
+    from gnomon.geometry.uncertainty import _completion_depth_sigma_numpy, completion_depth_sigma
 
     rng = np.random.default_rng(11)
     h, w, n = 37, 53, 9
@@ -200,7 +200,7 @@ def test_kernel_completion_sigma_is_its_numpy_definition() -> None:
 def test_a_point_light_measures_its_completion_error() -> None:
     """When the two-plane frames fix the lamp as a point, the completion's error is measured all the same
     (leave one out), so the completed planes' σ has a size: exact lines complete exactly (< 1e-4°)."""
-    from gnomon.shadow_planes import completion_light
+    from gnomon.light.shadow_planes import completion_light
 
     desk = _plane([0.0, -0.9, -0.44], [0.0, 300.0, 1500.0])
     wall = _plane([0.0, 0.2, -1.0], [0.0, 0.0, 2000.0])

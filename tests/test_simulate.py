@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
-from gnomon.camera import undistort_points
+from gnomon.camera.models import undistort_points
 from gnomon.errors import GnomonError
 from gnomon.simulate import DeskLampConfig, DeskLampScene, simulate_desk_lamp
 from gnomon.simulate import geometry as geo
@@ -575,7 +575,8 @@ def test_pencil_photos_show_pencil_and_shadow(pencil_capture):
 @pytest.mark.slow
 def test_pencil_photos_calibrate_the_lamp(pencil_capture):
     """gnomon.light (the pipeline) recovers the simulator's lamp from the pencil log."""
-    from gnomon.light import calibrate_lamp_from_pencil, load_pencil_log
+    from gnomon.config.pencil_log import load_pencil_log
+    from gnomon.light import calibrate_lamp_from_pencil
 
     r, _ = pencil_capture
     gt = np.load(r.ground_truth)
@@ -592,7 +593,8 @@ def test_pencil_photos_calibrate_the_lamp(pencil_capture):
 @pytest.mark.slow
 def test_pencil_log_calibrates_either_lamp_closely(tmp_path):
     """The log's pixels (no rendering needed) pin both lamps to 0.1 % of their distance."""
-    from gnomon.light import calibrate_lamp_from_pencil, load_pencil_log
+    from gnomon.config.pencil_log import load_pencil_log
+    from gnomon.light import calibrate_lamp_from_pencil
     from gnomon.simulate import pencil
 
     for side in ("left", "right"):

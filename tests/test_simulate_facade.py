@@ -1,5 +1,5 @@
 """The synthetic facade/sun time-lapse: its ground truth is self-consistent and
-agrees with independent code (OpenCV's projection, pvlib's sun, gnomon.sun's
+agrees with independent code (OpenCV's projection, pvlib's sun, gnomon.light.ephemeris's
 world frame, the timestamp readers), and its frames show the pole's shadow
 where the ground truth says."""
 
@@ -16,8 +16,9 @@ import pandas as pd
 import pytest
 from PIL import Image
 
-from gnomon.camera import undistort_points
+from gnomon.camera.models import undistort_points
 from gnomon.errors import GnomonError
+from gnomon.light.timestamps import frame_times
 from gnomon.simulate.facade_sun import (
     GROUND,
     POLE,
@@ -26,7 +27,6 @@ from gnomon.simulate.facade_sun import (
     FacadeSunScene,
     simulate_facade_sun,
 )
-from gnomon.timestamps import frame_times
 
 SMALL = FacadeSunConfig(width=320, height=240, frames=48, seed=1)          # JPEG
 TINY = FacadeSunConfig(width=160, height=120, frames=12, jpeg_quality=0, clouds=2)
@@ -130,7 +130,7 @@ def test_sun_direction_matches_pvlib(small):
     from pvlib.atmosphere import alt2pres
     from pvlib.solarposition import get_solarposition
 
-    from gnomon.sun import R_world_from_enu, Site, sun_direction_enu
+    from gnomon.light.ephemeris import R_world_from_enu, Site, sun_direction_enu
 
     _, gt, log = small
     site = log["site"]
@@ -159,8 +159,8 @@ def test_sun_direction_matches_pvlib(small):
 
 
 def test_world_frame_heading():
+    from gnomon.light.ephemeris import R_world_from_enu as pipeline_R
     from gnomon.simulate.facade_sun import HEADING_DEG, R_world_from_enu
-    from gnomon.sun import R_world_from_enu as pipeline_R
 
     for h in (0.0, 30.0, 90.0, HEADING_DEG):
         np.testing.assert_allclose(R_world_from_enu(h), pipeline_R(h), atol=1e-15)

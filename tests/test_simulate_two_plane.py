@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from gnomon.simulate import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
-from gnomon.simulate.two_plane import MARKER_PAPER, WALL_Y
+from gnomon.simulate.two_plane_scene import MARKER_PAPER, WALL_Y
 
 SMALL = TwoPlaneConfig(width=320, height=240, frames=96, jpeg_quality=0, seed=0)
 DESK, SPHERE, BOX, WALL = 0, 1, 2, 4

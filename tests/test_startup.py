@@ -1,4 +1,4 @@
-"""Start-up cost: what `import gnomon.pipeline` and `gnomon --version` load.
+"""Start-up cost: what `import gnomon.runs.scan` and `gnomon --version` load.
 
 A scan with a lamp or two planes needs neither pandas (the sun's clock, through pvlib)
 nor scipy.optimize nor scipy.stats (a plane's pose refined and checked from its markers): together
@@ -33,8 +33,8 @@ def _loaded_after(code: str, modules: list[str]) -> dict[str, bool]:
 
 
 def test_pipeline_import_loads_neither_pandas_nor_scipy_optimize() -> None:
-    loaded = _loaded_after("import gnomon.pipeline", ["gnomon.pipeline", "pandas", "scipy.optimize", "pvlib"])
-    assert loaded == {"gnomon.pipeline": True, "pandas": False, "scipy.optimize": False, "pvlib": False}
+    loaded = _loaded_after("import gnomon.runs.scan", ["gnomon.runs.scan", "pandas", "scipy.optimize", "pvlib"])
+    assert loaded == {"gnomon.runs.scan": True, "pandas": False, "scipy.optimize": False, "pvlib": False}
 
 
 def test_sun_names_load_on_first_use() -> None:
@@ -47,10 +47,10 @@ def test_sun_names_load_on_first_use() -> None:
 
 
 def test_a_plane_from_its_markers_loads_neither_scipy_optimize_nor_stats() -> None:
-    """A plane's pose refined from its markers (gnomon.fitting.levenberg_marquardt) and checked by its χ²
-    (gnomon.chi2): neither scipy.optimize (≈ 0.35 s) nor scipy.stats (0.4–0.9 s) is imported."""
-    code = ("import numpy as np, cv2\nfrom gnomon.camera import OpenCVCamera\n"
-            "from gnomon.markers import fit_plane_pose\nfrom gnomon.chi2 import chi2_isf\n"
+    """A plane's pose refined from its markers (gnomon.util.fitting.levenberg_marquardt) and checked by its χ²
+    (gnomon.util.chi2): neither scipy.optimize (≈ 0.35 s) nor scipy.stats (0.4–0.9 s) is imported."""
+    code = ("import numpy as np, cv2\nfrom gnomon.camera.models import OpenCVCamera\n"
+            "from gnomon.camera.plane_pose import fit_plane_pose\nfrom gnomon.util.chi2 import chi2_isf\n"
             "cam = OpenCVCamera(640, 480, 500.0, 500.0, 320.0, 240.0)\n"
             "ab = np.array([[0.0, 0.0], [200.0, 0.0], [200.0, 150.0], [0.0, 150.0], [100.0, 70.0]])\n"
             "obj = np.concatenate([ab, np.zeros((5, 1))], axis=1)\n"
@@ -58,8 +58,8 @@ def test_a_plane_from_its_markers_loads_neither_scipy_optimize_nor_stats() -> No
             "pix = cam.project(obj @ R.T + np.array([-100.0, -50.0, 700.0]))\n"
             "pose = fit_plane_pose(cam, ab, pix)\nassert pose.rms_px < 1e-6, pose.rms_px\n"
             "assert chi2_isf(0.01, 2 * len(ab) - 6) > 0")
-    loaded = _loaded_after(code, ["gnomon.markers", "scipy.optimize", "scipy.stats"])
-    assert loaded == {"gnomon.markers": True, "scipy.optimize": False, "scipy.stats": False}
+    loaded = _loaded_after(code, ["gnomon.camera.plane_pose", "scipy.optimize", "scipy.stats"])
+    assert loaded == {"gnomon.camera.plane_pose": True, "scipy.optimize": False, "scipy.stats": False}
 
 
 def test_version_loads_no_command() -> None:

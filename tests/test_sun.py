@@ -10,7 +10,7 @@ import pytest
 
 from gnomon.commands import sun as sun_command
 from gnomon.errors import GnomonError
-from gnomon.sun import (
+from gnomon.light.ephemeris import (
     R_world_from_enu,
     Site,
     direction_from_angles,

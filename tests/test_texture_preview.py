@@ -5,8 +5,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from gnomon.preview import COVERAGE_CLASSES, coverage_map, preview_image, write_preview
-from gnomon.texture import LitColour, sample_indices
+from gnomon.capture.texture import LitColour, sample_indices
+from gnomon.outputs.images import COVERAGE_CLASSES, coverage_map, preview_image, write_preview
 
 
 def test_colour_is_the_median_of_the_frames_a_pixel_is_lit_in() -> None:
@@ -101,7 +101,7 @@ def test_scan_colours_of_a_colour_capture_come_from_its_lit_frames(tmp_path) -> 
     import cv2
 
     from conftest import write_tiny_capture
-    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.runs.scan import ScanOptions, run_scan
 
     log = write_tiny_capture(tmp_path / "capture")
     frames = sorted((tmp_path / "capture" / "frames").glob("*.png"))
@@ -124,7 +124,7 @@ def test_scan_colours_of_a_colour_capture_come_from_its_lit_frames(tmp_path) -> 
 def test_coverage_map_says_why_a_pixel_has_no_point() -> None:
     """Each refused pixel gets its reason; a kept point is a point whatever else is set, and the
     reasons that need a shadow time (edges disagree, no neighbour) only where the shadow was seen."""
-    from gnomon.preview import AMBIGUOUS, EDGES_DISAGREE, NO_DEPTH, NO_NEIGHBOUR, NO_SHADOW, POINT
+    from gnomon.outputs.images import AMBIGUOUS, EDGES_DISAGREE, NO_DEPTH, NO_NEIGHBOUR, NO_SHADOW, POINT
 
     h, w = 4, 6
     seen = np.zeros((h, w), bool)

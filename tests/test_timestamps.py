@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from gnomon.errors import GnomonError
-from gnomon.timestamps import frame_times, interpolate_times
+from gnomon.light.timestamps import frame_times, interpolate_times
 
 
 def utc(*texts: str) -> pd.DatetimeIndex:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from gnomon import _kernel
+from gnomon.capture.tracking import NumpyTracker, ShadowTimes, decoding_lut, track
 from gnomon.errors import (
     FrameError,
     GnomonError,
@@ -17,7 +18,6 @@ from gnomon.errors import (
     KernelLutError,
     KernelParameterError,
 )
-from gnomon.tracking import NumpyTracker, ShadowTimes, decoding_lut, track
 
 KEYS = tuple(f.name for f in fields(ShadowTimes))
 
@@ -446,7 +446,7 @@ def test_saturated_lit_level_flags_the_pixel():
 def test_numpy_tracker_captures_in_chunks(monkeypatch):
     """The numpy reference captures windows a chunk of pixels at a time: the
     result does not depend on the chunk."""
-    import gnomon.tracking as tracking
+    import gnomon.capture.tracking as tracking
 
     rng = np.random.default_rng(16)
     n, pixels = 120, 90
@@ -466,7 +466,7 @@ def test_the_second_candidate_dip_has_its_own_times(normalize):
     second's contrast is the rival's depth in DN of the input (also through the normaliser), and a pixel
     with one dip has no second above the contrast floor. Without ``second_dips`` the kernel keeps
     no second candidates (its best dips and rivals unchanged) and refuses to report them."""
-    from gnomon.tracking import ShadowTracker, TrackerSettings
+    from gnomon.capture.tracking import ShadowTracker, TrackerSettings
 
     rng = np.random.default_rng(14)
     n, pixels = 150, 40

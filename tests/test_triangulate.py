@@ -103,7 +103,7 @@ def test_bad_inputs_raise_value_error():
 def test_depth_only_is_the_points_z() -> None:
     """triangulation.triangulate_depth (the kernel's Z only) is triangulate(...).depth bit for bit, and the
     Z of the exact ray-plane points: interpolated planes, NaN times, missing planes, times outside."""
-    from gnomon.triangulation import triangulate, triangulate_depth
+    from gnomon.geometry.triangulation import triangulate, triangulate_depth
 
     rng = np.random.default_rng(5)
     rays = pinhole_rays(30, 40, f=60.0)

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from conftest import write_tiny_capture
-from gnomon.accuracy import FALSE_SIGMAS, GROSS_FRACTION, depth_accuracy
+from gnomon.capture.noise import _median_of_integers, image_noise_dn
 from gnomon.cli import main
-from gnomon.uncertainty import _median_of_integers, image_noise_dn
+from gnomon.runs.accuracy import FALSE_SIGMAS, GROSS_FRACTION, depth_accuracy
 
 
 def noisy_pair(sigma_dn: float, seed: int, gain: float = 1.0, moved_rows: int = 0):
@@ -214,7 +214,7 @@ def _planes_through(lamp: np.ndarray, normals: np.ndarray) -> np.ndarray:
 
 
 def test_lamp_from_planes_all_round() -> None:
-    from gnomon.validity import light_point_or_line
+    from gnomon.geometry.validity import light_point_or_line
 
     lamp = np.array([-200.0, 50.0, 400.0])
     rng = np.random.default_rng(2)
@@ -226,7 +226,7 @@ def test_lamp_from_planes_all_round() -> None:
 
 
 def test_lamp_from_planes_sharing_one_direction_is_a_line() -> None:
-    from gnomon.validity import light_point_or_line
+    from gnomon.geometry.validity import light_point_or_line
 
     lamp = np.array([-200.0, 50.0, 400.0])
     stick = np.array([0.0, 0.6, 0.8])  # a stick translated parallel to itself
@@ -260,8 +260,8 @@ def _jitter_regions(folder: Path, shift_px: float, seed: int) -> None:
 
 @pytest.mark.slow
 def test_reference_line_residuals_far_above_sigma_warn(tmp_path: Path) -> None:
-    from gnomon.pipeline import ScanOptions, run_scan
-    from gnomon.validity import LINE_RESIDUAL_WARN_RATIO
+    from gnomon.geometry.validity import LINE_RESIDUAL_WARN_RATIO
+    from gnomon.runs.scan import ScanOptions, run_scan
 
     clean = run_scan(write_tiny_capture(tmp_path / "clean"), tmp_path / "s0", ScanOptions(progress=False, rrd=False))
     assert not any("residual" in w for w in clean.warnings), clean.warnings
@@ -287,8 +287,8 @@ def test_meaningless_reference_lines_are_an_error(tmp_path: Path, capsys) -> Non
 
 
 def test_share_of_the_sun_a_pole_hides() -> None:
-    from gnomon.validity import SUN_ANGULAR_RADIUS_RAD as rho
-    from gnomon.validity import occluded_fraction
+    from gnomon.geometry.validity import SUN_ANGULAR_RADIUS_RAD as rho
+    from gnomon.geometry.validity import occluded_fraction
 
     r = 0.05  # m
     umbra = r / rho  # ≈ 10.7 m: the pole as wide as the disc
@@ -305,9 +305,9 @@ def test_share_of_the_sun_a_pole_hides() -> None:
 def test_contrast_floor_from_the_noise_unless_given(tmp_path: Path) -> None:
     import tomllib
 
-    from gnomon import toml_io
-    from gnomon.pipeline import ScanOptions, run_scan
-    from gnomon.validity import MIN_CONTRAST_SIGMAS
+    from gnomon.capture.tracking import MIN_CONTRAST_SIGMAS
+    from gnomon.runs.scan import ScanOptions, run_scan
+    from gnomon.util import toml_io
 
     log = write_tiny_capture(tmp_path / "capture")
     rng = np.random.default_rng(4)
@@ -356,7 +356,7 @@ def _noise_cases():
 
 
 def test_noise_estimate_is_the_numpy_definition_to_the_last_bit() -> None:
-    from gnomon.uncertainty import _image_noise_dn_numpy
+    from gnomon.capture.noise import _image_noise_dn_numpy
 
     for a, b in _noise_cases():
         for clip, iterations in ((4.0, 6), (2.5, 12), (6.0, 1)):
@@ -392,7 +392,7 @@ def test_a_clipped_fit_step_is_numpys_float32_arithmetic() -> None:
 def test_the_noise_samples_are_the_numpy_ones(dtype) -> None:
     """The kernel's samples, centred levels and starting median and MAD against numpy's steps."""
     from gnomon import _kernel
-    from gnomon.uncertainty import _median_of_integers
+    from gnomon.capture.noise import _median_of_integers
 
     rng = np.random.default_rng(2)
     top = np.iinfo(dtype).max

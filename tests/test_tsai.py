@@ -1,4 +1,4 @@
-"""Tsai's camera model and two-stage calibration (gnomon.camera.TsaiCamera, gnomon.tsai).
+"""Tsai's camera model and two-stage calibration (gnomon.camera.models.TsaiCamera, gnomon.camera.tsai).
 
 Ground truth comes from the simulator's own Tsai model
 (gnomon.simulate.chessboard.TruthTsai), not from the code under test.
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from gnomon import calibration, tsai
-from gnomon.camera import Pose, TsaiCamera
+from gnomon.camera import calibration, tsai
+from gnomon.camera.models import Pose, TsaiCamera
 from gnomon.errors import GnomonError
 from gnomon.simulate.chessboard import TruthTsai, board_points, random_poses, synthetic_corners
 

@@ -1,4 +1,4 @@
-"""Tsai's two stages against a reference two-stage fit written here, independently of gnomon.tsai.
+"""Tsai's two stages against a reference two-stage fit written here, independently of gnomon.camera.tsai.
 
 The reference (:func:`reference_two_stage`) is our own code from the paper:
 stage 1 solves the radial-alignment constraint as a homogeneous system (its
@@ -26,7 +26,8 @@ import pytest
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from gnomon import cli, tsai
+from gnomon import cli
+from gnomon.camera import tsai
 from gnomon.errors import GnomonError
 from gnomon.simulate.chessboard import TruthTsai, board_points
 
@@ -274,7 +275,7 @@ def _write_points(path, world, pix):
 
 
 def test_cli_calibrates_points_and_writes_a_camera_file(tmp_path, capsys):
-    from gnomon.calibration import load_calibration_info, load_camera_file
+    from gnomon.camera.calibration import load_calibration_info, load_camera_file
 
     world, R, t = scene(60.0)
     pts = _write_points(tmp_path / "view.txt", world, observe(world, R, t, 0))

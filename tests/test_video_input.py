@@ -11,7 +11,7 @@ import cv2
 import pytest
 
 from conftest import encode_h264
-from gnomon import toml_io
+from gnomon.util import toml_io
 
 av = pytest.importorskip("av")  # PyAV: an H.264 encoder to make the test video (the `test` extra)
 
@@ -52,7 +52,7 @@ def test_video_capture_is_recorded_as_a_video(tiny_capture: Path) -> None:
     assert sorted(f for f, _ in refs) == list(range(len(frames)))
     assert all(t == f * 100_000_000 for f, t in refs)
     assert list(resolution) == [48, 36]  # the video's own size: the pinhole matches it
-    from gnomon.review import summarize
+    from gnomon.recording.review import summarize
 
     assert summarize(rrd).to_dict()["frames_stored"] == len(frames)
 
@@ -66,8 +66,8 @@ def test_a_variable_frame_rate_video_in_any_container_has_all_its_frames(tmp_pat
 
     import numpy as np
 
+    from gnomon.capture.frames import FrameSource
     from gnomon.cli import main
-    from gnomon.frames import FrameSource
 
     path, n = tmp_path / f"vfr{suffix}", 45
     out = av.open(str(path), "w", format=fmt)

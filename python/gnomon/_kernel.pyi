@@ -129,7 +129,7 @@ class FinishedPixels:
 
 class TemporalTracker:
     """Streaming per-pixel shadow tracker: one shadow event (the deepest dip) per
-    pixel; memory independent of the number of frames (see :mod:`gnomon.tracking`).
+    pixel; memory independent of the number of frames (see :mod:`gnomon.capture.tracking`).
 
     ``dtype``: the frames' dtype, ``"uint8"`` or ``"uint16"``. ``window``: half-width
     ``m`` (1..min(64, max_width)) of the sample windows kept around the enter and
@@ -165,7 +165,7 @@ class TemporalTracker:
         relative to the first frame's (required), otherwise None; ``levels`` (normalised
         tracker only): (height, width) float32 per-pixel factors (finite, > 0) on top of the
         gain, a sample stored as ``L(DN)/(gain·level)`` (a cloud frame levelled pixel by pixel,
-        :mod:`gnomon.cloud_levels`); a sample at the input's largest DN stays clipped."""
+        :mod:`gnomon.capture.cloud_levels`); a sample at the input's largest DN stays clipped."""
     def finish(self, min_contrast: float) -> ShadowTimes:
         """Per-pixel results for the frames seen so far (see :class:`ShadowTimes`); the tracker is unchanged.
 
@@ -243,7 +243,7 @@ def grid_faces(
     sigma_factor: float = 5.0,
 ) -> npt.NDArray[np.int32]:
     """Faces (F, 3) of the grid mesh of the valid pixels of (H, W) maps, vertices
-    numbered by the valid pixels' row-major rank: :func:`gnomon.meshing.grid_mesh`'s
+    numbered by the valid pixels' row-major rank: :func:`gnomon.geometry.meshing.grid_mesh`'s
     faces, element for element (float32 arithmetic)."""
 
 def clean_faces(
@@ -251,7 +251,7 @@ def clean_faces(
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64]]:
     """Drop edge-connected pieces of fewer than ``min_vertices`` vertices and give each
     fan meeting only at a vertex its own copy: the new faces (F', 3) and the input
-    vertex each new vertex copies (V',), as :func:`gnomon.meshing.remove_small_components`."""
+    vertex each new vertex copies (V',), as :func:`gnomon.geometry.meshing.remove_small_components`."""
 
 @overload
 def obj_text(
@@ -262,7 +262,7 @@ def obj_text(
     faces: npt.NDArray[np.int64],
     as_parts: Literal[False] = False,
 ) -> bytes:
-    """The ``v``/``vt``/``vn``/``f`` lines of :func:`gnomon.meshing.write_obj`, byte for byte."""
+    """The ``v``/``vt``/``vn``/``f`` lines of :func:`gnomon.outputs.obj.write_obj`, byte for byte."""
 
 @overload
 def obj_text(
@@ -283,7 +283,7 @@ def grid_normals(
     max_relative_jump: float,
 ) -> npt.NDArray[np.float32]:
     """Unit normals (H, W, 3) of the surface on the pixel grid, towards the camera, NaN off it:
-    :func:`gnomon.meshing.grid_normals` (its numpy definition), rows in parallel, f64 arithmetic."""
+    :func:`gnomon.geometry.meshing.grid_normals` (its numpy definition), rows in parallel, f64 arithmetic."""
 
 def ray_plane_angles(
     rays: npt.NDArray[np.float64],
@@ -293,7 +293,7 @@ def ray_plane_angles(
 ) -> npt.NDArray[np.float64]:
     """Angles (degrees) between the rays (H, W, 3) of the ``selected`` pixels (H, W) and their shadow
     planes (rows of ``planes`` (N, 4) interpolated at ``times`` (H, W)), row-major, NaN where a plane
-    is missing: :func:`gnomon.pipeline.ray_plane_angles`; chunks of pixels in parallel."""
+    is missing: :func:`gnomon.geometry.surface.ray_plane_angles`; chunks of pixels in parallel."""
 
 def depth_sigma(
     rays: npt.NDArray[np.float64],
@@ -310,7 +310,7 @@ def depth_sigma(
     ``times ± step`` (``rays`` (H, W, 3), ``planes`` (N, 4), ``min_cos`` as :func:`triangulate`)
     against ``depth`` (H, W; NaN = none, σZ NaN there), the pixel's ``sigma_t_pixel`` (H, W) and
     ``line_sigma`` (N,) interpolated at its time (``line_fill`` where that is not finite), in the
-    arithmetic of :func:`gnomon.uncertainty.depth_sigma`'s numpy definition; chunks of pixels in
+    arithmetic of :func:`gnomon.geometry.uncertainty.depth_sigma`'s numpy definition; chunks of pixels in
     parallel."""
 
 def completion_sigma(
@@ -326,7 +326,7 @@ def completion_sigma(
     """The σZ (H, W) float32 (world units, camera Z) a completed plane's error of ``sigma_rad`` (a turn
     about its completing line, ``line_point``/``line_direction`` (N, 3), NaN rows measured) adds at each
     pixel of ``rays`` (H, W, 3) with ``depth`` (H, W) at plane row ``times`` (H, W), ``planes`` (N, 4); 0
-    where none: :func:`gnomon.uncertainty.completion_depth_sigma`'s numpy definition, value for value;
+    where none: :func:`gnomon.geometry.uncertainty.completion_depth_sigma`'s numpy definition, value for value;
     chunks of pixels in parallel."""
 
 def isochrone_crossings(
@@ -336,7 +336,7 @@ def isochrone_crossings(
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Where the shadow-time map ``times`` (H, W) float32 (frames, NaN = none) crosses each integer frame
     ``0 … n_frames − 1``, sub-pixel: ``(frame, u, v)`` (K,) each, as
-    :func:`gnomon.reference_lines.isochrone_crossings`'s numpy definition gives them (the same values, in
+    :func:`gnomon.geometry.reference_lines.isochrone_crossings`'s numpy definition gives them (the same values, in
     its order); lines in parallel."""
 
 def frame_lines(
@@ -349,10 +349,10 @@ def frame_lines(
     min_extent_fraction: float,
 ) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
            npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
-    """Every frame's own shadow line on a reference plane (:func:`gnomon.reference_lines.lines_on_plane`'s
+    """Every frame's own shadow line on a reference plane (:func:`gnomon.geometry.reference_lines.lines_on_plane`'s
     fits): ``xy`` (K, 2) crossings in plane coordinates grouped by frame, frame t's being
     ``bounds[t]:bounds[t + 1]`` (``bounds`` (N + 1,)). Each frame with ``min_points`` crossings is fitted
-    (:func:`gnomon.fitting.fit_line_robust` with ``k``, ``iterations``); a fit that keeps ``min_points``
+    (:func:`gnomon.util.fitting.fit_line_robust` with ``k``, ``iterations``); a fit that keeps ``min_points``
     inliers and is a line (extent ≥ ``min_extent_to_rms`` × RMS) and reaches ``min_extent_fraction`` of
     the 90th percentile of those lines' extents is accepted, its direction turned within 90° of the
     previous accepted one. Returns ``(accepted (N,), centre (N, 2), direction (N, 2) unit, rms (N,),
@@ -365,17 +365,18 @@ def fuse_supported(
     max_relative_jump: float,
     min_support: int = 2,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.uint8]]:
-    """K depth estimates (K, H, W) with their σ fused by inverse variance (:func:`gnomon.fusion.fuse_depths`,
-    Gaussian weights), then the fused depths no ``min_support`` of 8 neighbours share dropped
-    (:func:`gnomon.triangulation.supported_by_neighbours`): (depth, σ) (H, W) NaN where not kept, and per
-    pixel 0 no estimate, 1 kept, 2 conflict, 3 unsupported; rows in parallel."""
+    """K depth estimates (K, H, W) with their σ fused by inverse variance
+    (:func:`gnomon.reconstruct.fusion.fuse_depths`, Gaussian weights), then the fused depths no
+    ``min_support`` of 8 neighbours share dropped
+    (:func:`gnomon.geometry.triangulation.supported_by_neighbours`): (depth, σ) (H, W) NaN where not
+    kept, and per pixel 0 no estimate, 1 kept, 2 conflict, 3 unsupported; rows in parallel."""
 
 def noise_samples(
     a: npt.NDArray[np.uint8] | npt.NDArray[np.uint16],
     b: npt.NDArray[np.uint8] | npt.NDArray[np.uint16],
     min_inside: int,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], float, float] | None:
-    """The pixels of two flat frames of one integer dtype that :func:`gnomon.uncertainty.image_noise_dn` fits
+    """The pixels of two flat frames of one integer dtype that :func:`gnomon.capture.noise.image_noise_dn` fits
     (both inside the range, neither 0 nor the maximum), in order: ``(diff, level, median, mad)``, ``diff = a − b``
     and ``level = ½(a + b) − mean`` in float32 as numpy computes them, the differences' median and MAD from their
     histogram; None when fewer than ``min_inside`` pixels are inside."""
@@ -388,14 +389,14 @@ def clipped_fit_step(
     limit: float,
     min_kept: int,
 ) -> tuple[int, float, float, float] | None:
-    """One step of :func:`gnomon.uncertainty.image_noise_dn`'s clipped fit of ``diff`` against ``level`` (N,):
+    """One step of :func:`gnomon.capture.noise.image_noise_dn`'s clipped fit of ``diff`` against ``level`` (N,):
     ``(kept, offset, gain, rms)`` of the pixels within ``limit`` of ``offset + gain·level`` (float32 values, as
     floats), each float32 operation and mean numpy's, in its order; None when fewer than ``min_kept`` are kept."""
 
 def lit_median(stack: npt.NDArray[np.uint8], lit: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
     """(H, W, 3): per pixel and channel the median of the ``stack`` (K, H, W, 3) samples it is ``lit`` (K, H, W)
     in (all K where it is lit in none), ``(s[(n−1)//2] + s[n//2] + 1) // 2`` of the n sorted samples, as
-    :meth:`gnomon.texture.LitColour.finish` defines it; chunks of pixels in parallel."""
+    :meth:`gnomon.capture.texture.LitColour.finish` defines it; chunks of pixels in parallel."""
 
 def world_points(
     rays: npt.NDArray[np.float64],
@@ -407,7 +408,7 @@ def world_points(
 ) -> npt.NDArray[np.float32]:
     """World-frame points (H, W, 3) of a camera depth map (H, W), NaN off ``valid``: each pixel's ray
     ``r`` at ``p = r·Z/r_z`` (rounded to float32), then ``Rᵀ·(p − t)`` (pose world → camera), as
-    :func:`gnomon.pipeline.build_surface` defines them; rows in parallel."""
+    :func:`gnomon.geometry.surface.build_surface` defines them; rows in parallel."""
 
 def ray_map(
     width: int,
@@ -422,11 +423,11 @@ def ray_map(
     (H, W) mask of the pixels solved: Newton's method from the pinhole point, a pixel solved once its
     ray reprojects within ``tol_px`` pixels of it on the unfolded branch (det J > 0), NaN rays where
     not within ``max_steps`` steps; rows in parallel, GIL released. As
-    :meth:`gnomon.camera.OpenCVCamera.ray_map` uses it."""
+    :meth:`gnomon.camera.models.OpenCVCamera.ray_map` uses it."""
 
 def stl_records(vertices: npt.NDArray[np.float32], faces: npt.NDArray[np.int32]) -> npt.NDArray[np.uint8]:
     """The (F·50,) bytes of a binary STL file's records (normal, corners, attribute 0; little-endian),
-    as :func:`gnomon.meshing.write_stl` writes them."""
+    as :func:`gnomon.outputs.stl.write_stl` writes them."""
 
 def retime_rows(
     times: npt.NDArray[np.float64],
@@ -440,7 +441,7 @@ def retime_rows(
            npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
            npt.NDArray[np.float64]]:
     """The rows of a shadow-time map oriented along the sweep (times rising to the right) re-timed
-    between its isochrones, as :func:`gnomon.retiming.retime_between_isochrones` defines it: the
+    between its isochrones, as :func:`gnomon.reconstruct.retiming.retime_between_isochrones` defines it: the
     times, the re-timed mask, and per re-timed pixel (row-major) its ``index`` value, the crossings'
     pixels (left, right), phases and rises, their gap and the pixel's fraction of it."""
 
@@ -451,7 +452,7 @@ def average_across(
     half: int,
     bend: float,
 ) -> npt.NDArray[np.float32]:
-    """(H, W) re-timed times averaged across the sweep, as :func:`gnomon.retiming.average_across_sweep`
+    """(H, W) re-timed times averaged across the sweep, as :func:`gnomon.reconstruct.retiming.average_across_sweep`
     defines it (f64 in numpy's order, rounded to f32): ``across_rows`` the pixels ``v ± d`` of a column,
     else ``u ± d`` of a row; rows in parallel, GIL released."""
 
@@ -466,5 +467,5 @@ def retime_rows_sigma(
     backstep: float,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_], npt.NDArray[np.float32]]:
     """:func:`retime_rows` and each pixel's time σ (``sigma``: every pixel's own σ in the caller's image,
-    flat, indexed by ``index``'s values), as :meth:`gnomon.retiming.RetimedTimes.sigma` defines it:
+    flat, indexed by ``index``'s values), as :meth:`gnomon.reconstruct.retiming.RetimedTimes.sigma` defines it:
     the times, the re-timed mask and the σ, each (H, W) and oriented as given."""

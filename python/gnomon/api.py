@@ -16,20 +16,22 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gnomon.errors import GnomonError
+from gnomon.simulate.scenes import SCENES, simulate
+
+if TYPE_CHECKING:
+    from gnomon.config.specs import FieldLog
 
 __all__ = ["SCENES", "Scan", "ScanMesh", "load_scan", "scan", "simulate"]
 
-#: Scenes :func:`simulate` (and `gnomon simulate`) can render.
-SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "facade_day", "chessboard")
 
 
 @dataclass
@@ -62,7 +64,7 @@ class Scan:
       ``normals`` (N, 3) float32 unit normals towards the camera, ``point_sigma`` (N,),
       ``pixels`` (N, 2) float32 (u, v).
 
-    ``coverage`` (H, W) uint8 class per pixel (:data:`gnomon.preview.COVERAGE_CLASSES`:
+    ``coverage`` (H, W) uint8 class per pixel (:data:`gnomon.outputs.images.COVERAGE_CLASSES`:
     no shadow seen, point, no depth, under-sampled point, cropped, ambiguous, edges
     disagree, no neighbour at its depth); ``coverage.npy`` in the scan folder (None
     from :func:`load_scan` of a folder written before it existed).
@@ -116,7 +118,7 @@ def _camera_arrays(report: dict) -> tuple[np.ndarray, np.ndarray | None, np.ndar
         K = np.array([[cam["fx"], 0.0, cam["cx"]], [0.0, cam["fy"], cam["cy"]], [0.0, 0.0, 1.0]])
         dist = np.asarray(cam.get("dist", [0.0] * 5), dtype=np.float64)
     else:  # Tsai: the pinhole part only
-        from gnomon.calibration import camera_from_table
+        from gnomon.camera.calibration import camera_from_table
 
         c = camera_from_table({k: v for k, v in cam.items() if k != "pose"}, "report.json: camera")
         K, dist = np.asarray(c.K, dtype=np.float64), None
@@ -138,26 +140,29 @@ def _from_result(result, folder: Path | None) -> Scan:
 
 @contextmanager
 def _tracker(field_log: str | os.PathLike, tiles: str | None, scheduler: str | None, workers: int | None,
-             frame_stride: int) -> Iterator[Any]:
-    """The pass over the frames: None (the in-process tracker), or a :class:`gnomon.tiles.TiledTracker`
-    on a Dask cluster (``scheduler``'s, or a local one of ``workers`` processes), closed afterwards."""
+             frame_stride: int) -> Iterator[tuple[FieldLog, Any]]:
+    """The field log, read once, and the pass over its frames: None (the in-process tracker), or a
+    :class:`gnomon.capture.tiles.TiledTracker` on a Dask cluster (``scheduler``'s, or a local one of
+    ``workers`` processes), closed afterwards."""
+    from gnomon.config.fieldlog import load_field_log
+
     if tiles is None:
         if scheduler or workers is not None:
             raise GnomonError("--scheduler and --workers are for tiled scans: add --tiles RxC")
-        yield None
+        yield load_field_log(Path(field_log)), None
         return
-    from gnomon.batch import close_client, connect_client
-    from gnomon.fieldlog import load_field_log
-    from gnomon.tiles import TiledTracker, TileGrid
+    from gnomon.capture.tiles import TiledTracker, TileGrid
+    from gnomon.runs.batch import close_client, connect_client
 
     grid = TileGrid.parse(tiles)
     if workers is not None and (workers < 1 or scheduler):
         raise GnomonError("--workers N (N >= 1) sizes a local cluster; not with --scheduler")
-    cam = load_field_log(Path(field_log)).camera
+    log = load_field_log(Path(field_log))
+    cam = log.camera
     grid.bounds((cam.height, cam.width))  # a bad tiling fails here, before any cluster starts
     client, cluster = connect_client(scheduler, workers)
     try:
-        yield TiledTracker(client, grid, frame_stride=frame_stride)
+        yield log, TiledTracker(client, grid, frame_stride=frame_stride)
     finally:
         close_client(client, cluster)
 
@@ -191,24 +196,24 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
     ``rrd=False``, ``--rrd PATH`` ``rrd_path``, ``--quiet`` ``progress=False``)
     and prints the summary; error messages name the command's options.
     """
-    from gnomon.fieldlog import load_field_log
-    from gnomon.pipeline import ScanOptions, run_scan
-    from gnomon.pipeline import scan as scan_in_memory
-    from gnomon.scan_setup import frame_source, resolve_scan
+    from gnomon.runs.scan import ScanOptions, prepare_scan, run_scan
+    from gnomon.runs.scan import scan as scan_in_memory
 
     frame_stride = max(1, int(frame_stride))
     if out is None and (rrd or rrd_path is not None or view):
         raise ValueError("a recording needs an output folder: give out=")
-    with _tracker(field_log, tiles, scheduler, workers, frame_stride) as track:
+    formats = _mesh_formats(mesh_formats)
+    if out is not None and (rrd is None or rrd or view):
+        from gnomon.recording.recorder import warm_rerun_import
+
+        warm_rerun_import()  # rerun (≈ 1 s) imported on a thread while the field log is read
+    with _tracker(field_log, tiles, scheduler, workers, frame_stride) as (log, track):
         if out is not None:
             opts = ScanOptions(rrd=True if rrd is None else bool(rrd), progress=progress,
                                rrd_path=None if rrd_path is None else Path(rrd_path), view=view,
-                               frame_stride=frame_stride, track=track,
-                               mesh_formats=_mesh_formats(mesh_formats))
-            return _from_result(run_scan(Path(field_log), Path(out), opts), Path(out))
-        log = load_field_log(Path(field_log))
-        source = frame_source(log)
-        setup = resolve_scan(log, source)
+                               frame_stride=frame_stride, track=track, mesh_formats=formats)
+            return _from_result(run_scan(log, Path(out), opts), Path(out))
+        setup, source = prepare_scan(log, formats)
         result = scan_in_memory(setup, source, None, progress=progress, frame_stride=frame_stride,
                                 **({} if track is None else {"track": track}))
         return _from_result(result, None)
@@ -216,13 +221,13 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
 
 def _mesh_formats(value: Any) -> tuple[str, ...] | None:
     """scan()'s ``mesh_formats`` checked (None: the field log's)."""
-    from gnomon.fieldlog import MESH_FORMATS, mesh_formats
+    from gnomon.outputs.formats import FORMATS, mesh_formats
 
     if value is None:
         return None
     chosen = mesh_formats(list(value) if isinstance(value, (list, tuple)) else value)
     if chosen is None:
-        raise GnomonError(f"mesh_formats: expected 'all' or formats among {', '.join(MESH_FORMATS)}, got {value!r}")
+        raise GnomonError(f"mesh_formats: expected 'all' or formats among {', '.join(FORMATS)}, got {value!r}")
     return chosen
 
 
@@ -247,7 +252,7 @@ def load_scan(folder: str | os.PathLike) -> Scan:
     """
     import cv2
 
-    from gnomon import ply
+    from gnomon.outputs import ply
 
     f = Path(folder)
     if not f.is_dir():
@@ -291,74 +296,3 @@ def load_scan(folder: str | os.PathLike) -> Scan:
                 points=pts["xyz"], colors=pts.get("rgb"), normals=pts.get("normals"),
                 point_sigma=pts.get("sigma"), pixels=pts.get("uv"), mesh=mesh, K=K, dist=dist, R=R, t=t,
                 units=units, report=report, warnings=list(report.get("warnings", [])), folder=f)
-
-
-def _scene_config(scene: str, options: dict[str, Any]) -> tuple[Any, Any]:
-    """``(config, render)`` of a shadow-sweep scene from its options (the configuration's fields)."""
-    make: Callable[..., Any]
-    render: Callable[..., Any]
-    if scene in ("desk_lamp", "desk_lamp_right"):
-        from gnomon.simulate import DeskLampConfig, simulate_desk_lamp
-
-        if "lamp_side" in options:
-            raise GnomonError(f"simulate {scene}: lamp_side is the scene's (desk_lamp: left, desk_lamp_right: right)")
-        make, render = DeskLampConfig, simulate_desk_lamp
-        options = {**options, "lamp_side": "left" if scene == "desk_lamp" else "right"}
-    elif scene == "two_plane":
-        from gnomon.simulate import TwoPlaneConfig, simulate_two_plane
-
-        make, render = TwoPlaneConfig, simulate_two_plane
-    else:
-        from gnomon.simulate.facade_sun import FacadeSunConfig, simulate_facade_sun
-
-        make = FacadeSunConfig.day if scene == "facade_day" else FacadeSunConfig
-        render = simulate_facade_sun
-    try:
-        config = make(**options)
-    except TypeError as exc:
-        raise GnomonError(f"simulate {scene}: {exc}") from None
-    config.validate()
-    return config, render
-
-
-def simulate(scene: str, out: str | os.PathLike, *, progress: bool = False, **options: Any) -> Path:
-    """Render a synthetic capture with exact ground truth into ``out``; return its field log's path.
-
-    ``scene`` one of :data:`SCENES` (`gnomon simulate --help` describes them).
-    ``options`` are the scene's settings, the fields of its configuration:
-    :class:`gnomon.simulate.DeskLampConfig` (``desk_lamp``, ``desk_lamp_right``),
-    :class:`~gnomon.simulate.TwoPlaneConfig` (``two_plane``; ``markers="aruco"``
-    for ArUco markers), :class:`~gnomon.simulate.FacadeSunConfig` (``facade_sun``;
-    ``facade_day`` starts from ``FacadeSunConfig.day()``), e.g. ``width=400,
-    height=300, frames=120, seed=1``; a setting left out keeps the scene's
-    default. The folder gets ``frames/``, ``ground_truth.npz``,
-    ``ground_truth.json`` and, last, ``field_log.toml`` (desk_lamp scenes also
-    pencil photos and ``pencil_log.toml``). ``chessboard`` (options ``width``,
-    ``height``, default 1280x960, and ``seed``) writes 12 views of a 9x6 board
-    with 25 mm squares and the true camera instead, and returns the folder.
-    ``progress`` a progress bar on stderr. `gnomon simulate` calls this
-    function with its options; error messages name the command's options.
-    """
-    from gnomon import validate
-    from gnomon.progress import Progress
-    from gnomon.publish import check_output_folder
-
-    if scene not in SCENES:
-        raise GnomonError(f"simulate: unknown scene {scene!r} (one of {', '.join(SCENES)})")
-    check_output_folder(out)
-    if "seed" in options:
-        validate.number(options["seed"], "--seed", minimum=0, maximum=2**32 - 1, integer=True)
-    if scene == "chessboard":
-        from gnomon.simulate.chessboard import default_truth_camera, write_chessboard_views
-
-        options = dict(options)
-        width, height, seed = options.pop("width", 1280), options.pop("height", 960), options.pop("seed", 0)
-        if options:
-            raise GnomonError(f"simulate chessboard: unknown options {sorted(options)} (width, height, seed)")
-        write_chessboard_views(Path(out), camera=default_truth_camera(width, height), cols=9, rows=6, square=25.0,
-                               n_views=12, seed=seed)
-        return Path(out)
-    config, render = _scene_config(scene, options)
-    with Progress("simulate", config.frames, enabled=progress) as bar:
-        result = render(out, config, progress=lambda done, total: bar.update(done))
-    return Path(result.field_log)

@@ -25,9 +25,10 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from gnomon import __version__, _kernel, interrupts
+from gnomon import __version__, _kernel
 from gnomon.commands import COMMANDS
 from gnomon.errors import GnomonError
+from gnomon.util import interrupts
 
 #: ``OSError`` numbers that describe the environment (disk, permissions, limits), not a bug.
 ENVIRONMENT_ERRNOS = frozenset(
@@ -195,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
     # rerun's writer thread logs its own errors on stderr; ours are one line.
     os.environ.setdefault("RUST_LOG", "off")
     # So does FFmpeg's decoder inside OpenCV ("Get current frame error" for a codec it cannot decode); a video
-    # it cannot read is named by our own line (gnomon.frames). OPENCV_FFMPEG_LOGLEVEL in the environment wins.
+    # it cannot read is named by our own line (gnomon.capture.frames). OPENCV_FFMPEG_LOGLEVEL in the environment wins.
     os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
     # And OpenCV's own warnings ("can't open camera by index"): a camera or stream it cannot open is ours too.
     os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from gnomon.commands import COMMANDS
-from gnomon.recording import add_recording_arguments
+from gnomon.recording.recorder import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -44,8 +44,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon.batch import plan_batch, run_batch, summary_markdown, write_summary
     from gnomon.errors import GnomonError
+    from gnomon.runs.batch import plan_batch, run_batch, summary_markdown, write_summary
 
     if args.workers is not None and args.workers < 1:
         raise GnomonError(f"--workers {args.workers}: expected at least 1")

@@ -2,7 +2,7 @@
 reference implementation of the same algorithm, and its peak memory for two
 sequence lengths (it must not grow with the number of frames).
 
-See :mod:`gnomon.bench` for how the figures are taken.
+See :mod:`gnomon.runs.bench` for how the figures are taken.
 """
 
 from __future__ import annotations
@@ -10,11 +10,11 @@ from __future__ import annotations
 import argparse
 import json
 
-from gnomon.atomic import write_text
-from gnomon.bench import format_table, run_bench
 from gnomon.commands import COMMANDS
-from gnomon.commands.scan import _mesh_formats
+from gnomon.commands.scan import mesh_formats_option
 from gnomon.errors import GnomonError
+from gnomon.runs.bench import format_table, run_bench
+from gnomon.util.atomic import write_text
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -37,7 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="instead: time decoding this capture's frames alone, decoding and tracking alone, then its "
                    "whole scan")
     p.add_argument("--scan-out", metavar="DIR", help="output folder of the --scan run (default: a temporary one)")
-    p.add_argument("--mesh-formats", type=_mesh_formats, default=None, metavar="LIST",
+    p.add_argument("--mesh-formats", type=mesh_formats_option, default=None, metavar="LIST",
                    help="with --scan: the mesh's files, as gnomon scan --mesh-formats ('all': every format)")
     p.add_argument("--no-memory", action="store_true", help="skip the peak-memory subprocesses")
     p.add_argument("--json", metavar="PATH", help="also write the figures as JSON to PATH")
@@ -50,12 +50,12 @@ def run(args: argparse.Namespace) -> int:
     for name in ("frames", "numpy_frames", "width", "height", "window", "max_width"):
         if getattr(args, name) < 1:
             raise GnomonError(f"--{name.replace('_', '-')} must be ≥ 1, got {getattr(args, name)}")
-    from gnomon.validate import MAX_WINDOW
+    from gnomon.util.validate import MAX_WINDOW
 
     if args.window > MAX_WINDOW:
         raise GnomonError(f"--window must be ≤ {MAX_WINDOW}, got {args.window}")
     if args.json:
-        from gnomon.publish import check_output_file
+        from gnomon.util.validate import check_output_file
 
         check_output_file(args.json, "--json")
     memory_frames = () if args.no_memory else tuple(sorted({100, args.frames}))
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
 def _run_scan(args: argparse.Namespace) -> int:
     import tempfile
 
-    from gnomon.bench import format_scan_table, run_scan_bench
+    from gnomon.runs.bench import format_scan_table, run_scan_bench
 
     with tempfile.TemporaryDirectory(prefix="gnomon-bench-") as tmp:
         result = run_scan_bench(args.scan, args.scan_out or tmp, args.mesh_formats)

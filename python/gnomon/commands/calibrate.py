@@ -22,7 +22,7 @@ from pathlib import Path
 
 from gnomon.commands import COMMANDS
 from gnomon.errors import GnomonError
-from gnomon.recording import add_recording_arguments
+from gnomon.recording.recorder import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -144,7 +144,7 @@ def _pitch(text: str) -> tuple[float, float]:
 
 def _degenerate_camera(cal) -> str | None:
     """Why a calibration result must not replace a camera file without --force, or None."""
-    from gnomon import validate
+    from gnomon.util import validate
 
     if not math.isfinite(cal.rms_px) or cal.rms_px > 5.0:
         return f"reprojection RMS {cal.rms_px:.3g} px"
@@ -164,9 +164,9 @@ def _record_calibration(cal, path: Path) -> None:
     calibrated camera and that view's pose, the per-view RMS, and the warnings."""
     import numpy as np
 
-    from gnomon import calibration
-    from gnomon.camera import Pose
-    from gnomon.recording import ScanRecording
+    from gnomon.camera import calibration
+    from gnomon.camera.models import Pose
+    from gnomon.recording.recorder import ScanRecording
 
     cam = cal.camera
     board = calibration.board_points(cal.board[0], cal.board[1], cal.square)
@@ -183,8 +183,9 @@ def _record_calibration(cal, path: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import calibration, publish, validate
-    from gnomon.progress import Progress
+    from gnomon.camera import calibration
+    from gnomon.util import validate
+    from gnomon.util.progress import Progress
 
     try:
         board = calibration.parse_board(args.board)
@@ -196,9 +197,9 @@ def run(args: argparse.Namespace) -> int:
     validate.number(args.square, "--square")  # finite; the sign is calibrate_images' to check
     validate.number(args.reject, "--reject", minimum=1.0)
     validate.number(args.sx, "--sx", positive=True)
-    publish.check_output_file(args.out, "--out")
+    validate.check_output_file(args.out, "--out")
     if args.rrd and not args.no_rrd:
-        publish.check_output_file(args.rrd, "--rrd")
+        validate.check_output_file(args.rrd, "--rrd")
     pitch = None if args.pixel_pitch is None else _pitch(args.pixel_pitch)
     if args.model == "zhang" and (pitch is not None or args.full or args.sx != 1.0):
         raise GnomonError("--pixel-pitch, --sx and --full apply to --model tsai only")
@@ -304,8 +305,8 @@ def read_points_file(path: Path):
 
 
 def run_points(args: argparse.Namespace) -> int:
-    from gnomon import calibration, toml_io, tsai
-
+    from gnomon.camera import calibration, tsai
+    from gnomon.util import toml_io
     width, height = _size(args.size)
     dx, dy = _pitch(args.pixel_pitch)
     if not args.sx > 0:
@@ -335,7 +336,7 @@ def run_points(args: argparse.Namespace) -> int:
 
 def run_lamp(args: argparse.Namespace) -> int:
     try:
-        from gnomon.light import calibrate_lamp_cli
+        from gnomon.runs.calibrate_lamp import calibrate_lamp_cli
     except ModuleNotFoundError as exc:
         if exc.name not in ("gnomon.light",):
             raise
@@ -347,11 +348,11 @@ def run_lamp(args: argparse.Namespace) -> int:
 
 
 def run_focal(args: argparse.Namespace) -> int:
-    from gnomon import toml_io
-    from gnomon.calibration import camera_to_table
-    from gnomon.camera import OpenCVCamera
-    from gnomon.fieldlog import load_field_log
-    from gnomon.scan_setup import fit_focal, frame_source, marked_points
+    from gnomon.camera.calibration import camera_to_table
+    from gnomon.camera.models import OpenCVCamera
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.config.setup import fit_focal, frame_source, marked_points
+    from gnomon.util import toml_io
 
     log = load_field_log(args.field_log)
     if not isinstance(log.camera, OpenCVCamera):

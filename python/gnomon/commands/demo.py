@@ -32,9 +32,9 @@ def demo_scene(name: str, simulate, cfg, out: Path, *, progress: bool, what: str
     errors over all output points) are added to the scan's report.json as
     ``accuracy``.
     """
-    from gnomon import atomic
-    from gnomon.accuracy import depth_accuracy
-    from gnomon.pipeline import ScanOptions, run_scan
+    from gnomon.runs.accuracy import depth_accuracy
+    from gnomon.runs.scan import ScanOptions, run_scan
+    from gnomon.util import atomic
 
     capture = out / name / "capture"
     print(f"simulating {name} ({cfg.width}x{cfg.height}, {cfg.frames} {what}) -> {capture}")
@@ -78,8 +78,8 @@ def run_facade_sun(out: Path, *, small: bool, progress: bool) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import atomic
-    from gnomon.publish import check_output_folder
+    from gnomon.util import atomic
+    from gnomon.util.validate import check_output_folder
 
     out: Path = check_output_folder(args.out)
     results = run_desk_lamp(out, small=args.small, progress=not args.quiet)

@@ -28,8 +28,8 @@ import re
 from collections import Counter
 from pathlib import Path
 
+from gnomon.capture.frames import VIDEO_SUFFIXES
 from gnomon.commands import COMMANDS
-from gnomon.fieldlog import VIDEO_SUFFIXES
 
 LIGHTS = ("two-plane", "lamp", "sun")
 
@@ -256,7 +256,7 @@ def _sun_times(files: list[Path], video: bool, fps: float | None) -> str:
     """The [capture] lines saying where each frame's time comes from."""
     if not video:
         from gnomon.errors import GnomonError
-        from gnomon.timestamps import frame_times
+        from gnomon.light.timestamps import frame_times
 
         try:
             frame_times(files[:1], "exif", site_tz="UTC")
@@ -278,11 +278,10 @@ def _sun_times(files: list[Path], video: bool, fps: float | None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import atomic
+    from gnomon.capture.frames import FrameSource, expand_glob_argument, natural_key, video_fps
     from gnomon.errors import GnomonError
-    from gnomon.frames import FrameSource, expand_glob_argument, natural_key, video_fps
-    from gnomon.publish import check_output_file
-    from gnomon.validate import input_file
+    from gnomon.util import atomic
+    from gnomon.util.validate import check_output_file, input_file
 
     files = sorted((f for a in args.frames for f in (expand_glob_argument(a, "frame") or (a,))), key=natural_key)
     for f in files:
@@ -330,7 +329,7 @@ def run(args: argparse.Namespace) -> int:
     if args.camera is not None:
         if not args.camera.is_file():
             raise GnomonError(f"{args.camera}: camera file not found")
-        from gnomon.calibration import load_camera_file, other_aspect
+        from gnomon.camera.calibration import load_camera_file, other_aspect
 
         camera = f'file = "{_relative(args.camera, base)}"  # from `gnomon calibrate camera`\n'
         cal = load_camera_file(args.camera)

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from gnomon.commands import COMMANDS
-from gnomon.recording import add_recording_arguments
+from gnomon.recording.recorder import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -42,9 +42,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import validate
-    from gnomon.live import LiveOptions, run_live
-    from gnomon.recording import display_available
+    from gnomon.recording.recorder import display_available
+    from gnomon.runs.live import LiveOptions, run_live
+    from gnomon.util import validate
 
     validate.number(args.recover, "--recover", minimum=1, maximum=255, integer=True)
     validate.number(args.max_frames, "--max-frames", minimum=2, maximum=10**9, integer=True)

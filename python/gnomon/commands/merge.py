@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from gnomon.commands import COMMANDS
-from gnomon.recording import add_recording_arguments
+from gnomon.recording.recorder import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -26,13 +26,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import publish, validate
     from gnomon.errors import GnomonError
-    from gnomon.merge import merge_scans
-    from gnomon.pipeline import ScanOptions
+    from gnomon.runs.merge import merge_scans
+    from gnomon.runs.scan import ScanOptions
+    from gnomon.util import validate
 
     beta = validate.number(args.beta, "--beta", positive=True)
-    out = publish.check_output_folder(args.out)
+    out = validate.check_output_folder(args.out)
     for name, scan in (("SCAN_A", args.scan_a), ("SCAN_B", args.scan_b)):
         folder = validate.input_folder(scan, f"{name} (a scan output folder)").resolve()
         if out == folder or folder in out.parents or out in folder.parents:

@@ -2,7 +2,7 @@
 
 Writes a PNG of the capture's first frame with each plane's regions, each
 marker as found with its residual, each plane's grid reprojected, the line
-where the planes meet and the pencil's pixels (see :mod:`gnomon.check`).
+where the planes meet and the pencil's pixels (see :mod:`gnomon.runs.setup_preview`).
 A wrong number in the field log shows at a glance: a grid that misses the
 marks, a residual of pixels instead of tenths, a region over an object.
 """
@@ -33,12 +33,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import cv2
 
-    from gnomon import atomic, toml_io
-    from gnomon.check import MarkerMark, PlaneDrawing, setup_preview
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.config.setup import first_frame, frame_source, plane_region_mask, resolve_reference_planes
     from gnomon.errors import FieldLogError
-    from gnomon.fieldlog import load_field_log
-    from gnomon.publish import check_output_file
-    from gnomon.scan_setup import first_frame, frame_source, resolve_reference_planes
+    from gnomon.runs.setup_preview import MarkerMark, PlaneDrawing, setup_preview
+    from gnomon.util import atomic, toml_io
+    from gnomon.util.validate import check_output_file
 
     if args.out is not None:
         check_output_file(args.out, "--out")
@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
             if plane.chessboard is not None and plane.square is not None:  # the grid over the board's squares
                 (cols, rows), sq = plane.chessboard, plane.square
                 extent = (-sq, cols * sq, -sq, rows * sq)
-        mask = plane.region_mask(shape) if plane.has_regions else None
+        mask = plane_region_mask(plane, shape) if plane.has_regions else None
         drawings.append(PlaneDrawing(plane.name, plane.point, x_axis, np.cross(plane.normal, x_axis), plane.normal,
                                      mask, marks, extent))
     pencil = []

@@ -2,7 +2,7 @@
 
 Tracks the shadow once, measures every plane with markers (or a chessboard),
 and keeps each plane's pixels whose shadow times its own shadow lines predict
-(:mod:`gnomon.regions`). Writes, into ``--out`` (default ``regions/`` beside
+(:mod:`gnomon.runs.regions`). Writes, into ``--out`` (default ``regions/`` beside
 the field log): one mask image per plane (``<plane>_mask.png``), a field-log
 snippet (``regions.toml``: the ``mask`` key of each ``[[planes]]``) and a
 drawing (``regions.png``: the first frame with the regions tinted).
@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _png(path: Path, image: np.ndarray) -> None:
     import cv2
 
-    from gnomon import atomic
+    from gnomon.util import atomic
 
     ok, data = cv2.imencode(".png", image)
     if not ok:  # pragma: no cover - OpenCV encodes any uint8 image
@@ -69,15 +69,21 @@ def draw_regions(first: np.ndarray, masks: list[np.ndarray]) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import atomic, validate
+    from gnomon.capture.tracking import track_source, track_widening
+    from gnomon.config.fieldlog import load_field_log
+    from gnomon.config.setup import (
+        dip_width_policy,
+        frame_source,
+        plane_region_mask,
+        resolve_reference_planes,
+        tracker_settings,
+    )
     from gnomon.errors import FieldLogError
-    from gnomon.fieldlog import load_field_log
-    from gnomon.pipeline import edge_time_maps
-    from gnomon.publish import check_output_folder
-    from gnomon.reference_lines import PlaneInCamera
-    from gnomon.regions import hull_mask, propose_regions
-    from gnomon.scan_setup import dip_width_policy, frame_source, resolve_reference_planes, tracker_settings
-    from gnomon.tracking import track_source, track_widening
+    from gnomon.geometry.reference_lines import PlaneInCamera
+    from gnomon.reconstruct.edges import edge_time_maps
+    from gnomon.runs.regions import hull_mask, propose_regions
+    from gnomon.util import atomic, validate
+    from gnomon.util.validate import check_output_folder
 
     if args.out is not None:
         check_output_folder(args.out)
@@ -95,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     seeds = []
     for plane in log.planes:
         if plane.has_regions:
-            seeds.append(plane.region_mask(shape))
+            seeds.append(plane_region_mask(plane, shape))
         elif plane.name in measured and len(measured[plane.name]) >= 3:
             seeds.append(hull_mask(shape, measured[plane.name], shrink=SEED_GROWTH))
         else:
@@ -107,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     for note in notes:
         print(f"warning: {note}")
     # The scan's own times: a compressed video's block times interpolated between their centres, a fast
-    # sweep's staircase re-timed between its isochrones (gnomon.pipeline.edge_time_maps).
+    # sweep's staircase re-timed between its isochrones (gnomon.reconstruct.edges.edge_time_maps).
     maps = edge_time_maps(tracked, log.scan.edge)
     planes = [PlaneInCamera.from_world(p.point, p.normal, log.pose) for p in log.planes]
     names = [p.name for p in log.planes]

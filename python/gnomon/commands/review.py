@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from gnomon.commands import COMMANDS
-from gnomon.recording import ENTITY
+from gnomon.recording.recorder import ENTITY
 
 
 def register(subparsers) -> None:
@@ -45,13 +45,13 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import publish, review, validate
-
+    from gnomon.recording import review
+    from gnomon.util import validate
     validate.input_file(args.recording, "recording")
     if args.compare is not None:
         validate.input_file(args.compare, "recording")
     if args.export is not None:
-        publish.check_output_file(args.export, "--export")
+        validate.check_output_file(args.export, "--export")
     summary = review.summarize(args.recording)
     result: dict = {"summary": summary.to_dict()}
     messages = []

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from gnomon.commands import COMMANDS
-from gnomon.recording import add_recording_arguments
+from gnomon.recording.recorder import add_recording_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("field_log", type=Path, help="the capture's field log (TOML)")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: scan/ beside the field log)")
-    p.add_argument("--mesh-formats", type=_mesh_formats, default=None, metavar="LIST",
+    p.add_argument("--mesh-formats", type=mesh_formats_option, default=None, metavar="LIST",
                    help="the mesh's files: 'all', or formats joined by commas among ply (always), obj (with "
                    "its .mtl and .png texture) and stl; default: the field log's [output] mesh_formats, "
                    "else ply only")
@@ -37,13 +37,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _mesh_formats(value: str) -> tuple[str, ...]:
+def mesh_formats_option(value: str) -> tuple[str, ...]:
     """--mesh-formats: the formats it names (argparse's error otherwise)."""
-    from gnomon.fieldlog import MESH_FORMATS, mesh_formats
+    from gnomon.outputs.formats import FORMATS, mesh_formats
 
     chosen = mesh_formats(value)
     if chosen is None:
-        raise argparse.ArgumentTypeError(f"expected 'all' or formats among {', '.join(MESH_FORMATS)}, got {value!r}")
+        raise argparse.ArgumentTypeError(f"expected 'all' or formats among {', '.join(FORMATS)}, got {value!r}")
     return chosen
 
 

@@ -88,9 +88,10 @@ def _options(args: argparse.Namespace) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import api, validate
+    from gnomon import api
 
     # finite numbers here; their ranges are the scene configuration's to check
+    from gnomon.util import validate
     for name in ("noise", "blur", "gamma", "lamp_radius", "stick_radius", "pole_radius"):
         validate.number(getattr(args, name), "--" + name.replace("_", "-"))
     t0 = time.perf_counter()

@@ -2,7 +2,7 @@
 
 Prints the apparent (refracted) solar position by NREL SPA (pvlib) and the
 unit vector towards the sun in East-North-Up — and in the world frame when
-the heading of the world x axis is given (see :mod:`gnomon.sun` for the
+the heading of the world x axis is given (see :mod:`gnomon.light.ephemeris` for the
 conventions).
 """
 
@@ -13,9 +13,9 @@ import argparse
 import numpy as np
 
 from gnomon.commands import COMMANDS
-from gnomon.sun import Site, SiteError, enu_to_world, parse_time, sun_position
+from gnomon.light.ephemeris import Site, SiteError, enu_to_world, parse_time, sun_position
 
-#: The option of each :class:`gnomon.sun.Site` field, for messages.
+#: The option of each :class:`gnomon.light.ephemeris.Site` field, for messages.
 OPTIONS = {"latitude_deg": "--lat", "longitude_deg": "--lon", "altitude_m": "--alt", "pressure_pa": "--pressure",
            "temperature_c": "--temperature", "timezone": "--tz"}
 
@@ -58,7 +58,7 @@ def _vec(v: np.ndarray) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from gnomon import validate
+    from gnomon.util import validate
 
     validate.number(args.lat, "--lat")  # finite; the range is Site's to check
     validate.number(args.lon, "--lon")

@@ -26,17 +26,21 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from gnomon.camera import CameraModel
-from gnomon.reference_lines import ReferenceLines, ReferencePlane, measure_reference_lines
-from gnomon.tracking import ShadowTimes, TrackedSequence
-from gnomon.uncertainty import line_time_sigma
+from gnomon.camera.models import CameraModel
+from gnomon.capture.tracking import ShadowTimes, TrackedSequence
+from gnomon.geometry.reference_lines import ReferenceLines, ReferencePlane, measure_reference_lines
+from gnomon.geometry.uncertainty import line_time_sigma
 
-__all__ = ["EdgePlanes", "EdgeTimes", "LightModel", "PlaneCompletion", "Recorder", "ReferenceGeometry", "Screening",
-           "skipped_frames_warning"]
+__all__ = ["TIMESTAMP_MODES", "EdgePlanes", "EdgeTimes", "LightModel", "PlaneCompletion", "Recorder",
+           "ReferenceGeometry", "Screening", "skipped_frames_warning"]
+
+#: How each frame's time is known (``[capture] timestamps`` in the field log, read by
+#: :mod:`gnomon.light.timestamps`): here, where the field log's parser finds them without loading pandas.
+TIMESTAMP_MODES = ("filename", "exif", "start+fps")
 
 
 class Recorder(Protocol):
-    """The part of :class:`gnomon.recording.ScanRecording` a light model uses."""
+    """The part of :class:`gnomon.recording.recorder.ScanRecording` a light model uses."""
 
     def log_lamp(self, position_world: np.ndarray, sigma: float | None = None) -> None: ...
 
@@ -86,7 +90,7 @@ class PlaneCompletion:
 
     ``line_point``, ``line_direction`` (N, 3): each completed row's line (unit direction; NaN rows:
     measured); ``sigma_rad``: the completion's 1σ angle, from its measured median error on the
-    two-plane rows (:func:`gnomon.shadow_planes.completion_light`) as a Gaussian's (median/0.6745).
+    two-plane rows (:func:`gnomon.light.shadow_planes.completion_light`) as a Gaussian's (median/0.6745).
     """
 
     line_point: np.ndarray
@@ -138,7 +142,7 @@ class LightModel:
     # True when :meth:`choose_dips` needs the tracker's second candidate dips (``tracked.second``).
     chooses_dips: ClassVar[bool] = False
     # True when the planes come from the shadow lines on the reference planes (:meth:`planes_from_lines`,
-    # whatever :meth:`shadow_planes` adds to them): the live view (:mod:`gnomon.live`) then measures the
+    # whatever :meth:`shadow_planes` adds to them): the live view (:mod:`gnomon.runs.live`) then measures the
     # lines and planes as the frames come; False for a light whose planes need the whole capture.
     planes_from_reference_lines: ClassVar[bool] = True
 
@@ -190,7 +194,7 @@ class LightModel:
         """The triangulated points (H, W, 3, camera frame) this light's shadow can explain; all by default.
         ``relative_depth`` (H, W): each dip's ``(Imax − Imin)/Imax`` in linear irradiance, and its 1σ
         from the image noise; ``levelled``: the tracker frames of illumination dips it saw levelled
-        pixel by pixel (:attr:`gnomon.tracking.TrackedSequence.levelled_frames`)."""
+        pixel by pixel (:attr:`gnomon.capture.tracking.TrackedSequence.levelled_frames`)."""
         return Screening()
 
     def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:

@@ -1,7 +1,7 @@
 """A point lamp at a known position (measured with ``gnomon calibrate lamp``).
 
 Each frame's shadow plane passes through the lamp centre S and the shadow
-line(s) on the reference planes (:func:`gnomon.shadow_planes.lamp_shadow_planes`).
+line(s) on the reference planes (:func:`gnomon.light.shadow_planes.lamp_shadow_planes`).
 """
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 
-from gnomon.camera import Pose
+from gnomon.camera.models import Pose
+from gnomon.geometry.reference_lines import ReferenceLines
 from gnomon.light.base import LightModel, Recorder
-from gnomon.reference_lines import ReferenceLines
-from gnomon.shadow_planes import lamp_shadow_planes
+from gnomon.light.shadow_planes import lamp_shadow_planes
 
 __all__ = ["LampLight"]
 

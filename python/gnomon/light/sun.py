@@ -1,9 +1,9 @@
 """The sun outdoors: frame times, the world frame's heading, sun shadow planes.
 
-* **Time**: every frame's UTC time (:mod:`gnomon.timestamps`); sub-frame
+* **Time**: every frame's UTC time (:mod:`gnomon.light.timestamps`); sub-frame
   shadow times map to UTC by interpolation between frames (:class:`SunTimeline`).
 * **Heading**: the world frame is tied to East-North-Up by the compass heading
-  of its x axis (world z up; :func:`gnomon.sun.R_world_from_enu`), given in
+  of its x axis (world z up; :func:`gnomon.light.ephemeris.R_world_from_enu`), given in
   ``[site] heading_deg`` or measured from a vertical gnomon: the shadow of a
   vertical pole on the ground points away from the sun's azimuth, whatever
   the elevation, so its direction in the world frame against the sun's
@@ -11,7 +11,7 @@
 * **Night**: frames with the sun at or below the horizon are not tracked.
 * **Planes**: without a pole (:class:`SunWithLines`) each frame's plane
   contains the shadow line on a reference plane and the direction towards the
-  sun (:func:`gnomon.shadow_planes.sun_shadow_planes`). With a ``[pole]`` of
+  sun (:func:`gnomon.light.shadow_planes.sun_shadow_planes`). With a ``[pole]`` of
   known axis (:class:`SunWithPole`) the shadow's centre plane contains the
   axis and the sun direction, so no reference plane is needed where the shadow
   falls; the sun direction is evaluated at ``SUBSTEPS`` steps per frame, so
@@ -27,27 +27,13 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from gnomon.camera import CameraModel, Pose
-from gnomon.dip_choice import choose_dips
+from gnomon.camera.models import CameraModel, Pose
+from gnomon.capture.tracking import ShadowTimes, TrackedSequence, linear
 from gnomon.errors import GnomonError
-from gnomon.georef import georeference_report
-from gnomon.light.base import (
-    EdgePlanes,
-    EdgeTimes,
-    LightModel,
-    Recorder,
-    ReferenceGeometry,
-    Screening,
-    skipped_frames_warning,
-)
-from gnomon.reference_lines import PlaneInCamera, ReferenceLines, ReferencePlane
-from gnomon.shadow_planes import sun_shadow_planes
-from gnomon.sun import Site, enu_to_world, sun_direction_enu, sun_position
-from gnomon.timestamps import interpolate_times
-from gnomon.tracking import ShadowTimes, TrackedSequence, linear
-from gnomon.triangulation import triangulate
-from gnomon.uncertainty import MIN_FRAMES_PER_TRANSITION, linear_noise_at_threshold
-from gnomon.validity import (
+from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines, ReferencePlane
+from gnomon.geometry.triangulation import triangulate
+from gnomon.geometry.uncertainty import MIN_FRAMES_PER_TRANSITION, linear_noise_at_threshold
+from gnomon.geometry.validity import (
     contrast_above_noise,
     contrast_like_neighbours,
     dip_in_frames,
@@ -58,6 +44,20 @@ from gnomon.validity import (
     not_in_global_event,
     pole_shadow_consistency,
 )
+from gnomon.light.base import (
+    EdgePlanes,
+    EdgeTimes,
+    LightModel,
+    Recorder,
+    ReferenceGeometry,
+    Screening,
+    skipped_frames_warning,
+)
+from gnomon.light.dip_choice import choose_dips
+from gnomon.light.ephemeris import Site, enu_to_world, sun_direction_enu, sun_position
+from gnomon.light.georef import georeference_report
+from gnomon.light.shadow_planes import sun_shadow_planes
+from gnomon.light.timestamps import interpolate_times
 
 __all__ = [
     "SUBSTEPS", "HeadingEstimate", "SunClock", "SunTimeline", "SunWithLines", "SunWithPole", "below_horizon",
@@ -316,7 +316,7 @@ class SunWithPole(SunLight):
                     max_jump: float, min_contrast_dn: float) -> list[str]:
         """Between each pixel's two candidate dips, the pole's: each candidate's centre triangulated on
         the pole's planes, kept where the pole's shadow can explain it, and chosen by the surfaces the
-        candidates make against the reference planes (:func:`gnomon.dip_choice.choose_dips`) when the
+        candidates make against the reference planes (:func:`gnomon.light.dip_choice.choose_dips`) when the
         regions show another moving shadow; otherwise the tracker's verdict stands."""
         second, times = tracked.second, tracked.times
         if second is None:

@@ -1,7 +1,7 @@
 """Two reference planes (desk and wall): no light position needed.
 
 Each frame's shadow plane is the plane through the shadow's crossings on both
-reference planes (:func:`gnomon.shadow_planes.two_plane_shadow_planes`). All
+reference planes (:func:`gnomon.light.shadow_planes.two_plane_shadow_planes`). All
 shadow planes of a point light pass through it, so the report also gives the
 light's position as the point closest to them all (or the line it lies on when
 the planes share one direction).
@@ -13,11 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from gnomon.camera import Pose
+from gnomon.camera.models import Pose
+from gnomon.geometry.reference_lines import ReferenceLines
+from gnomon.geometry.validity import MIN_LAMP_CONDITIONING, light_point_or_line
 from gnomon.light.base import EdgePlanes, EdgeTimes, LightModel, PlaneCompletion, ReferenceGeometry, best_line_sigma
-from gnomon.reference_lines import ReferenceLines
-from gnomon.shadow_planes import complete_from_light, completing_lines, completion_light, two_plane_shadow_planes
-from gnomon.validity import MIN_LAMP_CONDITIONING, light_point_or_line
+from gnomon.light.shadow_planes import complete_from_light, completing_lines, completion_light, two_plane_shadow_planes
 
 __all__ = ["TwoPlaneLight"]
 

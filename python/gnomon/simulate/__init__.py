@@ -11,7 +11,7 @@ frames, ``.npz``). Scenes:
 * ``desk_lamp_right`` — the same scene with the lamp mirrored to the other
   side of the camera (``DeskLampConfig(lamp_side="right")``), for dual-scan
   fusion on the same pixel grid;
-* ``two_plane`` — :func:`simulate_two_plane` (:mod:`gnomon.simulate.two_plane`):
+* ``two_plane`` — :func:`simulate_two_plane` (:mod:`gnomon.simulate.two_plane_scene`):
   desk + wall, printed markers, a lamp the field log does not give;
 * ``facade_sun`` — :func:`simulate_facade_sun` (:mod:`gnomon.simulate.facade_sun`):
   a pole's shadow swept by the sun (pvlib) over ground and a building facade;
@@ -31,7 +31,7 @@ from gnomon.simulate.desk_lamp import (
     simulate_desk_lamp,
 )
 from gnomon.simulate.facade_sun import FacadeSunConfig, FacadeSunResult, FacadeSunScene, simulate_facade_sun
-from gnomon.simulate.two_plane import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
+from gnomon.simulate.two_plane_scene import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
 
 SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "facade_day")
 
@@ -53,11 +53,11 @@ __all__ = [
 
 
 class _CallableModule(_types.ModuleType):
-    """``gnomon.simulate`` is this package and also the function :func:`gnomon.api.simulate`:
+    """``gnomon.simulate`` is this package and also the function :func:`gnomon.simulate.scenes.simulate`:
     ``gnomon.simulate("desk_lamp", "capture", frames=120)`` renders a scene and returns its field log."""
 
     def __call__(self, scene: str, out, *, progress: bool = False, **options):
-        from gnomon.api import simulate  # the scene dispatcher (it imports no scanning code)
+        from gnomon.simulate.scenes import simulate
 
         return simulate(scene, out, progress=progress, **options)
 

@@ -87,7 +87,7 @@ class TruthPinhole:
 
 @dataclass(frozen=True)
 class TruthTsai:
-    """Tsai's model; our own implementation (see gnomon.camera.TsaiCamera for the formulas).
+    """Tsai's model; our own implementation (see gnomon.camera.models.TsaiCamera for the formulas).
 
     ``f_mm`` (mm), ``kappa1`` (1/mm², ``Xu = Xd·(1 + κ1·r²)``), ``cx, cy``
     (pixels), ``dx_mm, dy_mm`` (pixel pitch, mm), ``sx``.
@@ -341,7 +341,7 @@ def write_chessboard_views(
     and each view's pose (rvec radians, tvec in the board's units). Returns
     the same content as a dict. Files are written atomically.
     """
-    from gnomon import atomic, toml_io  # file formats only
+    from gnomon.util import atomic, toml_io  # file formats only
 
     camera = camera or default_truth_camera()
     out = Path(out_dir)

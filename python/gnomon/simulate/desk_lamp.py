@@ -130,10 +130,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from gnomon import atomic, toml_io
 from gnomon.errors import GnomonError
 from gnomon.simulate import geometry as geo
 from gnomon.simulate import sensor, shadow
+from gnomon.simulate.sensor import AMBIENT, encode_image
+from gnomon.util import atomic, toml_io
 
 # ----------------------------------------------------------------- fixed scene constants
 
@@ -149,7 +150,6 @@ CAMERA_AZIMUTH_DEG = 4.0                # a slight turn about z
 CAMERA_ROLL_DEG = 1.2
 LAMP = np.array([-360.0, -220.0, 380.0])
 
-AMBIENT = 0.1                           # ambient irradiance (radiance = albedo · AMBIENT)
 DESK_PEAK = 0.8                         # brightest lit desk, fraction of full scale
 SURFACE_PEAK = 0.97                     # no surface brighter than this
 STICK_FRACTION = 0.55                   # stick position between S (0) and the desk (1)
@@ -852,16 +852,6 @@ def clear_previous(out: Path) -> None:
 
 
 _clear_previous = clear_previous  # the old private name
-
-
-def encode_image(img: np.ndarray, config: SweepConfig) -> bytes:
-    """A u8 image as JPEG (``config.jpeg_quality``) or PNG (quality 0) bytes."""
-    ext = config.extension
-    params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if ext == "png" else [cv2.IMWRITE_JPEG_QUALITY, config.jpeg_quality]
-    ok, buf = cv2.imencode(f".{ext}", img, params)
-    if not ok:  # pragma: no cover
-        raise RuntimeError("cv2.imencode failed")
-    return buf.tobytes()
 
 
 def prepare_out_dir(out_dir) -> Path:

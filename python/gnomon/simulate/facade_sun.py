@@ -8,14 +8,14 @@ sundial's and sweeps the ground and the facade.
 
 World frame (metres)
 --------------------
-Tied to local East-North-Up by a heading (:mod:`gnomon.sun`):
+Tied to local East-North-Up by a heading (:mod:`gnomon.light.ephemeris`):
 world z is up, world x points at compass heading ``HEADING_DEG`` = 295°
 (WNW) and y = z × x at 205° (SSW). The facade is the plane y = 0 (the
 building behind it, y < 0, its outward normal +y facing 205°, so it is in
 the sun from late morning to late afternoon); the ground is z = 0 (y ≥ 0).
 ``v_world = R · v_enu`` with R's rows the world axes in ENU:
 x = (sin h, cos h, 0), y = (−cos h, sin h, 0), z = (0, 0, 1). The simulator
-builds R itself; it does not use the pipeline's :func:`gnomon.sun.R_world_from_enu`.
+builds R itself; it does not use the pipeline's :func:`gnomon.light.ephemeris.R_world_from_enu`.
 
 Scene
 -----
@@ -51,7 +51,7 @@ elevation 25° → 15° (a low winter sun, so that the 14 m pole's shadow reache
 the facade and climbs it).
 Its direction per frame is pvlib's SPA (``nrel_numpy``, ΔT = 67 s), apparent
 (refracted) elevation, pressure from the altitude (``alt2pres``), 12 °C — the
-same settings :mod:`gnomon.sun` uses for a site without pressure/temperature.
+same settings :mod:`gnomon.light.ephemeris` uses for a site without pressure/temperature.
 The sun is a uniform disc of angular diameter 0.533°.
 
 Between frames the sun direction is taken to move along the chord between
@@ -196,10 +196,10 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from gnomon import atomic, toml_io
 from gnomon.errors import GnomonError
 from gnomon.simulate import geometry as geo
 from gnomon.simulate import sensor, shadow
+from gnomon.util import atomic, toml_io
 
 # ----------------------------------------------------------------- fixed scene constants
 

@@ -1,6 +1,6 @@
 """Independent geometry for the simulator: rotations, the lens, ray casting.
 
-Nothing here imports the pipeline (``gnomon.camera`` and friends): the
+Nothing here imports the pipeline (``gnomon.camera.models`` and friends): the
 simulator is the ground truth the pipeline is checked against, so it has its
 own projection, its own distortion inversion and its own ray/primitive
 intersections, all in plain numpy. Only the *conventions* are shared with the

@@ -53,10 +53,10 @@ from pathlib import Path
 
 import numpy as np
 
-from gnomon import atomic, toml_io
 from gnomon.errors import GnomonError
 from gnomon.simulate import geometry as geo
-from gnomon.simulate.desk_lamp import AMBIENT, encode_image
+from gnomon.simulate.sensor import AMBIENT, encode_image
+from gnomon.util import atomic, toml_io
 
 PENCIL_HEIGHT = 150.0     # base to apex, mm
 PENCIL_RADIUS = 3.5       # mm

@@ -17,7 +17,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from gnomon import atomic
+from gnomon.util import atomic
+
+AMBIENT = 0.1  # ambient irradiance of the desk scenes (radiance = albedo · AMBIENT)
 
 
 def blur_and_crop(L_full: np.ndarray, sigma_px: float, crop) -> np.ndarray:
@@ -55,3 +57,13 @@ def check_sensor_options(noise: float, jpeg_quality: int, blur: float, bad: Call
         raise bad(f"--jpeg-quality {jpeg_quality}: must be 0 (PNG) to 100")
     if not (math.isfinite(blur) and 0 <= blur <= 20):
         raise bad(f"--blur {blur}: must be 0 to 20 px")
+
+
+def encode_image(img: np.ndarray, config: Any) -> bytes:
+    """A u8 image as JPEG (``config.jpeg_quality``) or PNG (quality 0) bytes."""
+    ext = config.extension
+    params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if ext == "png" else [cv2.IMWRITE_JPEG_QUALITY, config.jpeg_quality]
+    ok, buf = cv2.imencode(f".{ext}", img, params)
+    if not ok:  # pragma: no cover
+        raise RuntimeError("cv2.imencode failed")
+    return buf.tobytes()

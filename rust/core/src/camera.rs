@@ -1,5 +1,5 @@
 //! The per-pixel rays of OpenCV's pinhole camera with 5 distortion
-//! coefficients `(k1, k2, p1, p2, k3)`, as `gnomon.camera.OpenCVCamera`
+//! coefficients `(k1, k2, p1, p2, k3)`, as `gnomon.camera.models.OpenCVCamera`
 //! defines the model (docs/architecture.md, "Camera models").
 //!
 //! The distortion maps undistorted normalised coordinates `(x, y)` to

@@ -1,4 +1,4 @@
-//! The shadow line of every frame on one reference plane (`gnomon.reference_lines.lines_on_plane`,
+//! The shadow line of every frame on one reference plane (`gnomon.geometry.reference_lines.lines_on_plane`,
 //! docs/method.md §3): where the shadow-time map crosses each frame ([`isochrone_crossings`]),
 //! and each frame's crossings, in plane coordinates, fitted with a robust total-least-squares
 //! line ([`frame_lines`]); the fits long enough to be lines set their own direction.
@@ -12,8 +12,8 @@ use rayon::prelude::*;
 
 use crate::error::KernelError;
 
-/// What [`frame_lines`] needs: `gnomon.fitting.fit_line_robust`'s `k` and `iterations`, and
-/// `gnomon.reference_lines`' `MIN_POINTS`, `MIN_EXTENT_TO_RMS` and `min_extent_fraction`.
+/// What [`frame_lines`] needs: `gnomon.util.fitting.fit_line_robust`'s `k` and `iterations`, and
+/// `gnomon.geometry.reference_lines`' `MIN_POINTS`, `MIN_EXTENT_TO_RMS` and `min_extent_fraction`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LineParams {
     /// Residuals beyond `k` robust σ (1.4826·MAD) are outliers.
@@ -65,7 +65,7 @@ fn percentile_sorted(sorted: &[f64], q: f64) -> f64 {
     }
 }
 
-/// `gnomon.reference_lines._extent`: the length the values cover (5th to 95th percentile,
+/// `gnomon.geometry.reference_lines._extent`: the length the values cover (5th to 95th percentile,
 /// stretched to the full range); 0 for fewer than 2.
 fn extent(mut along: Vec<f64>) -> f64 {
     if along.len() < 2 {
@@ -90,7 +90,7 @@ fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[0] + a[1] * b[1]
 }
 
-/// `gnomon.fitting.fit_line_robust` on one frame's points: (centroid, unit direction of most
+/// `gnomon.util.fitting.fit_line_robust` on one frame's points: (centroid, unit direction of most
 /// spread, inlier mask). The direction is the major axis of the inliers' scatter matrix (the
 /// first right singular vector of the centred points, up to sign and round-off).
 fn fit_line_robust(
@@ -288,7 +288,7 @@ pub fn frame_lines(xy: &[f64], bounds: &[i64], p: &LineParams) -> Result<FrameLi
 }
 
 /// Sub-pixel points where a shadow-time map crosses each integer frame
-/// (`gnomon.reference_lines.isochrone_crossings`, whose numpy definition this is, value for value).
+/// (`gnomon.geometry.reference_lines.isochrone_crossings`, whose numpy definition this is, value for value).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Crossings {
     /// The frame crossed.

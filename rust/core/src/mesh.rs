@@ -1,5 +1,5 @@
 //! The triangle mesh on the pixel grid (docs/method.md, "Mesh") and its
-//! connectivity clean-up, as the numpy definitions in `gnomon.meshing` state
+//! connectivity clean-up, as the numpy definitions in `gnomon.geometry.meshing` state
 //! them, with the same results element for element (faces, vertex order and
 //! vertex copies): [`grid_faces`] cuts the grid at depth jumps,
 //! [`clean_faces`] drops small edge-connected pieces and splits non-manifold
@@ -131,7 +131,7 @@ impl EdgeBuckets {
     }
 }
 
-/// The faces of the grid mesh of an `H × W` grid (see `gnomon.meshing.grid_mesh`).
+/// The faces of the grid mesh of an `H × W` grid (see `gnomon.geometry.meshing.grid_mesh`).
 ///
 /// `valid`, `depth` (camera Z, f32, NaN where invalid) and `sigma` (σZ; NaN
 /// counts as 0) are row-major `H·W`. Each 2×2 block of valid pixels `a b / c d`
@@ -280,7 +280,7 @@ pub struct CleanMesh {
 
 /// Drop edge-connected pieces with fewer than `min_vertices` vertices, then
 /// give every fan of triangles meeting at a vertex only there its own copy of
-/// the vertex (see `gnomon.meshing.remove_small_components` and
+/// the vertex (see `gnomon.geometry.meshing.remove_small_components` and
 /// `split_non_manifold_vertices`, whose results these are, element for element).
 ///
 /// A piece's size counts each vertex once, for the piece of the last face (in
@@ -555,7 +555,7 @@ fn column_lines(prefix: &[u8], columns: &[Column], rows: usize) -> Vec<Vec<u8>> 
     vec![out]
 }
 
-/// The body of a Wavefront OBJ file (see `gnomon.meshing.write_obj`, whose text this is, byte for byte).
+/// The body of a Wavefront OBJ file (see `gnomon.outputs.obj.write_obj`, whose text this is, byte for byte).
 ///
 /// `vertices` `V·3` (`v` lines, `vertex_decimals` decimals), `uv` `V·2`
 /// (`vt`, 6 decimals), `normals` `V·3` (`vn`, 5 decimals), `faces` `F·3`

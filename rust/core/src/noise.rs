@@ -1,4 +1,4 @@
-//! The clipped line fit of the image-noise estimate (`gnomon.uncertainty.image_noise_dn`), equal
+//! The clipped line fit of the image-noise estimate (`gnomon.capture.noise.image_noise_dn`), equal
 //! bit for bit to its numpy definition (`_image_noise_dn_numpy`).
 //!
 //! The estimate fits, over the pixels of two frames, the difference `y = a − b` against the
@@ -154,7 +154,7 @@ pub struct NoiseSamples {
 
 /// numpy's median of integers given by their histogram (`counts[v]` of the value `low + v`,
 /// `n` in all, `n > 0`): the mean of its sorted elements `(n − 1) / 2` and `n / 2`, as
-/// `gnomon.uncertainty._median_of_integers` computes it.
+/// `gnomon.geometry.uncertainty._median_of_integers` computes it.
 fn histogram_median(counts: &[u32], low: i64, n: usize) -> f64 {
     let nth = |k: usize| {
         let mut seen = 0usize;
@@ -171,7 +171,7 @@ fn histogram_median(counts: &[u32], low: i64, n: usize) -> f64 {
 
 /// The samples of frames `a` and `b` (one per pixel, the same length) that the noise estimate
 /// fits ([`NoiseSamples`]); None when fewer than `min_inside` pixels are inside the range.
-/// Equal to the integer path of `gnomon.uncertainty._image_noise_dn_numpy` before its fit.
+/// Equal to the integer path of `gnomon.capture.noise._image_noise_dn_numpy` before its fit.
 pub fn noise_samples<T: Sample>(
     a: &[T],
     b: &[T],

@@ -1,4 +1,4 @@
-//! Shadow times between the isochrones, row by row (`gnomon.retiming`, whose
+//! Shadow times between the isochrones, row by row (`gnomon.reconstruct.retiming`, whose
 //! numpy definition this reproduces element for element; the tests compare both).
 //!
 //! The map arrives oriented by the caller: the sweep runs along the rows, with
@@ -29,7 +29,7 @@ struct Crossing {
 }
 
 /// The re-timed map (oriented as given) and, per re-timed pixel in row-major
-/// order, what its time was made of (see `gnomon.retiming.RetimedTimes`).
+/// order, what its time was made of (see `gnomon.reconstruct.retiming.RetimedTimes`).
 #[derive(Default)]
 pub struct Retimed {
     /// `H·W` times (f32, the input's where not re-timed).
@@ -134,7 +134,7 @@ pub struct RetimedSigma {
 }
 
 /// [`retime_rows`] and the σ of each pixel's time in one pass, as
-/// `gnomon.retiming.RetimedTimes.sigma` defines it from the crossings' details
+/// `gnomon.reconstruct.retiming.RetimedTimes.sigma` defines it from the crossings' details
 /// (which are not kept): a crossing at phase φ between pixels a and b whose
 /// times rise by g per pixel is off by `((1 − φ)·σa + φ·σb)/g` pixels; the
 /// re-timed pixel at fraction f of the gap D between its two crossings takes
@@ -192,7 +192,7 @@ pub fn retime_rows_sigma(
     Ok(out)
 }
 
-/// Re-timed times averaged across the sweep (`gnomon.retiming.average_across_sweep`, whose numpy
+/// Re-timed times averaged across the sweep (`gnomon.reconstruct.retiming.average_across_sweep`, whose numpy
 /// definition this reproduces value for value).
 ///
 /// `times` `H·W` frames (f32, NaN = none), `retimed` `H·W` (non-zero = re-timed), rows of `width`.

@@ -1,5 +1,5 @@
 //! Per-pixel work on a scan's surface after fusion, as the numpy definitions
-//! in `gnomon.meshing` and `gnomon.pipeline` state them (the tests compare
+//! in `gnomon.geometry.meshing` and `gnomon.runs.scan` state them (the tests compare
 //! both): the world-frame points of a depth map ([`world_points`]), the grid's
 //! unit normals ([`grid_normals`]) and the binary STL records of a mesh
 //! ([`stl_records`]).
@@ -42,8 +42,8 @@ fn finite(a: V3) -> bool {
 pub type FusedMaps = (Vec<f32>, Vec<f32>, Vec<u8>);
 
 /// Inverse-variance fusion of K depth estimates per pixel, then the pixels no
-/// neighbour supports dropped (`gnomon.fusion.fuse_depths` with Gaussian weights,
-/// then `gnomon.triangulation.supported_by_neighbours`).
+/// neighbour supports dropped (`gnomon.reconstruct.fusion.fuse_depths` with Gaussian weights,
+/// then `gnomon.geometry.triangulation.supported_by_neighbours`).
 ///
 /// * `depths`, `sigmas`: `K·H·W` (f32), estimate k of pixel p at `k·H·W + p`;
 ///   an estimate counts where both are finite and σ > 0;
@@ -167,7 +167,7 @@ pub fn fuse_supported(
     Ok((fused, sigma, code))
 }
 
-/// Per pixel and channel, the median of the samples a pixel is lit in (`gnomon.texture.LitColour.finish`).
+/// Per pixel and channel, the median of the samples a pixel is lit in (`gnomon.capture.texture.LitColour.finish`).
 ///
 /// * `stack`: `K·P·3` colour samples (K frames of P pixels, RGB), u8;
 /// * `lit`: `K·P`, non-zero = the pixel is lit in that frame (a pixel lit in
@@ -223,7 +223,7 @@ pub fn lit_median(stack: &[u8], lit: &[u8], frames: usize) -> Result<Vec<u8>, Ke
 /// * `depth`: `H·W` camera Z (world units); `valid`: `H·W`, non-zero = a surface pixel;
 /// * `rotation`, `translation`: the pose, world → camera (`X_cam = R·X_world + t`).
 ///
-/// As `gnomon.pipeline.build_surface` defines it: the camera-frame point
+/// As `gnomon.geometry.surface.build_surface` defines it: the camera-frame point
 /// `p = r·(Z/r_z)` rounded to f32 (`points_from_depth`), then
 /// `X_world = Rᵀ·(p − t)` in f64 (`Pose.camera_to_world`), rounded to f32.
 /// Rows in parallel; each output depends on its own pixel only.
@@ -284,7 +284,7 @@ pub fn world_points(
 /// one-sided where one does, none otherwise; the normal is the unit
 /// `t_row × t_column` flipped to face the camera, or the unit vector towards
 /// the camera where it is undefined (no tangent, zero or non-finite). NaN
-/// where `valid` is zero. All in f64, as `gnomon.meshing.grid_normals`.
+/// where `valid` is zero. All in f64, as `gnomon.geometry.meshing.grid_normals`.
 pub fn grid_normals(
     points: &[f32],
     depth: &[f32],
@@ -385,7 +385,7 @@ pub const STL_RECORD_BYTES: usize = 50;
 ///
 /// `vertices` `V·3` f32, `faces` `F·3` indices into them (checked). Each record is
 /// the face's unit normal (right-hand rule over its corners, computed in f32 as
-/// `gnomon.meshing.face_normals`: zero for a degenerate face), its three corners and a
+/// `gnomon.geometry.meshing.face_normals`: zero for a degenerate face), its three corners and a
 /// zero attribute.
 pub fn stl_records(vertices: &[f32], faces: &[i32]) -> Result<Vec<u8>, KernelError> {
     if vertices.len() % 3 != 0 {

@@ -160,7 +160,7 @@ fn check_min_cos(min_cos: f64) -> Result<(), KernelError> {
     Ok(())
 }
 
-/// First-order depth σ of every pixel (`gnomon.uncertainty.depth_sigma`, whose numpy
+/// First-order depth σ of every pixel (`gnomon.geometry.uncertainty.depth_sigma`, whose numpy
 /// definition this is, value for value): `σZ = |∂Z/∂t| · sqrt(σt_pixel² + σt_line²)`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DepthSigma {
@@ -346,7 +346,7 @@ fn plane_row_count(planes: &[f64]) -> Result<usize, KernelError> {
 }
 
 /// The angle (degrees) between each selected pixel's ray and the shadow plane at its time
-/// (`gnomon.pipeline.ray_plane_angles`): a depth moves by a plane's error over its sine.
+/// (`gnomon.geometry.surface.ray_plane_angles`): a depth moves by a plane's error over its sine.
 ///
 /// * `rays`: `H·W·3` camera-frame ray directions (any length);
 /// * `times`: `H·W` times in rows of `planes`; the plane's normal is interpolated
@@ -426,7 +426,7 @@ pub struct Completion<'a> {
 }
 
 /// The σZ (world units, camera Z, `H·W` f32) a completed plane's own error adds at each pixel
-/// (`gnomon.uncertainty.completion_depth_sigma`, whose numpy definition this is, value for value).
+/// (`gnomon.geometry.uncertainty.completion_depth_sigma`, whose numpy definition this is, value for value).
 ///
 /// A row completed from one line and the light is exact along its line and off by a turn
 /// about it: by `sigma_rad`, a point at distance `d` from the line moves `sigma_rad·d` along

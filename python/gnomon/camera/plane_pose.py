@@ -1,0 +1,600 @@
+"""Reference planes: printed markers, a chessboard, or an explicit pose.
+
+A *marker* is a printed 2×2 checker pattern: its centre is an X-junction (a
+saddle point of the intensity), which a field log gives as an approximate
+pixel (the *hint*) plus its known coordinates on the plane.
+:func:`find_marker` finds the saddle near the hint (Hessian response), refines
+it to sub-pixel (by point symmetry, see :func:`_symmetric_centre`) and checks that it really is a 2×2
+checker corner (the intensity around it alternates dark/bright/dark/bright and
+is point-symmetric), else a :class:`GnomonError` names the marker and hint.
+
+:func:`plane_pose_from_markers`, :func:`plane_pose_from_chessboard` and
+:func:`plane_pose_from_pose` all return a :class:`PlanePose`: the pose of the
+plane's frame (or of the world frame, when the points are given in 3D world
+coordinates) in the camera frame, the plane as ``n·X = d`` in the camera
+frame, and the residuals. The pose comes from ``cv2.solvePnPGeneric`` (IPPE
+for planar points, SQPnP otherwise) on undistorted normalised coordinates —
+so any camera model with ``rays`` works — then Levenberg–Marquardt on the
+pixel reprojection error through the camera model's ``project``.
+
+Frames: camera as OpenCV's; ``Pose`` maps the points' frame to the camera,
+``X_cam = R·X + t``. Lengths in the units of the given coordinates.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import cv2
+import numpy as np
+
+from gnomon.camera.models import Pose
+from gnomon.capture.frames import grey_8bit_scale
+from gnomon.errors import GnomonError
+from gnomon.util.fitting import levenberg_marquardt
+
+# --------------------------------------------------------------------------- marker detection
+
+
+@dataclass(frozen=True)
+class MarkerDetection:
+    """One marker found near its hint.
+
+    ``pixel`` the refined centre (u, v); ``contrast`` the bright − dark
+    difference around it (8-bit DN); ``x_score`` the share of the circular
+    intensity profile in its 2nd harmonic relative to an ideal 2×2 checker
+    (1 = perfect, ≈0 for an edge or flat area); ``asymmetry`` the odd
+    harmonics relative to the 2nd (≈0 at a true centre).
+    """
+
+    name: str
+    hint: tuple[float, float]
+    pixel: tuple[float, float]
+    contrast: float
+    x_score: float
+    asymmetry: float
+
+
+def _circle_profile(img: np.ndarray, centre: tuple[float, float], radius: float, n: int = 64) -> np.ndarray:
+    th = np.arange(n) * (2 * np.pi / n)
+    mx = (centre[0] + radius * np.cos(th)).astype(np.float32).reshape(1, -1)
+    my = (centre[1] + radius * np.sin(th)).astype(np.float32).reshape(1, -1)
+    return cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel().astype(np.float64)
+
+
+def _x_check(img: np.ndarray, centre: tuple[float, float], radius: float) -> tuple[float, float, float]:
+    """(contrast, x_score, asymmetry) of the circular profiles at 0.6 and 1.0 × radius."""
+    scores = []
+    for r in (0.6 * radius, radius):
+        p = _circle_profile(img, centre, r)
+        n = len(p)
+        spec = np.abs(np.fft.rfft(p - p.mean())) * 2.0 / n
+        contrast = float(np.percentile(p, 95) - np.percentile(p, 5))
+        # An ideal X-junction of contrast C is a 4-sector square wave: its 2nd
+        # harmonic has amplitude 2C/π; odd harmonics vanish (point symmetry:
+        # the two edges through the centre stay straight lines under perspective).
+        x_score = float(spec[2] / (2.0 * contrast / np.pi)) if contrast > 0 else 0.0
+        asym = float(np.hypot(spec[1], spec[3]) / max(spec[2], 1e-12))
+        scores.append((contrast, x_score, asym))
+    return min(s[0] for s in scores), min(s[1] for s in scores), max(s[2] for s in scores)
+
+
+def _sample(img: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    p = pts.astype(np.float32)
+    out = cv2.remap(img, p[:, 0].reshape(1, -1), p[:, 1].reshape(1, -1), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.ravel().astype(np.float64)
+
+
+def _symmetric_centre(img: np.ndarray, start: tuple[float, float], radius: int, iters: int = 30) -> tuple[float, float]:
+    """Sub-pixel centre of a point-symmetric pattern: minimise Σ (I(p + d) − I(p − d))² over a disk.
+
+    A 2×2 checker stays point-symmetric about its centre under perspective
+    (its two edges through the centre stay straight lines), so this holds
+    where gradient-based refiners (cornerSubPix) are biased by the skewed,
+    blurred junction — on our synthetic frames ≈0.02 px instead of ≈0.1 px.
+    Gauss–Newton on the lightly blurred image with bilinear sampling.
+    """
+    b = cv2.GaussianBlur(img, (0, 0), 0.7)
+    gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    yy, xx = np.mgrid[-radius : radius + 1, -radius : radius + 1]
+    half = (xx * xx + yy * yy <= radius * radius) & ((yy > 0) | ((yy == 0) & (xx > 0)))
+    d = np.stack([xx[half], yy[half]], axis=1).astype(np.float64)
+    p = np.array(start, dtype=np.float64)
+    for _ in range(iters):
+        pa, pb = p + d, p - d
+        r = _sample(b, pa) - _sample(b, pb)
+        J = np.stack([_sample(gx, pa) - _sample(gx, pb), _sample(gy, pa) - _sample(gy, pb)], axis=1)
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        if not np.all(np.isfinite(step)) or np.hypot(*step) > radius:
+            return float("nan"), float("nan")
+        p += step
+        if np.hypot(*step) < 1e-5:
+            break
+    return float(p[0]), float(p[1])
+
+
+def find_marker(
+    image: np.ndarray,
+    hint: Sequence[float] | np.ndarray,
+    *,
+    name: str = "marker",
+    search_px: float = 30.0,
+    radius_px: int = 6,
+    min_contrast: float = 20.0,
+    source: str = "image",
+) -> MarkerDetection:
+    """Find one 2×2 checker marker's centre near ``hint`` (pixels), to sub-pixel.
+
+    ``search_px``: how far from the hint the centre may be (pixels).
+    ``radius_px``: radius (pixels) of the symmetric refinement and of the
+    check; each of the marker's four squares should span at least about half
+    this in the image, and the printed marker (with its white margin) at
+    least this. ``min_contrast``: minimum bright − dark difference (8-bit DN).
+    ``source`` names the image in errors. Raises GnomonError when no marker
+    is there.
+    """
+    img = grey_8bit_scale(image)
+    h, w = img.shape
+    u0, v0 = float(hint[0]), float(hint[1])
+    where = f"{source}: marker '{name}'"
+    if not (np.isfinite(u0) and np.isfinite(v0)) or not (0 <= u0 <= w - 1 and 0 <= v0 <= h - 1):
+        raise GnomonError(f"{where}: hint ({u0:.1f}, {v0:.1f}) lies outside the {w}x{h} image")
+    pad = int(np.ceil(search_px + 2 * radius_px + 4))
+    x0, x1 = max(int(u0) - pad, 0), min(int(u0) + pad + 1, w)
+    y0, y1 = max(int(v0) - pad, 0), min(int(v0) + pad + 1, h)
+    win = img[y0:y1, x0:x1]
+    sigma = max(1.0, radius_px / 3.0)
+    b = cv2.GaussianBlur(win, (0, 0), sigma)
+    ixx = cv2.Sobel(b, cv2.CV_32F, 2, 0, ksize=3)
+    iyy = cv2.Sobel(b, cv2.CV_32F, 0, 2, ksize=3)
+    ixy = cv2.Sobel(b, cv2.CV_32F, 1, 1, ksize=3)
+    # Saddle response −det(H): c² at an X-junction (any orientation), 0 on a
+    # straight edge, negative on a blob.
+    resp = ixy * ixy - ixx * iyy
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    inside = (xx - u0) ** 2 + (yy - v0) ** 2 <= search_px**2
+    inside &= (xx >= radius_px) & (xx <= w - 1 - radius_px) & (yy >= radius_px) & (yy <= h - 1 - radius_px)
+    resp = np.where(inside, resp, -np.inf)
+    if not np.isfinite(resp).any():
+        raise GnomonError(f"{where}: not found within {search_px:g} px of its hint ({u0:.1f}, {v0:.1f}): "
+                          "too close to the image border")
+    k = int(np.argmax(resp))
+    u, v = _symmetric_centre(img, (float(xx.flat[k]), float(yy.flat[k])), radius_px)
+    if not (np.isfinite(u) and np.isfinite(v)) or np.hypot(u - xx.flat[k], v - yy.flat[k]) > radius_px:
+        u, v = float(xx.flat[k]), float(yy.flat[k])  # refinement slid away: keep the saddle (the check below judges it)
+    contrast, x_score, asym = _x_check(img, (u, v), float(radius_px))
+    ok = (
+        contrast >= min_contrast
+        and x_score >= 0.5
+        and asym <= 0.35
+        and np.hypot(u - u0, v - v0) <= search_px
+    )
+    if not ok:
+        raise GnomonError(
+            f"{where}: not found within {search_px:g} px of its hint ({u0:.1f}, {v0:.1f}) "
+            f"(best candidate ({u:.1f}, {v:.1f}): contrast {contrast:.0f} DN, 2x2-checker score {x_score:.2f}, "
+            f"asymmetry {asym:.2f}; need ≥ {min_contrast:g} DN, ≥ 0.5, ≤ 0.35); if the mark is there but not a "
+            "clean 2x2 checker (squares that overlap or gap, seen at a grazing angle), give its centre as "
+            "pixel = [u, v] instead of pixel_hint"
+        )
+    return MarkerDetection(name=name, hint=(u0, v0), pixel=(u, v), contrast=contrast, x_score=x_score, asymmetry=asym)
+
+
+def find_markers(
+    image: np.ndarray,
+    hints: np.ndarray,
+    *,
+    names: Sequence[str] | None = None,
+    search_px: float = 30.0,
+    radius_px: int = 6,
+    min_contrast: float = 20.0,
+    source: str = "image",
+) -> list[MarkerDetection]:
+    """:func:`find_marker` for each hint (N, 2); two markers on one corner is an error."""
+    hints = np.asarray(hints, dtype=np.float64).reshape(-1, 2)
+    names = list(names) if names is not None else [f"m{i}" for i in range(len(hints))]
+    dets = [
+        find_marker(image, h, name=n, search_px=search_px, radius_px=radius_px, min_contrast=min_contrast,
+                    source=source)
+        for h, n in zip(hints, names, strict=True)
+    ]
+    for i in range(len(dets)):
+        for j in range(i + 1, len(dets)):
+            if np.hypot(dets[i].pixel[0] - dets[j].pixel[0], dets[i].pixel[1] - dets[j].pixel[1]) < 1.0:
+                raise GnomonError(
+                    f"{source}: markers '{dets[i].name}' and '{dets[j].name}' were found on the same corner "
+                    f"({dets[i].pixel[0]:.1f}, {dets[i].pixel[1]:.1f}); check their hints or reduce search_px"
+                )
+    return dets
+
+
+def find_cross(
+    image: np.ndarray,
+    rough: Sequence[float] | np.ndarray,
+    *,
+    name: str = "cross",
+    search_px: float = 60.0,
+    radius_px: int = 10,
+    stroke_px: int = 11,
+    follow: int = 3,
+    source: str = "image",
+) -> tuple[float, float]:
+    """The centre (u, v) of a hand-drawn cross (dark pen strokes on bright paper) near ``rough`` (pixels).
+
+    The strokes are isolated by a black-hat filter (dark details narrower than
+    ``stroke_px``); the cross is where they overlap most, the maximum of the
+    blurred ink within ``search_px`` of the rough pixel, refined to the
+    centroid of the ink within ``radius_px`` of it (mean shift) and then to
+    the point about which the ink is point-symmetric (a pen line passing
+    beside the cross, e.g. the stick's trace, pulls a centroid by about a
+    pixel, not the symmetric centre: 0.05 px on the synthetic test). A maximum on the search
+    window's border means the cross lies beyond it (a rough click far off):
+    the ink is followed from there through small windows (``2·radius_px``
+    around each border maximum, its local maximum rather than the darkest
+    thing near it), up to ``follow`` times. Raises GnomonError when
+    there is no ink.
+    """
+    img = grey_8bit_scale(image)
+    h, w = img.shape
+    u0, v0 = float(rough[0]), float(rough[1])
+    where = f"{source}: cross '{name}'"
+    if not (np.isfinite(u0) and np.isfinite(v0)) or not (0 <= u0 <= w - 1 and 0 <= v0 <= h - 1):
+        raise GnomonError(f"{where}: rough pixel ({u0:.1f}, {v0:.1f}) lies outside the {w}x{h} image")
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (stroke_px, stroke_px))
+    s = int(np.ceil(search_px))
+    cu, cv_ = int(np.rint(u0)), int(np.rint(v0))
+    for _ in range(follow + 1):
+        a0, a1 = max(cu - s, 0), min(cu + s + 1, w)
+        b0, b1 = max(cv_ - s, 0), min(cv_ + s + 1, h)
+        ink = cv2.morphologyEx(img[b0:b1, a0:a1], cv2.MORPH_BLACKHAT, kernel)
+        resp = cv2.GaussianBlur(ink, (0, 0), radius_px / 2.5)
+        vv, uu = np.unravel_index(int(np.argmax(resp)), resp.shape)
+        if float(resp[vv, uu]) <= 0.0:
+            raise GnomonError(f"{where}: no pen stroke within {search_px:g} px of ({u0:.1f}, {v0:.1f})")
+        on_border = ((uu < radius_px and a0 > 0) or (uu >= resp.shape[1] - radius_px and a1 < w)
+                     or (vv < radius_px and b0 > 0) or (vv >= resp.shape[0] - radius_px and b1 < h))
+        if not on_border:
+            break
+        # Follow the ink outwards: a small window around the border maximum (its own local maximum,
+        # not whatever is darkest within the whole search radius of it).
+        cu, cv_ = a0 + int(uu), b0 + int(vv)
+        s = 2 * radius_px
+    # Mean shift: the centroid of the ink within a disc of radius_px, recentred until it stays (a cross's
+    # strokes are point-symmetric about its centre; the blurred maximum leans towards other ink near it).
+    yy, xx = np.mgrid[0:ink.shape[0], 0:ink.shape[1]].astype(np.float64)
+    ink64 = ink.astype(np.float64)
+    pu, pv = float(uu), float(vv)
+    for _ in range(20):
+        disc = (xx - pu) ** 2 + (yy - pv) ** 2 <= radius_px**2
+        inside = ink64[disc]
+        weight = np.clip(inside - 0.3 * inside.max(), 0, None)
+        if weight.sum() <= 0:
+            break
+        nu, nv = float((weight * xx[disc]).sum() / weight.sum()), float((weight * yy[disc]).sum() / weight.sum())
+        moved = np.hypot(nu - pu, nv - pv)
+        pu, pv = nu, nv
+        if moved < 1e-3:
+            break
+    # Then the point of the ink's point symmetry (a pen line passing beside the centre pulls a centroid).
+    su, sv = _symmetric_centre(ink, (pu, pv), radius_px)
+    if np.isfinite(su) and np.isfinite(sv) and np.hypot(su - pu, sv - pv) <= radius_px / 2:
+        pu, pv = su, sv
+    return a0 + pu, b0 + pv
+
+
+# --------------------------------------------------------------------------- pose fitting
+
+
+@dataclass(frozen=True)
+class PlanePose:
+    """A reference plane measured in one image.
+
+    ``pose`` maps the points' frame to the camera (the plane's own frame for
+    2-D plane coordinates, the world frame for 3-D ones). In the camera frame
+    the plane is ``normal_cam·X = offset_cam`` with ``normal_cam`` a unit
+    vector pointing away from the camera, so ``offset_cam`` > 0 is the
+    distance from the optical centre to the plane (units of the
+    coordinates). ``point_world``/``normal_world``: the plane in the points'
+    frame. ``residuals_px``: observed − reprojected pixels (N, 2);
+    ``std_normal_deg``/``std_offset``: 1-σ uncertainties from the LM
+    covariance (NaN with no redundancy, e.g. with exactly 3 points).
+    """
+
+    pose: Pose
+    normal_cam: np.ndarray
+    offset_cam: float
+    point_world: np.ndarray
+    normal_world: np.ndarray
+    pixels: np.ndarray
+    residuals_px: np.ndarray
+    rms_px: float
+    max_px: float
+    std_normal_deg: float
+    std_offset: float
+    method: str
+    names: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+
+    def to_report(self) -> dict[str, Any]:
+        """JSON-ready summary (for report.json): residuals and the plane."""
+        return {
+            "method": self.method,
+            "n_points": int(len(self.pixels)),
+            "rms_px": float(self.rms_px),
+            "max_px": float(self.max_px),
+            "residuals_px": {n: [float(r[0]), float(r[1])] for n, r in zip(self.names, self.residuals_px, strict=True)},
+            "normal_cam": [float(x) for x in self.normal_cam],
+            "offset_cam": float(self.offset_cam),
+            "std_normal_deg": float(self.std_normal_deg),
+            "std_offset": float(self.std_offset),
+            "rvec": [float(x) for x in self.pose.rvec],
+            "tvec": [float(x) for x in self.pose.t],
+            "warnings": list(self.warnings),
+        }
+
+
+def _plane_frame(points: np.ndarray, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Coplanar 3-D points → (local 2-D coordinates, origin c, basis B) with X = B·[a, b, 0] + c."""
+    c = points.mean(axis=0)
+    _, s, Vt = np.linalg.svd(points - c)
+    if s[1] <= 1e-6 * s[0]:
+        raise GnomonError(f"{where}: the points are collinear; a plane needs at least 4 points not on one line")
+    extent = float(np.max(np.linalg.norm(points - c, axis=1)))
+    off = float(np.max(np.abs((points - c) @ Vt[2])))
+    if off > 1e-3 * extent:
+        raise GnomonError(f"{where}: the points are not coplanar (one lies {off:.4g} off their best plane)")
+    B = Vt.T.copy()
+    if np.linalg.det(B) < 0:
+        B[:, 2] *= -1
+    local = (points - c) @ B
+    return local[:, :2], c, B
+
+
+def _pixel_residuals(camera, rvec, tvec, obj, pixels):
+    R = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3))[0]
+    return pixels - camera.project(obj @ R.T + tvec)
+
+
+def _fit_pose_planar(camera, local2d: np.ndarray, pixels: np.ndarray, where: str):
+    """Planar points (plane coordinates, z = 0) → (rvec, tvec, lm result)."""
+    obj = np.concatenate([local2d, np.zeros((len(local2d), 1))], axis=1)
+    rays = camera.rays(pixels)
+    if not np.all(np.isfinite(rays)):
+        raise GnomonError(f"{where}: some pixels have no ray in the camera model (outside its valid field)")
+    norm = rays[:, :2] / rays[:, 2:3]
+    n_sol, rvecs, tvecs, _ = cv2.solvePnPGeneric(
+        np.ascontiguousarray(obj, dtype=np.float64).reshape(-1, 1, 3),
+        np.ascontiguousarray(norm, dtype=np.float64).reshape(-1, 1, 2),
+        np.eye(3),
+        None,
+        flags=cv2.SOLVEPNP_IPPE,
+    )
+    if n_sol == 0:
+        raise GnomonError(f"{where}: no pose fits the points (check their order and coordinates)")
+    # IPPE returns both planar solutions: keep the one that reprojects best in pixels.
+    best = None
+    for rv, tv in zip(rvecs, tvecs, strict=True):
+        res = _pixel_residuals(camera, rv, np.asarray(tv).ravel(), obj, pixels)
+        err = float(np.sum(np.nan_to_num(res, nan=1e6) ** 2))
+        if best is None or err < best[0]:
+            best = (err, np.asarray(rv, dtype=np.float64).ravel(), np.asarray(tv, dtype=np.float64).ravel())
+    assert best is not None  # n_sol > 0 solutions were compared
+    return _refine(camera, obj, pixels, best[1], best[2])
+
+
+def _refine(camera, obj, pixels, rvec, tvec):
+    """The pose (rvec, tvec) minimising the pixel residuals, from a closed-form start; the fit (its
+    residuals and their Jacobian at the solution, for the pose's covariance)."""
+    def fun(p):
+        return np.nan_to_num(_pixel_residuals(camera, p[:3], p[3:], obj, pixels).ravel(), nan=1e6)
+
+    sol = levenberg_marquardt(fun, np.concatenate([rvec, tvec]))
+    return sol.x[:3], sol.x[3:], sol
+
+
+def _plane_from_params(p: np.ndarray) -> tuple[np.ndarray, float]:
+    """(rvec, tvec) of a plane frame → (unit normal away from the camera, distance)."""
+    R = cv2.Rodrigues(p[:3].reshape(3))[0]
+    n = R[:, 2]
+    d = float(n @ p[3:])
+    return (n, d) if d >= 0 else (-n, -d)
+
+
+def fit_plane_pose(
+    camera,
+    points: np.ndarray,
+    pixels: np.ndarray,
+    *,
+    names: Sequence[str] | None = None,
+    method: str = "points",
+    source: str = "image",
+) -> PlanePose:
+    """Pose of a plane from ≥ 4 of its points and their pixels.
+
+    ``camera``: any model with ``project``/``rays`` (OpenCVCamera,
+    TsaiCamera). ``points``: (N, 2) coordinates on the plane, or (N, 3)
+    coplanar world coordinates; ``pixels``: (N, 2) observed (distorted).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    pix = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    names = tuple(names) if names is not None else tuple(f"p{i}" for i in range(len(pts)))
+    where = f"{source}: plane ({method})"
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3):
+        raise GnomonError(f"{where}: coordinates must be (N, 2) plane or (N, 3) world coordinates, "
+                          f"got shape {pts.shape}")
+    if len(pts) != len(pix):
+        raise GnomonError(f"{where}: {len(pts)} points but {len(pix)} pixels")
+    if len(pts) < 4:
+        raise GnomonError(f"{where}: a plane's pose needs at least 4 points (markers), got {len(pts)}")
+    if pts.shape[1] == 2:
+        c, B = np.zeros(3), np.eye(3)
+        _s = np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False)
+        if _s[1] <= 1e-6 * _s[0]:
+            raise GnomonError(f"{where}: the points are collinear; a plane needs at least 4 points not on one line")
+        local = pts
+    else:
+        local, c, B = _plane_frame(pts, where)
+    rvec_l, tvec_l, sol = _fit_pose_planar(camera, local, pix, where)
+    # Local plane frame → camera; then the points' frame → camera: X_cam = R_l·Bᵀ·(X − c) + t_l.
+    R_l = cv2.Rodrigues(rvec_l)[0]
+    R = R_l @ B.T
+    t = tvec_l - R @ c
+    pose = Pose(R=R, t=t)
+    n_cam, d_cam = _plane_from_params(np.concatenate([rvec_l, tvec_l]))
+    obj_l = np.concatenate([local, np.zeros((len(local), 1))], axis=1)
+    res = _pixel_residuals(camera, rvec_l, tvec_l, obj_l, pix)
+    lengths = np.linalg.norm(res, axis=1)
+    # Covariance of (rvec, tvec) from the LM Jacobian, propagated to the plane.
+    m, k = sol.jac.shape
+    std_n = std_d = float("nan")
+    if m > k:
+        s2 = float(np.sum(sol.fun**2)) / (m - k)
+        cov = np.linalg.pinv(sol.jac.T @ sol.jac) * s2
+        p0 = np.concatenate([rvec_l, tvec_l])
+        J = np.zeros((4, 6))
+        for i in range(6):
+            h = 1e-7 * max(1.0, abs(p0[i]))
+            dp = np.zeros(6)
+            dp[i] = h
+            n1, d1 = _plane_from_params(p0 + dp)
+            n0, d0 = _plane_from_params(p0 - dp)
+            J[:3, i] = (n1 - n0) / (2 * h)
+            J[3, i] = (d1 - d0) / (2 * h)
+        C = J @ cov @ J.T
+        std_n = float(np.degrees(np.sqrt(max(np.trace(C[:3, :3]), 0.0))))
+        std_d = float(np.sqrt(max(C[3, 3], 0.0)))
+    warns = []
+    if len(pts) == 4:
+        warns.append(f"{where}: only 4 points: the residuals barely test the fit (2 degrees of freedom); "
+                     "more markers give an honest check")
+    normal_world = B[:, 2] if (R @ B[:, 2]) @ n_cam > 0 else -B[:, 2]
+    return PlanePose(
+        pose=pose,
+        normal_cam=n_cam,
+        offset_cam=d_cam,
+        point_world=c.copy(),
+        normal_world=normal_world,
+        pixels=pix,
+        residuals_px=res,
+        rms_px=float(np.sqrt(np.mean(lengths**2))),
+        max_px=float(lengths.max()),
+        std_normal_deg=std_n,
+        std_offset=std_d,
+        method=method,
+        names=names,
+        warnings=tuple(warns),
+    )
+
+
+# --------------------------------------------------------------------------- the three ways
+
+
+def plane_pose_from_markers(
+    image: np.ndarray,
+    camera,
+    plane_points: np.ndarray,
+    hints: np.ndarray,
+    *,
+    names: Sequence[str] | None = None,
+    search_px: float = 30.0,
+    radius_px: int = 6,
+    min_contrast: float = 20.0,
+    source: str = "image",
+    exact: np.ndarray | None = None,
+) -> PlanePose:
+    """A reference plane from ≥ 4 printed 2×2 markers.
+
+    ``image``: the frame (grey or BGR array); ``camera``: the calibrated model;
+    ``plane_points``: (N, 2) marker centres on the plane, or (N, 3) coplanar
+    world coordinates; ``hints``: (N, 2) approximate pixels (from the field
+    log); ``names``: marker names for messages. Each marker is found within
+    ``search_px`` of its hint (see :func:`find_marker`), then the pose is
+    fitted (:func:`fit_plane_pose`). ``exact``: (N,) bool, hints that are
+    already exact pixels (a clicked cross) and are used as given.
+    """
+    pts = np.asarray(plane_points, dtype=np.float64)
+    hints = np.asarray(hints, dtype=np.float64).reshape(-1, 2)
+    names = list(names) if names is not None else [f"m{i}" for i in range(len(hints))]
+    if len(pts) != len(hints) or len(names) != len(hints):
+        raise GnomonError(f"{source}: {len(pts)} marker coordinates, {len(hints)} hints and {len(names)} names")
+    if len(hints) < 4:
+        raise GnomonError(f"{source}: a plane from markers needs at least 4 markers, got {len(hints)}")
+    exact = np.zeros(len(hints), dtype=bool) if exact is None else np.asarray(exact, dtype=bool)
+    pix = hints.copy()
+    refine = np.flatnonzero(~exact)
+    if refine.size:
+        dets = find_markers(image, hints[refine], names=[names[i] for i in refine], search_px=search_px,
+                            radius_px=radius_px, min_contrast=min_contrast, source=source)
+        pix[refine] = np.array([d.pixel for d in dets])
+    return fit_plane_pose(camera, pts, pix, names=names, method="markers", source=source)
+
+
+def plane_pose_from_chessboard(
+    image: np.ndarray,
+    camera,
+    board: tuple[int, int],
+    square: float,
+    *,
+    source: str = "image",
+) -> PlanePose:
+    """A reference plane from a chessboard lying on it.
+
+    ``board``: inner corners (cols, rows); ``square`` in world units. The
+    plane's frame is the board's: origin at the first inner corner OpenCV
+    reports, x along the rows, z = 0 on the board. A board with cols and rows
+    of the same parity looks the same turned by 180°, so its origin may land
+    on either end: the result then carries a warning.
+    """
+    from gnomon.camera.calibration import board_points, detect_chessboard
+
+    corners = detect_chessboard(image, board)
+    if corners is None:
+        raise GnomonError(f"{source}: no {board[0]}x{board[1]} chessboard found (inner corners)")
+    obj = board_points(board[0], board[1], square)[:, :2]
+    names = [f"corner {i}" for i in range(len(obj))]
+    res = fit_plane_pose(camera, obj, corners, names=names, method="chessboard", source=source)
+    if (board[0] - board[1]) % 2 == 0:
+        w = (f"{source}: a {board[0]}x{board[1]} board is symmetric under a half-turn: "
+             "its origin corner is ambiguous (use e.g. 9x6)")
+        res = replace(res, warnings=res.warnings + (w,))
+    return res
+
+
+def plane_pose_from_pose(rvec: Sequence[float], tvec: Sequence[float]) -> PlanePose:
+    """A reference plane given explicitly: the pose of its frame (z = 0 on the plane) in the camera frame.
+
+    ``rvec`` Rodrigues vector (radians), ``tvec`` in world units. No
+    residuals (NaN): nothing was measured.
+    """
+    pose = Pose.from_rvec_tvec(np.asarray(rvec, dtype=np.float64), np.asarray(tvec, dtype=np.float64))
+    n, d = _plane_from_params(np.concatenate([pose.rvec, pose.t]))
+    return PlanePose(
+        pose=pose,
+        normal_cam=n,
+        offset_cam=d,
+        point_world=np.zeros(3),
+        normal_world=np.array([0.0, 0.0, 1.0]) if pose.R[:, 2] @ n > 0 else np.array([0.0, 0.0, -1.0]),
+        pixels=np.zeros((0, 2)),
+        residuals_px=np.zeros((0, 2)),
+        rms_px=float("nan"),
+        max_px=float("nan"),
+        std_normal_deg=float("nan"),
+        std_offset=float("nan"),
+        method="pose",
+    )
+
+
+def plane_in_camera(point_world: np.ndarray, normal_world: np.ndarray,
+                    world_to_camera: Pose) -> tuple[np.ndarray, float]:
+    """A plane given in world coordinates → (unit normal, offset) in the camera frame, offset ≥ 0.
+
+    For a second plane (e.g. a wall) known in the world frame that another
+    plane (the desk) fixed.
+    """
+    n = world_to_camera.R @ (np.asarray(normal_world, dtype=np.float64) / np.linalg.norm(normal_world))
+    d = float(n @ world_to_camera.world_to_camera(np.asarray(point_world, dtype=np.float64)))
+    return (n, d) if d >= 0 else (-n, -d)
