@@ -29,7 +29,7 @@ def test_scan_in_process_matches_the_files_the_cli_wrote(desk_scan, in_memory) -
     np.testing.assert_array_equal(s.points, np.stack([v["x"], v["y"], v["z"]], axis=1))
     np.testing.assert_array_equal(s.normals, np.stack([v["nx"], v["ny"], v["nz"]], axis=1))
     np.testing.assert_array_equal(s.colors, np.stack([v["red"], v["green"], v["blue"]], axis=1))
-    np.testing.assert_array_equal(s.point_sigma, v["sigma"])
+    np.testing.assert_array_equal(s.point_sigma, v["scalar_sigma"])
     m = plyfile.PlyData.read(str(files / "mesh.ply"))
     np.testing.assert_array_equal(s.mesh.faces, np.stack(m["face"].data["vertex_indices"]))
     report = json.loads((files / "report.json").read_text())
@@ -110,7 +110,8 @@ def test_the_cli_scan_is_the_api_scan(tiny_capture, tmp_path, monkeypatch, capsy
     args, kwargs, s = calls[0]
     assert args == (tiny_capture, out)
     assert kwargs == {"rrd": False, "rrd_path": None, "view": False, "progress": False, "frame_stride": 3,
-                      "tiles": None, "scheduler": None, "workers": None, "mesh_formats": None}
+                      "tiles": None, "scheduler": None, "workers": None, "mesh_formats": None,
+                      "cloud_formats": None, "crs": None}
     assert s.folder == out and not (out / "scan.rrd").exists()
     v = plyfile.PlyData.read(str(out / "points.ply"))["vertex"].data
     np.testing.assert_array_equal(s.points, np.stack([v["x"], v["y"], v["z"]], axis=1))

@@ -63,13 +63,13 @@ def test_points_have_unit_normals_towards_the_camera(desk_scan) -> None:
     # On the bare desk (world z = 0, z up) the normal is +z, tilted by the depth noise: σ over
     # the two-pixel baseline of a central difference, tan τ = √2·σ / (2·spacing).
     gt = np.load(desk_scan / "capture" / "ground_truth.npz")
-    u, vv = np.rint(v["u"]).astype(int), np.rint(v["v"]).astype(int)
+    u, vv = np.rint(v["scalar_u"]).astype(int), np.rint(v["scalar_v"]).astype(int)
     desk = gt["object_id"][vv, u] == 0
     assert desk.sum() > 20_000
     grid = np.full((300, 400, 3), np.nan)
     grid[vv, u] = xyz
     spacing = np.nanmedian(np.linalg.norm(grid[:, 1:] - grid[:, :-1], axis=2))
-    tau = np.degrees(np.arctan(np.sqrt(2) * np.median(v["sigma"][desk]) / (2 * spacing)))
+    tau = np.degrees(np.arctan(np.sqrt(2) * np.median(v["scalar_sigma"][desk]) / (2 * spacing)))
     angle = np.degrees(np.arccos(np.clip(n[desk, 2], -1, 1)))
     assert np.median(angle) < 1.5 * tau, (np.median(angle), tau)
     # the noise averages out: the mean normal is +z within a degree

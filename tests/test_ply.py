@@ -51,12 +51,12 @@ def test_points_header_layout(tmp_path):
         "element vertex 10",
         "property float x", "property float y", "property float z",
         "property uchar red", "property uchar green", "property uchar blue",
-        "property float sigma",
-        "property float u", "property float v",
+        "property float scalar_sigma", "property float quality",
+        "property float scalar_u", "property float scalar_v",
     ]
-    # packed records: 3*4 + 3 + 4 + 2*4 = 27 bytes per vertex
+    # packed records: 3*4 + 3 + 2*4 + 2*4 = 31 bytes per vertex
     body = p.read_bytes().split(b"end_header\n", 1)[1]
-    assert len(body) == 10 * 27
+    assert len(body) == 10 * 31
     assert body[:4] == xyz[0, 0].astype("<f4").tobytes()
 
 

@@ -168,7 +168,7 @@ def test_entities(scan):
         "/world/camera", "/world/camera/image", "/world/camera/image/edges", "/world/shadow_plane",
         "/world/planes/ground", "/world/planes/back_wall", "/world/light", "/world/points", "/world/mesh",
         "/maps/shadow_time", "/maps/depth", "/maps/sigma", "/log", "/world", "/world/camera/depth",
-        "/maps/coverage", "/metrics/coverage", "/metrics/depth_rms_mm", "/metrics/timings/total_s",
+        "/maps/coverage", "/metrics/coverage", "/metrics/depth_rms_mm", "/metrics/timings/total_s", "/summary",
         "/metrics/timings/kernel_s",
     }
     assert set(data) - {"/__properties"} == expected
@@ -190,7 +190,7 @@ def test_recording_properties_and_blueprint(scan):
     ]
     assert sorted(v.strip("/") for v in views) == sorted(
         ["world", "world/camera/image", "maps/shadow_time", "live/shadow_time", "maps/depth", "maps/sigma",
-         "maps/coverage", "log", "metrics"]
+         "maps/coverage", "log", "summary", "metrics"]
     )
 
 

@@ -114,3 +114,50 @@ def test_scan_recording_has_coverage_and_depth_under_the_camera(scanned) -> None
     assert "DepthImage:buffer" in seen["/world/camera/depth"]
     assert {"SegmentationImage:buffer", "AnnotationContext:context"} <= seen["/maps/coverage"]
     assert len(COVERAGE_CLASSES) == 8
+
+
+@pytest.mark.slow
+def test_the_recording_opens_in_its_own_layout(scanned, tmp_path) -> None:
+    """The file carries the designed blueprint as the active one (a viewer opens it in that layout, not in
+    its automatic grid): rerun's own reader lists the blueprint's activation command."""
+    config = tmp_path / "config" / "rerun"
+    config.mkdir(parents=True)
+    (config / "analytics.json").write_text('{"analytics_enabled": false}')  # no first-run banner, no network
+    env = {"HOME": str(tmp_path), "XDG_CONFIG_HOME": str(tmp_path / "config"), "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run([sys.executable, "-m", "rerun", "rrd", "print", "-v", str(scanned / "scan" / "scan.rrd")],
+                          capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr
+    commands = [line for line in proc.stdout.splitlines() if line.startswith("BlueprintActivationCommand")]
+    assert len(commands) == 1 and "make_active: true" in commands[0] and "make_default: true" in commands[0]
+
+
+@pytest.mark.slow
+def test_warnings_sit_at_their_frames_and_the_metrics_are_a_table(tmp_path) -> None:
+    """A sun scan's cloud dips are warned about at the frames of the dips; the run's other warnings at frame
+    0; the metrics as a table the Metrics view shows."""
+    import shutil
+    from pathlib import Path
+
+    from rerun.chunk import RrdReader
+
+    shutil.copytree(Path(__file__).resolve().parents[1] / "field_logs" / "facade_sun_small", tmp_path / "cap")
+    out = tmp_path / "scan"
+    assert main(["scan", str(tmp_path / "cap" / "field_log.toml"), "--out", str(out), "--quiet"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    levelled = report["inputs"]["levelled_frames"]
+    assert len(levelled) >= 3  # the capture's three cloud dips
+    runs = [f for i, f in enumerate(levelled) if i == 0 or levelled[i - 1] != f - 1]
+    found: dict[str, list[int]] = {}
+    summary = []
+    for chunk in RrdReader(out / "scan.rrd").stream():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == "/log":
+            for f, t in zip(batch.column("frame").to_pylist(), batch.column("TextLog:text").to_pylist(), strict=True):
+                if t:
+                    found.setdefault(t[0], []).append(f)
+        elif chunk.entity_path == "/summary":
+            summary += [t[0] for t in batch.column("TextDocument:text").to_pylist() if t]
+    clouds = [w for w in report["warnings"] if "illumination dips" in w]
+    assert len(clouds) == 1 and sorted(found[clouds[0]]) == runs[:8]
+    assert all(found[w] == [0] for w in report["warnings"] if w not in clouds)
+    assert summary and f"| coverage/points | {report['coverage']['points']} |" in summary[-1]

@@ -11,10 +11,11 @@ from pathlib import Path
 import numpy as np
 
 from gnomon.geometry.surface import Surface
+from gnomon.outputs.formats import OutputContext
 from gnomon.util import atomic
 
 
-def write_scan_xyz(folder: Path, surface: Surface, units: str) -> None:
-    """mesh.xyz: one ``x y z`` line per mesh vertex (world frame, ``units``), after a comment naming them."""
+def write_scan_xyz(folder: Path, surface: Surface, ctx: OutputContext) -> None:
+    """mesh.xyz: one ``x y z`` line per mesh vertex (world frame, ``ctx.units``), after a comment naming them."""
     rows = "\n".join(" ".join(f"{c:.6f}" for c in v) for v in np.asarray(surface.mesh.vertices, dtype=np.float64))
-    atomic.write_text(folder / "mesh.xyz", f"# gnomon mesh vertices, units {units}\n{rows}\n")
+    atomic.write_text(folder / "mesh.xyz", f"# gnomon mesh vertices, units {ctx.units}\n{rows}\n")

@@ -170,7 +170,8 @@ def _tracker(field_log: str | os.PathLike, tiles: str | None, scheduler: str | N
 def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, rrd: bool | None = None,
          rrd_path: str | os.PathLike | None = None, view: bool = False, progress: bool = False,
          frame_stride: int = 10, tiles: str | None = None, scheduler: str | None = None,
-         workers: int | None = None, mesh_formats: tuple[str, ...] | None = None) -> Scan:
+         workers: int | None = None, mesh_formats: tuple[str, ...] | None = None,
+         cloud_formats: tuple[str, ...] | None = None, crs: str | None = None) -> Scan:
     """Scan the capture a field log describes; return the result, and write it if ``out`` is given.
 
     ``field_log`` the capture's TOML field log (format: field_logs/README.md;
@@ -184,7 +185,9 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
     either way); ``frame_stride`` keep every n-th frame image in it.
     ``progress`` a progress bar on stderr. ``mesh_formats`` the mesh's files among
     ``("ply", "obj", "stl")`` (mesh.ply always; default: the field log's ``[output] mesh_formats``,
-    else mesh.ply only).
+    else mesh.ply only). ``cloud_formats`` survey point clouds among ``("las", "laz")`` (``()``: none;
+    default: the field log's ``[output] cloud_formats``, else LAZ for a sun scan, none for a desk scan), in
+    ``crs`` (a sun scan's; default: the field log's ``[output] crs``, else the site's UTM zone).
 
     ``tiles`` ``"RxC"``: track R × C image tiles on Dask workers and stitch
     the maps (the same result; ``pip install "gnomon[dask]"``, see
@@ -211,9 +214,10 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
         if out is not None:
             opts = ScanOptions(rrd=True if rrd is None else bool(rrd), progress=progress,
                                rrd_path=None if rrd_path is None else Path(rrd_path), view=view,
-                               frame_stride=frame_stride, track=track, mesh_formats=formats)
+                               frame_stride=frame_stride, track=track, mesh_formats=formats,
+                               cloud_formats=_cloud_formats(cloud_formats), crs=crs)
             return _from_result(run_scan(log, Path(out), opts), Path(out))
-        setup, source = prepare_scan(log, formats)
+        setup, source = prepare_scan(log, formats, _cloud_formats(cloud_formats), crs)
         result = scan_in_memory(setup, source, None, progress=progress, frame_stride=frame_stride,
                                 **({} if track is None else {"track": track}))
         return _from_result(result, None)
@@ -221,13 +225,27 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
 
 def _mesh_formats(value: Any) -> tuple[str, ...] | None:
     """scan()'s ``mesh_formats`` checked (None: the field log's)."""
-    from gnomon.outputs.formats import FORMATS, mesh_formats
+    from gnomon.outputs.formats import mesh_formats, names_of
 
     if value is None:
         return None
     chosen = mesh_formats(list(value) if isinstance(value, (list, tuple)) else value)
     if chosen is None:
-        raise GnomonError(f"mesh_formats: expected 'all' or formats among {', '.join(FORMATS)}, got {value!r}")
+        raise GnomonError(f"mesh_formats: expected 'all' or formats among {', '.join(names_of('mesh'))}, "
+                          f"got {value!r}")
+    return chosen
+
+
+def _cloud_formats(value: Any) -> tuple[str, ...] | None:
+    """scan()'s ``cloud_formats`` checked (None: the field log's; () none)."""
+    from gnomon.outputs.formats import cloud_formats, names_of
+
+    if value is None:
+        return None
+    chosen = cloud_formats(list(value) if isinstance(value, (list, tuple)) else value)
+    if chosen is None:
+        raise GnomonError(f"cloud_formats: expected 'all' or formats among {', '.join(names_of('cloud'))}, "
+                          f"got {value!r}")
     return chosen
 
 

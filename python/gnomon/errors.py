@@ -7,6 +7,8 @@ code 2. Anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 
 class GnomonError(Exception):
     """A problem with the user's input, reported as one line, exit code 2."""
@@ -45,3 +47,15 @@ class KernelLutError(KernelError):
 
 class KernelFramesError(KernelError, FrameError):
     """No frames before ``finish``, or more frames than one tracker can index (``NoFrames``, ``TooManyFrames``)."""
+
+
+class FrameNote(str):
+    """A warning about particular frames of the capture: the text, and the frames (capture indices) it
+    concerns, so that a recording shows it at those frames. Everywhere else it is the plain string."""
+
+    frames: tuple[int, ...]
+
+    def __new__(cls, text: str, frames: Iterable[int] = ()) -> FrameNote:
+        note = super().__new__(cls, text)
+        note.frames = tuple(int(f) for f in frames)
+        return note

@@ -152,9 +152,10 @@ SITE = '''\
 # Where the world origin is (the ground's first marker), and how the world frame is turned.
 latitude = nan  # degrees north: fill in
 longitude = nan  # degrees east: fill in
-altitude = 0.0  # m above sea level
+altitude = 0.0  # m above sea level (the geoid: EGM2008; altitude_datum = "ellipsoidal" for a GNSS height)
 timezone = "UTC"  # IANA name (e.g. "Europe/Zurich") or offset, for timestamps without one
-heading_deg = nan  # the compass heading of the world x axis (the ground markers' x), degrees: fill in,
+heading_deg = nan  # the heading of the world x axis (the ground markers' x), degrees clockwise from TRUE
+                   # north: fill in (from a compass: add heading_north = "magnetic" and declination_deg),
                    # or delete it and measure it from a vertical pole's shadow with [gnomon] below
 
 # [gnomon]  # the heading from a vertical pole seen in one frame (instead of heading_deg)

@@ -26,6 +26,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="the mesh's files: 'all', or formats joined by commas among ply (always), obj (with "
                    "its .mtl and .png texture) and stl; default: the field log's [output] mesh_formats, "
                    "else ply only")
+    p.add_argument("--cloud-formats", type=cloud_formats_option, default=None, metavar="LIST",
+                   help="survey point clouds: 'all', 'none', or formats joined by commas among las and laz (with "
+                   "colour, normal, sigma and pixel per point); default: the field log's [output] cloud_formats, else "
+                   "laz for a sun scan (in a projected CRS) and none for a desk scan")
+    p.add_argument("--crs", default=None, metavar="CRS",
+                   help="a sun scan's survey files in this coordinate reference system (e.g. EPSG:2056; anything "
+                   "pyproj reads); default: the field log's [output] crs, else the site's UTM zone")
     add_recording_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     tiles = p.add_argument_group("tiled scan on Dask (pip install \"gnomon[dask]\"; see docs/batch.md)")
@@ -39,11 +46,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def mesh_formats_option(value: str) -> tuple[str, ...]:
     """--mesh-formats: the formats it names (argparse's error otherwise)."""
-    from gnomon.outputs.formats import FORMATS, mesh_formats
+    from gnomon.outputs.formats import mesh_formats, names_of
 
     chosen = mesh_formats(value)
     if chosen is None:
-        raise argparse.ArgumentTypeError(f"expected 'all' or formats among {', '.join(FORMATS)}, got {value!r}")
+        raise argparse.ArgumentTypeError(f"expected 'all' or formats among {', '.join(names_of('mesh'))}, "
+                                         f"got {value!r}")
+    return chosen
+
+
+def cloud_formats_option(value: str) -> tuple[str, ...]:
+    """--cloud-formats: the formats it names, or none (argparse's error otherwise)."""
+    from gnomon.outputs.formats import cloud_formats, names_of
+
+    chosen = () if value.strip().lower() == "none" else cloud_formats(value)
+    if chosen is None:
+        raise argparse.ArgumentTypeError(f"expected 'all', 'none' or formats among {', '.join(names_of('cloud'))}, "
+                                         f"got {value!r}")
     return chosen
 
 
@@ -53,7 +72,8 @@ def run(args: argparse.Namespace) -> int:
     out = args.out if args.out is not None else args.field_log.parent / "scan"
     s = api.scan(args.field_log, out, rrd=not args.no_rrd, rrd_path=args.rrd, view=args.view,
                  progress=not args.quiet, frame_stride=args.frame_stride, tiles=args.tiles,
-                 scheduler=args.scheduler, workers=args.workers, mesh_formats=args.mesh_formats)
+                 scheduler=args.scheduler, workers=args.workers, mesh_formats=args.mesh_formats,
+                 cloud_formats=args.cloud_formats, crs=args.crs)
     if args.tiles is not None:
         info = s.report["tracking"]
         peaks = [p for p in info["worker_peak_rss_bytes"] if p is not None]

@@ -37,7 +37,8 @@ from gnomon.config.specs import (
 from gnomon.config.tables import Table, boolean
 from gnomon.errors import FieldLogError
 from gnomon.light import TIMESTAMP_MODES
-from gnomon.outputs.formats import DEFAULT_MESH_FORMATS, FORMATS, mesh_formats
+from gnomon.outputs.crs import ALTITUDE_DATUMS, GEOIDS
+from gnomon.outputs.formats import DEFAULT_MESH_FORMATS, cloud_formats, mesh_formats, names_of
 from gnomon.util import toml_io
 
 
@@ -271,14 +272,33 @@ def _parse_site(t: Table | None) -> SiteSpec | None:
     if t is None:
         return None
     opt = lambda key, fn: fn(key) if key in t.data else None  # noqa: E731
+    latitude, longitude, altitude = t.number("latitude"), t.number("longitude"), t.number("altitude", 0.0)
+    timezone = opt("timezone", t.string)
+    pressure = opt("pressure_pa", lambda k: t.number(k, positive=True))
+    temperature = opt("temperature_c", t.number)
+    heading = opt("heading_deg", t.number)
+    north = t.string("heading_north", "true", ("true", "magnetic"))
+    declination = opt("declination_deg", t.number)
+    if north == "magnetic":
+        if declination is None:
+            raise t.error("declination_deg", "missing: a heading from magnetic north needs the site's magnetic "
+                                              "declination (degrees, east positive; e.g. from NOAA's calculator)")
+        if heading is not None:
+            heading = (heading + declination) % 360.0  # from true north, as the scan uses it
+    elif declination is not None:
+        raise t.error("declination_deg", "is for heading_north = \"magnetic\" (heading_deg is from true north)")
     site = SiteSpec(
-        latitude_deg=t.number("latitude"),
-        longitude_deg=t.number("longitude"),
-        altitude_m=t.number("altitude", 0.0),
-        timezone=opt("timezone", t.string),
-        pressure_pa=opt("pressure_pa", lambda k: t.number(k, positive=True)),
-        temperature_c=opt("temperature_c", t.number),
-        heading_deg=opt("heading_deg", t.number),
+        latitude_deg=latitude,
+        longitude_deg=longitude,
+        altitude_m=altitude,
+        timezone=timezone,
+        pressure_pa=pressure,
+        temperature_c=temperature,
+        heading_deg=heading,
+        altitude_datum=t.string("altitude_datum", "orthometric", ALTITUDE_DATUMS),
+        geoid=t.string("geoid", "EGM2008", tuple(GEOIDS)),
+        heading_north=north,
+        declination_deg=declination,
     )
     if not -90.0 <= site.latitude_deg <= 90.0:
         raise t.error("latitude", f"{site.latitude_deg} is outside ±90°")
@@ -331,9 +351,20 @@ def _parse_output(t: Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec:
         raw = t.take("mesh_formats")
         chosen = mesh_formats(raw)
         if chosen is None:
-            raise t.error("mesh_formats", f"expected \"all\" or a list of {', '.join(map(repr, FORMATS))}, "
+            raise t.error("mesh_formats", f"expected \"all\" or a list of {', '.join(map(repr, names_of('mesh')))}, "
                                           f"got {raw!r}")
         formats = chosen
+    clouds = None
+    if "cloud_formats" in t.data:
+        raw = t.take("cloud_formats")
+        clouds = cloud_formats(raw)
+        if clouds is None:
+            raise t.error("cloud_formats", f"expected \"all\" or a list of {', '.join(map(repr, names_of('cloud')))}"
+                                           f", got {raw!r}")
+    crs = None
+    if "crs" in t.data:
+        crs = t.string("crs")
+        _check_crs(t, crs)
     box = None
     if "crop_box" in t.data:
         raw = t.take("crop_box")
@@ -358,7 +389,20 @@ def _parse_output(t: Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec:
         raise t.error("crop_above", "crop_min_height/crop_max_height need crop_above (a [[planes]] name)")
     max_sigma = t.number("max_sigma", positive=True) if "max_sigma" in t.data else None
     t.done()
-    return OutputSpec(box, above, low, high, formats, max_sigma)
+    return OutputSpec(box, above, low, high, formats, max_sigma, clouds, crs)
+
+
+def _check_crs(t: Table, crs: str) -> None:
+    """[output] crs: a coordinate reference system pyproj knows, with a horizontal part in length units."""
+    from pyproj import CRS
+    from pyproj.exceptions import CRSError
+
+    try:
+        parsed = CRS.from_user_input(crs)
+    except CRSError as exc:
+        raise t.error("crs", f"{crs!r} is not a coordinate reference system pyproj knows ({exc})") from None
+    if parsed.is_vertical and not parsed.is_compound:
+        raise t.error("crs", f"{crs!r} is a vertical CRS only; give a projected one (e.g. EPSG:2056)")
 
 
 def load_field_log(path: str | Path, *, without_light: bool = False) -> FieldLog:

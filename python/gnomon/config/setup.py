@@ -33,7 +33,7 @@ from gnomon.util.chi2 import chi2_isf
 
 __all__ = ["FocalFit", "ScanInputs", "ScanSetup", "crop_of", "dip_width_policy", "first_frame", "fit_focal",
            "focal_diagnosis", "frame_source", "marked_points", "plane_region_mask", "resolve_reference_planes",
-           "resolve_scan", "tracker_settings"]
+           "resolve_scan", "site_datum", "tracker_settings"]
 
 
 @dataclass(frozen=True)
@@ -66,8 +66,18 @@ class ScanSetup:
     inputs: ScanInputs
     warnings: tuple[str, ...] = ()
     crop: Crop | None = None  # [output] crop (world frame)
-    mesh_formats: tuple[str, ...] = ("ply",)  # [output] mesh_formats: the mesh's files (fieldlog.MESH_FORMATS)
+    mesh_formats: tuple[str, ...] = ("ply",)  # [output] mesh_formats: the mesh's files (gnomon.outputs.formats)
     dip_width: str = "auto"  # how the dip width was set: see dip_width_policy
+    cloud_formats: tuple[str, ...] = ()  # [output] cloud_formats: the survey files (LAZ by default when georeferenced)
+    crs: str | None = None  # [output] crs: the survey files' CRS (None: the site's UTM zone)
+    site_datum: dict[str, Any] | None = None  # [site]'s altitude datum, geoid and heading's north, for the report
+
+    def georeference(self) -> dict[str, Any] | None:
+        """report.json's ``site``: where the world frame is on Earth (a sun scan), else None."""
+        site = self.light.georeference(self.units)
+        if site is not None and self.site_datum is not None:
+            site.update(self.site_datum)
+        return site
 
 
 def frame_source(log: FieldLog) -> FrameSource:
@@ -93,8 +103,30 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
     s = log.scan
     tracker = dataclasses.replace(tracker_settings(log), second_dips=light.chooses_dips)
     inputs = ScanInputs(log.path, log.camera_file, dict(log.calibration), planes_report)
+    georeferenced = light.georeference(log.capture.units) is not None
+    if log.output.crs is not None and not georeferenced:
+        raise FieldLogError(f"{log.path}: [output] crs: this scan is not georeferenced (its world frame is the "
+                            "scan's own); a CRS needs a sun scan's [site]")
+    clouds = log.output.cloud_formats
+    if clouds is None:
+        clouds = ("laz",) if georeferenced else ()
     return ScanSetup(log.camera, pose, planes, tracker, light, s.edge, s.max_depth_jump, log.capture.units,
-                     inputs, tuple(warnings), crop_of(log), log.output.mesh_formats, dip_width_policy(log))
+                     inputs, tuple(warnings), crop_of(log), log.output.mesh_formats, dip_width_policy(log),
+                     clouds, log.output.crs, site_datum(log))
+
+
+def site_datum(log: FieldLog) -> dict[str, Any] | None:
+    """How the field log's [site] altitude and heading are meant (report.json's ``site``)."""
+    s = log.site
+    if s is None:
+        return None
+    datum: dict[str, Any] = {"altitude_datum": s.altitude_datum, "heading_north": s.heading_north,
+             "datum": "WGS84" if s.altitude_datum == "ellipsoidal" else f"WGS84, heights above {s.geoid}"}
+    if s.altitude_datum == "orthometric":
+        datum["geoid"] = s.geoid
+    if s.declination_deg is not None:
+        datum["declination_deg"] = s.declination_deg
+    return datum
 
 
 def crop_of(log: FieldLog) -> Crop | None:

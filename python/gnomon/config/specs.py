@@ -150,6 +150,9 @@ class OutputSpec:
     ``mesh_formats`` the mesh's files: ``ply`` (always), ``obj`` (with its
     ``.mtl`` and ``.png`` texture), ``stl`` (:func:`mesh_formats`).
     ``max_sigma`` the largest predicted depth σ (world units) a kept point may have.
+    ``cloud_formats`` the cloud's survey files, ``las`` and ``laz`` (None: LAZ for a georeferenced
+    scan, none for a desk scan); ``crs`` their coordinate reference system, anything pyproj reads
+    (None: the site's UTM zone; georeferenced scans only).
     """
 
     crop_box: np.ndarray | None = None
@@ -158,6 +161,8 @@ class OutputSpec:
     crop_max_height: float | None = None
     mesh_formats: tuple[str, ...] = ("ply",)  # the mesh's files (gnomon.outputs.formats); mesh.ply always
     max_sigma: float | None = None
+    cloud_formats: tuple[str, ...] | None = None
+    crs: str | None = None
 
     @property
     def crops(self) -> bool:
@@ -174,7 +179,11 @@ class SiteSpec:
     timezone: str | None = None
     pressure_pa: float | None = None
     temperature_c: float | None = None
-    heading_deg: float | None = None  # compass heading of the world x axis (world z up)
+    heading_deg: float | None = None  # heading of the world x axis from true north, clockwise (world z up)
+    altitude_datum: str = "orthometric"  # altitude above the geoid ("orthometric") or the WGS 84 ellipsoid
+    geoid: str = "EGM2008"  # the geoid an orthometric altitude is above (gnomon.outputs.crs.GEOIDS)
+    heading_north: str = "true"  # [site] heading_deg was given from true north, or from magnetic north
+    declination_deg: float | None = None  # magnetic declination (east positive), with heading_north = "magnetic"
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ import numpy as np
 
 from gnomon.camera.models import CameraModel
 from gnomon.capture.tracking import ShadowTimes, TrackedSequence
+from gnomon.errors import FrameNote
 from gnomon.geometry.reference_lines import ReferenceLines, ReferencePlane, measure_reference_lines
 from gnomon.geometry.uncertainty import line_time_sigma
 
@@ -132,7 +133,7 @@ def best_line_sigma(lines: list[ReferenceLines]) -> np.ndarray:
 
 def skipped_frames_warning(frames: list[int], why: str) -> str:
     more = " …" if len(frames) > 8 else ""
-    return f"{len(frames)} frames skipped as {why} (frames {frames[:8]}{more})"
+    return FrameNote(f"{len(frames)} frames skipped as {why} (frames {frames[:8]}{more})", frames)
 
 
 class LightModel:
@@ -153,6 +154,10 @@ class LightModel:
     def frame_time(self, index: int) -> datetime | np.datetime64 | None:
         """The capture time of capture frame ``index`` (UTC), when the light needs clock time."""
         return None
+
+    def undersampling_advice(self, factor: float) -> str:
+        """What to change so that the shadow edge takes ``factor`` times as many frames to cross a point."""
+        return f"sweep the shadow {factor:.1f}× more slowly, or film {factor:.1f}× as many frames per second"
 
     def georeference(self, units: str) -> dict[str, Any] | None:
         """Where the world frame is on Earth (report.json's ``site``), when the light knows it."""

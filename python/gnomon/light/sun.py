@@ -29,7 +29,7 @@ import pandas as pd
 
 from gnomon.camera.models import CameraModel, Pose
 from gnomon.capture.tracking import ShadowTimes, TrackedSequence, linear
-from gnomon.errors import GnomonError
+from gnomon.errors import FrameNote, GnomonError
 from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines, ReferencePlane
 from gnomon.geometry.triangulation import triangulate
 from gnomon.geometry.uncertainty import MIN_FRAMES_PER_TRANSITION, linear_noise_at_threshold
@@ -197,6 +197,16 @@ class SunLight(LightModel):
     def skipped_frames(self, n_frames: int) -> np.ndarray:
         return np.asarray(self.clock.night, dtype=bool)
 
+    def undersampling_advice(self, factor: float) -> str:
+        """The sun sets the shadow's speed: only the interval between frames can change."""
+        seconds = np.diff(self.clock.times.asi8) / 1e9
+        day = seconds[seconds > 0]
+        if not day.size:
+            return f"take {factor:.1f}× as many frames per hour"
+        interval = float(np.median(day))
+        return (f"take the frames {factor:.1f}× as often (every {interval / factor:.0f} s instead of "
+                f"{interval:.0f} s; the sun sets the shadow's speed)")
+
     def frame_time(self, index: int) -> datetime:
         return self.clock.times[index]
 
@@ -208,10 +218,10 @@ class SunLight(LightModel):
     def after_tracking(self, used: np.ndarray, skipped_dips: list[int]) -> list[str]:
         night = [int(i) for i in np.flatnonzero(self.clock.night)]
         self.timeline = SunTimeline(self.clock.times, np.asarray(used), list(skipped_dips), night)
-        warnings = []
+        warnings: list[str] = []
         if night:
-            warnings.append(f"{len(night)} frames skipped: the sun is below the horizon "
-                            f"(first {self.clock.times[night[0]].isoformat()})")
+            warnings.append(FrameNote(f"{len(night)} frames skipped: the sun is below the horizon "
+                                      f"(first {self.clock.times[night[0]].isoformat()})", night))
         if skipped_dips:
             warnings.append(skipped_frames_warning(list(skipped_dips), "cloud dips"))
         return warnings

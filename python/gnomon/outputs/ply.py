@@ -3,15 +3,18 @@
 Layouts written by Gnomon (the outputs of `gnomon scan` and `gnomon merge`)::
 
     points.ply   element vertex N: float x y z [float nx ny nz] [uchar red green blue]
-                 [float sigma] [float u v]
+                 [float scalar_sigma quality] [float scalar_u scalar_v]
     mesh.ply     element vertex N: float x y z [float nx ny nz] [uchar red green blue]
                  element face M:   list uchar int vertex_indices   (triangles)
 
-Coordinates are float32 in world units (the units go into a ``comment units
-<u>`` line, see :func:`units_comment`); ``sigma`` is the per-point standard
-deviation of the depth in the same units; ``nx ny nz`` the unit surface
-normal (world frame, towards the camera); ``u v`` are the pixel coordinates
-(OpenCV convention, pixel centres at integers) the point came from.
+Coordinates are float32 in world units (the units go into an ``obj_info units <u>`` line and a
+``comment units <u>`` line, see :func:`units_comment`); ``scalar_sigma`` is the per-point standard
+deviation of the depth in the same units, written again as ``quality``; ``nx ny nz`` the unit surface
+normal (world frame, towards the camera); ``scalar_u scalar_v`` are the pixel coordinates (OpenCV
+convention, pixel centres at integers) the point came from. The names are those the tools keep:
+CloudCompare shows each ``scalar_*`` property as a scalar field and drops other names; MeshLab keeps
+``quality`` as the vertex quality and drops the rest. Files of earlier versions (``sigma``, ``u``,
+``v``) are read as well.
 
 Files are written atomically (temporary file beside the target, then rename).
 The float32 arrays are written as they are, so a write/read round trip is
@@ -92,6 +95,8 @@ def _check_comments(comments: Iterable[str]) -> list[str]:
 
 def _header(elements: list[tuple[str, int, list[str]]], comments: list[str]) -> bytes:
     lines = ["ply", "format binary_little_endian 1.0"]
+    # the units also where a PLY header has its own place for the object's description (obj_info)
+    lines += [f"obj_info {c}" for c in comments if c.startswith("units ")]
     lines += [f"comment {c}" if c else "comment" for c in comments]
     for name, count, props in elements:
         lines.append(f"element {name} {count}")
@@ -136,11 +141,11 @@ def _vertex_table(
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
         props += ["property uchar red", "property uchar green", "property uchar blue"]
     if sigma is not None:
-        fields.append(("sigma", "<f4"))
-        props.append("property float sigma")
+        fields += [("scalar_sigma", "<f4"), ("quality", "<f4")]
+        props += ["property float scalar_sigma", "property float quality"]
     if uv is not None:
-        fields += [("u", "<f4"), ("v", "<f4")]
-        props += ["property float u", "property float v"]
+        fields += [("scalar_u", "<f4"), ("scalar_v", "<f4")]
+        props += ["property float scalar_u", "property float scalar_v"]
 
     table = np.empty(n, dtype=np.dtype(fields))  # packed: no alignment padding
     table["x"], table["y"], table["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
@@ -149,9 +154,9 @@ def _vertex_table(
     if rgb is not None:
         table["red"], table["green"], table["blue"] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
     if sigma is not None:
-        table["sigma"] = sigma
+        table["scalar_sigma"] = table["quality"] = sigma
     if uv is not None:
-        table["u"], table["v"] = uv[:, 0], uv[:, 1]
+        table["scalar_u"], table["scalar_v"] = uv[:, 0], uv[:, 1]
     return table, props
 
 
@@ -421,10 +426,14 @@ def read_ply(path: str | os.PathLike) -> PlyData:
         out["normals"] = np.stack([v["nx"], v["ny"], v["nz"]], axis=1)
     if all(k in v for k in ("red", "green", "blue")):
         out["rgb"] = np.stack([v["red"], v["green"], v["blue"]], axis=1).astype(np.uint8, copy=False)
-    if "sigma" in v:
-        out["sigma"] = v["sigma"]
-    if "u" in v and "v" in v:
-        out["uv"] = np.stack([v["u"], v["v"]], axis=1)
+    for name in ("scalar_sigma", "sigma"):  # this version's name, an earlier one's
+        if name in v:
+            out["sigma"] = v[name]
+            break
+    for u_name, v_name in (("scalar_u", "scalar_v"), ("u", "v")):
+        if u_name in v and v_name in v:
+            out["uv"] = np.stack([v[u_name], v[v_name]], axis=1)
+            break
     f = data.get("face", {})
     idx = f.get("vertex_indices", f.get("vertex_index"))
     if idx is not None:

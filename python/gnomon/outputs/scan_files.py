@@ -19,7 +19,7 @@ import numpy as np
 from gnomon import __version__
 from gnomon.geometry.surface import Surface, SurfacePoints
 from gnomon.outputs import ply
-from gnomon.outputs.formats import DEFAULT_MESH_FORMATS, FORMATS
+from gnomon.outputs.formats import DEFAULT_MESH_FORMATS, FORMATS, OutputContext
 from gnomon.outputs.images import write_preview
 from gnomon.outputs.obj import write_texture
 from gnomon.outputs.writers import Writers
@@ -27,18 +27,20 @@ from gnomon.util import atomic
 from gnomon.util.timing import timed
 
 
-def write_surface(folder: Path, surface: Surface, units: str, writers: Writers | None = None,
-                  mesh_formats: tuple[str, ...] = DEFAULT_MESH_FORMATS) -> None:
-    """points.ply, depth.npy, sigma.npy, mesh.png (the colour image) and the mesh in each of
-    ``mesh_formats`` (:data:`gnomon.outputs.formats.FORMATS`; mesh.ply always), each atomically.
+def write_surface(folder: Path, surface: Surface, ctx: OutputContext, writers: Writers | None = None,
+                  mesh_formats: tuple[str, ...] = DEFAULT_MESH_FORMATS, cloud_formats: tuple[str, ...] = ()) -> None:
+    """points.ply, depth.npy, sigma.npy, mesh.png (the colour image), the mesh in each of ``mesh_formats``
+    and the cloud in each of ``cloud_formats`` (:data:`gnomon.outputs.formats.FORMATS`; mesh.ply always),
+    each atomically.
 
     ``writers``: write on its threads (waited for by its owner), else here, concurrently."""
     if writers is None:
         with Writers() as own:
-            write_surface(folder, surface, units, own, mesh_formats)
+            write_surface(folder, surface, ctx, own, mesh_formats, cloud_formats)
         return
-    write_mesh_files(folder, surface, units, writers, mesh_formats)  # the longest first
-    write_point_files(folder, surface, units, writers, texture=not writes_texture(mesh_formats))
+    write_mesh_files(folder, surface, ctx, writers, mesh_formats)  # the longest first
+    write_point_files(folder, surface, ctx, writers, texture=not writes_texture(mesh_formats),
+                      cloud_formats=cloud_formats)
 
 
 def writes_texture(mesh_formats: tuple[str, ...]) -> bool:
@@ -46,10 +48,13 @@ def writes_texture(mesh_formats: tuple[str, ...]) -> bool:
     return any(FORMATS[name].texture for name in mesh_formats)
 
 
-def write_point_files(folder: Path, points: Surface | SurfacePoints, units: str, writers: Writers, *,
-                      texture: bool) -> None:
-    """points.ply, depth.npy, sigma.npy and, with ``texture``, mesh.png (else a mesh format writes it)."""
-    comments = [f"gnomon {__version__}", ply.units_comment(units), "frame world"]
+def write_point_files(folder: Path, points: Surface | SurfacePoints, ctx: OutputContext, writers: Writers, *,
+                      texture: bool, cloud_formats: tuple[str, ...] = ()) -> None:
+    """points.ply, depth.npy, sigma.npy, the cloud in each of ``cloud_formats`` and, with ``texture``,
+    mesh.png (else a mesh format writes it)."""
+    comments = [f"gnomon {__version__}", ply.units_comment(ctx.units), "frame world"]
+    for name in cloud_formats:
+        writers.add(FORMATS[name].write, folder, points, ctx)
     if texture:  # the colour image alone (load_scan's and merge's colours)
         writers.add(write_texture, folder / "mesh.png", points.rgb)
     writers.add(ply.write_points_ply, folder / "points.ply", points.points_world, points.colors,
@@ -58,14 +63,14 @@ def write_point_files(folder: Path, points: Surface | SurfacePoints, units: str,
     writers.add(atomic.save_npy, folder / "sigma.npy", points.sigma)
 
 
-def write_mesh_files(folder: Path, surface: Surface, units: str, writers: Writers,
+def write_mesh_files(folder: Path, surface: Surface, ctx: OutputContext, writers: Writers,
                      mesh_formats: tuple[str, ...]) -> None:
-    """The mesh in each of ``mesh_formats`` and in every always-written format (mesh.ply), the
+    """The mesh in each of ``mesh_formats`` and in every always-written mesh format (mesh.ply), the
     always-written last (the others take longer)."""
     chosen = [FORMATS[name] for name in mesh_formats if not FORMATS[name].always]
-    chosen += [f for f in FORMATS.values() if f.always]
+    chosen += [f for f in FORMATS.values() if f.always and f.kind == "mesh"]
     for fmt in chosen:
-        writers.add(fmt.write, folder, surface, units)
+        writers.add(fmt.write, folder, surface, ctx)
 
 
 def write_maps(folder: Path, surface: Surface | SurfacePoints, shadow_time: np.ndarray, undersampled: np.ndarray,

@@ -20,8 +20,10 @@ from gnomon.config.setup import ScanSetup
 from gnomon.geometry.crop import crop_mask
 from gnomon.geometry.surface import points_from_depth
 from gnomon.geometry.uncertainty import (
+    MIN_FRAMES_PER_TRANSITION,
     undersampled,
 )
+from gnomon.light.base import LightModel
 from gnomon.reconstruct.edges import EdgeResult, Levels
 from gnomon.reconstruct.fusion import beyond_trust
 
@@ -36,6 +38,8 @@ class FusedMaps:
     undersampled: np.ndarray
     unsupported: np.ndarray  # (H, W) a fused depth no neighbour shares (dropped)
     untrusted: np.ndarray  # (H, W) a kept point whose σ the depth-jump test cannot vouch for (counted, kept)
+    # the median number of frames the shadow edge took to cross an under-sampled point (NaN: none is)
+    transition_frames: float = float("nan")
 
 
 def fuse_edges(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: float,
@@ -57,18 +61,29 @@ def fuse_edges(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump
     levels = levels or Levels(tracked)
     imax, imin = levels.imax, levels.imin
     under = np.zeros(keep.shape, dtype=bool)
+    lengths = []
     for e in edges:
-        under |= undersampled(e.slope, imax, imin) & keep
-    return FusedMaps(depth, sigma, keep, conflict, shadow_time, under, unsupported, untrusted)
+        fast = undersampled(e.slope, imax, imin) & keep
+        under |= fast
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lengths.append(((imax - imin) / e.slope)[fast])  # frames from fully lit to fully shadowed
+    crossing = np.concatenate(lengths) if lengths else np.zeros(0)
+    transition = float(np.median(crossing)) if crossing.size else float("nan")
+    return FusedMaps(depth, sigma, keep, conflict, shadow_time, under, unsupported, untrusted, transition)
 
 
-def fusion_warnings(fused: FusedMaps) -> list[str]:
+def fusion_warnings(fused: FusedMaps, light: LightModel) -> list[str]:
+    """The warning for a capture most of whose points the shadow edge crossed in under
+    ``MIN_FRAMES_PER_TRANSITION`` frames, with what the light lets the user change (``light``)."""
     warnings = []
     under, keep = fused.undersampled, fused.keep
     if under.mean() > 0.2 * max(keep.mean(), 1e-9):
+        factor = MIN_FRAMES_PER_TRANSITION / fused.transition_frames if fused.transition_frames > 0 else 2.0
         warnings.append(
-            f"{int(under.sum())} points ({100 * under.sum() / max(keep.sum(), 1):.0f} %) are under-sampled: "
-            "the shadow edge crossed them in fewer than 2 frames; sweep more slowly or film faster"
+            f"{int(under.sum())} points ({100 * under.sum() / max(keep.sum(), 1):.0f} %) are under-sampled: the "
+            f"shadow edge crossed them in {fused.transition_frames:.1f} frames (median), fewer than "
+            f"{MIN_FRAMES_PER_TRANSITION:g}; their times are interpolated across the edge and their σ includes "
+            f"that error; to sample the edge, {light.undersampling_advice(max(factor, 1.0))}"
         )
     return warnings
 

@@ -132,6 +132,6 @@ def report_outputs(report: dict[str, Any], setup: ScanSetup, cropped: np.ndarray
     if setup.crop is not None:
         report["output"] = {"crop": setup.crop.to_report(), "cropped_points": int(cropped.sum())}
         report["coverage"]["cropped"] = int(cropped.sum())
-    site = setup.light.georeference(setup.units)
+    site = setup.georeference()
     if site is not None:
         report["site"] = site

@@ -159,6 +159,7 @@ ENTITY = {
     "live_shadow_time": "live/shadow_time",
     "log": "log",
     "metrics": "metrics",
+    "summary": "summary",
 }
 
 TIMELINE_FRAME = "frame"
@@ -264,6 +265,12 @@ def warm_rerun_import() -> None:
         _rerun_warm.start()
 
 
+def _run_starts(frames: Sequence[int]) -> list[int]:
+    """The first frame of each run of consecutive frames, in order."""
+    ordered = sorted(set(int(f) for f in frames))
+    return [f for i, f in enumerate(ordered) if i == 0 or ordered[i - 1] != f - 1]
+
+
 def default_blueprint():
     """The default viewer layout: 3D scene | camera image + edges, maps, log and metrics."""
     import rerun.blueprint as rrb
@@ -282,7 +289,8 @@ def default_blueprint():
                 ),
                 rrb.Tabs(
                     rrb.TextLogView(name="Warnings", origin=ENTITY["log"]),
-                    rrb.DataframeView(name="Metrics", origin=ENTITY["metrics"]),
+                    rrb.TextDocumentView(name="Metrics", origin=ENTITY["summary"]),
+                    rrb.DataframeView(name="Metric values", origin=ENTITY["metrics"]),
                 ),
                 row_shares=[2, 2, 1],
             ),
@@ -334,6 +342,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         self.jpeg_quality = int(jpeg_quality)
         self.viewer_spawned = False
         self.notes: list[str] = []  # why a viewer asked for did not start
+        self._summary: dict[str, float] = {}  # the static metrics logged so far (the Metrics view's table)
         self._log_notes = bool(log_notes)
         self.frames_seen = 0
         self.frames_stored = 0
@@ -384,7 +393,9 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
                 self.viewer_spawned = True
             elif self._stream is None:
                 return  # viewer wanted, failed, and no file: disabled
-            rr.send_blueprint(default_blueprint(), make_active=False, make_default=True, recording=rec)
+            # active: the file opens in this layout (make_default alone leaves a viewer with the layout of its
+            # last recording, or its own heuristic one, until the user resets the blueprint)
+            rr.send_blueprint(default_blueprint(), make_active=True, make_default=True, recording=rec)
             rec.send_recording_name(recording_name)
             rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         except BaseException:
@@ -868,14 +879,17 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         capture_time: datetime | np.datetime64 | None = None,
         level: str = "WARN",
     ) -> None:
-        """A warning in ``log`` on the ``frame`` timeline: at frame ``index`` if given, else at
-        frame 0 (a run's warning belongs to the whole run: from its start it is listed in the
-        Warnings view at every frame, not only from whichever frame was logged last)."""
+        """A warning in ``log`` on the ``frame`` timeline: at frame ``index`` if given; for a
+        :class:`~gnomon.errors.FrameNote`, at the first frame of each run of the frames it concerns
+        (eight runs at most); else at frame 0 (a run's warning belongs to the whole run: from its
+        start it is listed in the Warnings view at every frame)."""
         if not self.enabled:
             return
         rr = _rr()
-        self.set_time(0 if index is None else index, capture_time)
-        self._rec.log(ENTITY["log"], rr.TextLog(str(text), level=level))
+        frames = [index] if index is not None else _run_starts(getattr(text, "frames", ()))[:8] or [0]
+        for frame in frames:
+            self.set_time(frame, capture_time)
+            self._rec.log(ENTITY["log"], rr.TextLog(str(text), level=level))
 
     def log_metrics(self, metrics: Mapping[str, Any], *, index: int | None = None) -> None:
         """Numbers of the report as ``metrics/<name>`` Scalars (nested dicts joined with ``/``).
@@ -887,8 +901,14 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         rr = _rr()
         if index is not None:
             self.set_time(index)
-        for name, value in _flatten_numbers(metrics):
+        numbers = list(_flatten_numbers(metrics))
+        for name, value in numbers:
             self._rec.log(f"{ENTITY['metrics']}/{name}", rr.Scalars(value), static=index is None)
+        if index is None:  # the run's figures, also as a table the Metrics view shows as it is
+            self._summary.update(numbers)
+            rows = "\n".join(f"| {name} | {value:.6g} |" for name, value in sorted(self._summary.items()))
+            self._rec.log(ENTITY["summary"], rr.TextDocument(f"| metric | value |\n|---|---|\n{rows}\n",
+                                                             media_type=rr.MediaType.MARKDOWN), static=True)
 
     # ------------------------------------------------------------------ live view (gnomon live)
 

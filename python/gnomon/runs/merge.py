@@ -22,6 +22,7 @@ from gnomon.errors import GnomonError
 from gnomon.geometry.surface import Surface, build_surface
 from gnomon.geometry.triangulation import supported_by_neighbours
 from gnomon.outputs import ply
+from gnomon.outputs.formats import OutputContext
 from gnomon.outputs.publish import recover, staged_outputs
 from gnomon.outputs.scan_files import write_surface
 from gnomon.reconstruct.fusion import fuse_depths
@@ -149,7 +150,7 @@ def merge_scans(scan_a: str | Path, scan_b: str | Path, out_dir: str | Path, *, 
         merge_opts = ScanOptions(rrd=opts.rrd, view=opts.view, progress=False, frame_stride=opts.frame_stride)
         recorder = open_recorder(staging, merge_opts, f"merge {a.folder.name} + {b.folder.name}", "merge.rrd")
         try:
-            write_surface(staging, surface, a.units)
+            write_surface(staging, surface, OutputContext(a.units))
             report["timings_s"] = {"total_s": time.perf_counter() - t0}
             if recorder is not None:
                 recorder.log_camera(a.camera.K, a.camera.width, a.camera.height, a.pose.R, a.pose.t, a.units)

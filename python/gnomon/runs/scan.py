@@ -33,9 +33,11 @@ from gnomon.capture.tracking import ShadowTimes, TrackedSequence, track_source, 
 from gnomon.config.fieldlog import load_field_log
 from gnomon.config.setup import ScanSetup, frame_source, resolve_scan
 from gnomon.config.specs import FieldLog
+from gnomon.errors import FrameNote, GnomonError
 from gnomon.geometry.meshing import GridMesh
 from gnomon.geometry.reference_lines import ReferenceLines
 from gnomon.geometry.surface import Surface, SurfacePoints, mesh_surface, surface_points
+from gnomon.outputs.formats import OutputContext
 from gnomon.outputs.images import coverage_map
 from gnomon.outputs.publish import staged_outputs
 from gnomon.outputs.scan_files import (
@@ -72,9 +74,13 @@ class ScanOptions:
     view: bool = False  # stream to a viewer
     progress: bool = True
     frame_stride: int = 10  # frames kept in the recording
-    # The mesh's files (gnomon.config.fieldlog.MESH_FORMATS, mesh.ply always); None: the field log's
+    # The mesh's files (gnomon.outputs.formats, mesh.ply always); None: the field log's
     # [output] mesh_formats (default mesh.ply only).
     mesh_formats: tuple[str, ...] | None = None
+    # The cloud's survey files (las, laz); None: the field log's [output] cloud_formats (default: LAZ for a
+    # georeferenced scan, none for a desk scan). crs: theirs (None: the field log's [output] crs, else UTM).
+    cloud_formats: tuple[str, ...] | None = None
+    crs: str | None = None
     # The pass over the frames: gnomon.capture.tracking.track_source, or a drop-in with its signature
     # (gnomon.capture.tiles.TiledTracker tracks image tiles on a Dask cluster).
     track: Callable[..., TrackedSequence] | None = None
@@ -179,8 +185,9 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
     if tracked.levelled:
         more = " …" if len(tracked.levelled) > 8 else ""
-        warnings.append(f"{len(tracked.levelled)} frames of sudden illumination dips (clouds) levelled pixel by "
-                        f"pixel and tracked (frames {tracked.levelled[:8]}{more})")
+        warnings.append(FrameNote(f"{len(tracked.levelled)} frames of sudden illumination dips (clouds) levelled "
+                                  f"pixel by pixel and tracked (frames {tracked.levelled[:8]}{more})",
+                                  tracked.levelled))
     warnings += setup.light.choose_dips(tracked, ray_map, setup.planes, setup.max_depth_jump,
                                         min_contrast_dn(setup.tracker.min_contrast, tracked.noise_dn))
     # The colours need only the tracked times (final from here on): combined on a thread meanwhile.
@@ -202,7 +209,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
                                       else points_part_recorder(timings, setup, edges, points, fused, frame_stride,
                                                                tracked.used, coverage)))
             surface = mesh_surface(points, setup.max_depth_jump)
-    warnings += fusion_warnings(fused) + grazing_warnings(edges)
+    warnings += fusion_warnings(fused, setup.light) + grazing_warnings(edges)
     timings["total_s"] = time.perf_counter() - t0
     report = scan_report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
     report_outputs(report, setup, cropped, cpu, warnings)
@@ -246,21 +253,29 @@ def write_scan(folder: Path, result: ScanResult, started: float | None = None,
     t, c = time.perf_counter(), time.process_time()
     setup, surface = result.setup, result.surface
     with Writers() as writers:
-        write_surface(folder, surface, setup.units, writers, setup.mesh_formats)
+        write_surface(folder, surface, output_context(setup), writers, setup.mesh_formats, setup.cloud_formats)
         write_maps(folder, surface, result.shadow_time, result.undersampled, result.coverage, result.report["camera"],
                    result.report.get("site"), setup.units, writers)
     write_report(folder, result.report, t, c, started, before_report)
 
 
-def prepare_scan(field_log: str | Path | FieldLog,
-                 mesh_formats: tuple[str, ...] | None = None) -> tuple[ScanSetup, FrameSource]:
+def prepare_scan(field_log: str | Path | FieldLog, mesh_formats: tuple[str, ...] | None = None,
+                 cloud_formats: tuple[str, ...] | None = None,
+                 crs: str | None = None) -> tuple[ScanSetup, FrameSource]:
     """A field log (a path, or one already read) resolved into the scan's set-up and its frames;
-    ``mesh_formats`` instead of the field log's ``[output] mesh_formats``."""
+    ``mesh_formats``, ``cloud_formats`` and ``crs`` instead of the field log's ``[output]`` ones."""
     log = field_log if isinstance(field_log, FieldLog) else load_field_log(field_log)
     source = frame_source(log)
     setup = resolve_scan(log, source)
+    if crs is not None and setup.georeference() is None:
+        raise GnomonError(f"--crs {crs}: {log.path} is not a georeferenced scan (its world frame is the scan's "
+                          "own); a CRS needs a sun scan's [site]")
     if mesh_formats is not None:
         setup = dataclasses.replace(setup, mesh_formats=mesh_formats)
+    if cloud_formats is not None:
+        setup = dataclasses.replace(setup, cloud_formats=cloud_formats)
+    if crs is not None:
+        setup = dataclasses.replace(setup, crs=crs)
     return setup, source
 
 
@@ -275,7 +290,7 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
     t0 = time.perf_counter()
     if opts.rrd or opts.view:
         warm_rerun_import()
-    setup, source = prepare_scan(field_log, opts.mesh_formats)
+    setup, source = prepare_scan(field_log, opts.mesh_formats, opts.cloud_formats, opts.crs)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
         full = source.video is not None and (opts.rrd or opts.view) and playable_video(source.video)
         name, scale = f"scan {setup.inputs.field_log.name}", 1.0 if full else 0.5
@@ -289,7 +304,7 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
                     recorder.submit(record)
                     recorder.close_soon()  # encoded and written while the mesh files are
                 t, c = time.perf_counter(), time.process_time()
-                write_mesh_files(staging, result.surface, setup.units, writers, setup.mesh_formats)
+                write_mesh_files(staging, result.surface, output_context(setup), writers, setup.mesh_formats)
             write_report(staging, result.report, t, c, t0, None if recorder is None else recorder.finish)
     result.out_dir = Path(out_dir)
     return result
@@ -302,7 +317,13 @@ def _point_outputs(folder: Path, setup: ScanSetup, writers: Writers,
     def start(ready: PointsReady) -> None:
         if recorder is not None and ready.record is not None:
             recorder.submit(ready.record)
-        write_point_files(folder, ready.points, setup.units, writers, texture=not writes_texture(setup.mesh_formats))
+        write_point_files(folder, ready.points, output_context(setup), writers,
+                          texture=not writes_texture(setup.mesh_formats), cloud_formats=setup.cloud_formats)
         write_maps(folder, ready.points, ready.shadow_time, ready.undersampled, ready.coverage, camera_report(setup),
-                   setup.light.georeference(setup.units), setup.units, writers)
+                   setup.georeference(), setup.units, writers)
     return start
+
+
+def output_context(setup: ScanSetup) -> OutputContext:
+    """What the writers need to know of a scan besides its surface: units, site, CRS."""
+    return OutputContext(setup.units, setup.georeference(), setup.crs)
