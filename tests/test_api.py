@@ -10,6 +10,7 @@ import plyfile
 import pytest
 
 import gnomon
+from gnomon.cli import main
 from gnomon.errors import GnomonError
 
 
@@ -93,7 +94,6 @@ def test_the_cli_scan_is_the_api_scan(tiny_capture, tmp_path, monkeypatch, capsy
     """`gnomon scan` calls gnomon.api.scan with its options (a pass-through wrapper records the call;
     the real function runs) and prints that call's result: the files are the returned Scan's."""
     import gnomon.api
-    from gnomon.cli import main
 
     calls = []
     real = gnomon.api.scan
@@ -161,3 +161,17 @@ def test_simulate_knows_every_scene_of_the_cli(tmp_path) -> None:
     assert cv2.imread(str(board / "view_00.png")).shape[:2] == (240, 320)
     with pytest.raises(GnomonError, match="--seed"):
         gnomon.simulate("desk_lamp", tmp_path / "x", seed=-1)
+
+
+def test_a_scan_prints_a_short_summary_and_every_stage_shows_progress(tiny_capture, tmp_path, capsys) -> None:
+    """print(scan) is a summary, not the arrays; `gnomon scan` says each stage on stderr (tracking has its bar)."""
+    out = tmp_path / "s"
+    assert main(["scan", str(tiny_capture), "--out", str(out), "--no-rrd"]) == 0
+    err = capsys.readouterr().err
+    stages = [line.split(": ", 1)[1].rsplit(" ", 2)[0] for line in err.splitlines() if line.startswith("scan: ")]
+    assert stages == ["set-up (field log, camera, reference planes)", "shadow planes and triangulation",
+                      "fusion and mesh", "output files", "report"]
+    s = gnomon.load_scan(out)
+    text = repr(s)
+    assert len(text) < 400 and f"{len(s.points):,} of 48×36 pixels" in text and "array" not in text
+    assert "<table>" in s._repr_html_()

@@ -33,8 +33,7 @@ if TYPE_CHECKING:
 __all__ = ["SCENES", "Scan", "ScanMesh", "load_scan", "scan", "simulate"]
 
 
-
-@dataclass
+@dataclass(repr=False)
 class ScanMesh:
     """The surface mesh: ``vertices`` (V, 3) float32 world, ``faces`` (F, 3) int32 (counter-clockwise
     seen from the camera), ``normals`` (V, 3) float32 unit (towards the camera), ``colors`` (V, 3)
@@ -46,8 +45,11 @@ class ScanMesh:
     colors: np.ndarray | None
     pixels: np.ndarray | None
 
+    def __repr__(self) -> str:
+        return f"ScanMesh({len(self.vertices)} vertices, {len(self.faces)} faces)"
 
-@dataclass
+
+@dataclass(repr=False)
 class Scan:
     """A scan's result, in memory or read back from its folder.
 
@@ -100,6 +102,34 @@ class Scan:
     def valid(self) -> np.ndarray:
         """(H, W) bool: the pixels with a point."""
         return np.isfinite(self.depth)
+
+    def _summary(self) -> list[tuple[str, str]]:
+        """(what, value) lines of the short summary a notebook or a print shows."""
+        h, w = self.depth.shape
+        sigma = self.point_sigma if self.point_sigma is not None and len(self.point_sigma) else None
+        rows = [("points", f"{len(self.points):,} of {w}×{h} pixels ({100 * len(self.points) / (w * h):.1f} %)"),
+                ("units", self.units)]
+        if sigma is not None:
+            rows.append(("median σ", f"{float(np.nanmedian(sigma)):.3g} {self.units}"))
+        if self.mesh is not None:
+            rows.append(("mesh", f"{len(self.mesh.vertices):,} vertices, {len(self.mesh.faces):,} faces"))
+        if "site" in self.report:
+            s = self.report["site"]
+            rows.append(("site", f"{s['latitude_deg']:.5f}° N, {s['longitude_deg']:.5f}° E"))
+        rows.append(("warnings", str(len(self.warnings))))
+        rows.append(("folder", str(self.folder) if self.folder is not None else "(in memory)"))
+        return rows
+
+    def __repr__(self) -> str:
+        return "Scan(" + ", ".join(f"{k}: {v}" for k, v in self._summary()) + ")"
+
+    def _repr_html_(self) -> str:
+        import html
+
+        body = "".join(f"<tr><th style='text-align:left'>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>"
+                       for k, v in self._summary())
+        warn = "".join(f"<li>{html.escape(x)}</li>" for x in self.warnings)
+        return f"<b>gnomon Scan</b><table>{body}</table>" + (f"<ul>{warn}</ul>" if warn else "")
 
     @property
     def camera_centre(self) -> np.ndarray:

@@ -21,6 +21,11 @@ class Writers:
     def add(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
         self._jobs.append(self._pool.submit(fn, *args, **kwargs))
 
+    def wait(self) -> None:
+        """Wait for the files added so far; re-raise the first failure."""
+        for job in self._jobs:
+            job.result()
+
     def __enter__(self) -> Writers:
         return self
 

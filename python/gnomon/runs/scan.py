@@ -62,6 +62,7 @@ from gnomon.reconstruct.report import camera_report, report_outputs, scan_report
 from gnomon.recording.recorder import ScanRecording, playable_video, warm_rerun_import
 from gnomon.recording.scan_log import frame_logger, points_part_recorder, record_mesh_part, record_scan, record_setup
 from gnomon.recording.worker import Recorder, RecordingWorker, recording
+from gnomon.util.progress import Stages
 from gnomon.util.timing import timed
 
 __all__ = ["PointsReady", "ScanOptions", "ScanResult", "prepare_scan", "reconstruct", "run_scan", "scan", "write_scan"]
@@ -163,6 +164,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     cpu: dict[str, float] = {}  # CPU seconds of the process (all threads) during each stage
+    stage = Stages("scan", enabled=progress)  # tracking has its own bar
     warnings = list(setup.warnings) + (list(recorder.notes) if recorder is not None else [])
     if recorder is not None:
         recorder.submit(lambda rec: record_setup(rec, setup, source))
@@ -193,10 +195,10 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
     # The colours need only the tracked times (final from here on): combined on a thread meanwhile.
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-colour") as colour_pool:
         colours = colour_pool.submit(lit_colours, colour, tracked)
-        with timed(timings, "planes_and_triangulation_s", cpu):
+        with timed(timings, "planes_and_triangulation_s", cpu), stage("shadow planes and triangulation"):
             levels = Levels(tracked)
             edges = reconstruct_edges(setup, tracked, ray_map, warnings, levels)
-        with timed(timings, "fusion_and_mesh_s", cpu):
+        with timed(timings, "fusion_and_mesh_s", cpu), stage("fusion and mesh"):
             fused = fuse_edges(edges, tracked, setup.max_depth_jump, levels)
             cropped = crop_fused(fused, setup, ray_map)
             points = surface_points(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, colours.result(),
@@ -290,7 +292,9 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
     t0 = time.perf_counter()
     if opts.rrd or opts.view:
         warm_rerun_import()
-    setup, source = prepare_scan(field_log, opts.mesh_formats, opts.cloud_formats, opts.crs)
+    stage = Stages("scan", enabled=opts.progress)
+    with stage("set-up (field log, camera, reference planes)"):
+        setup, source = prepare_scan(field_log, opts.mesh_formats, opts.cloud_formats, opts.crs)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
         full = source.video is not None and (opts.rrd or opts.view) and playable_video(source.video)
         name, scale = f"scan {setup.inputs.field_log.name}", 1.0 if full else 0.5
@@ -304,8 +308,11 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
                     recorder.submit(record)
                     recorder.close_soon()  # encoded and written while the mesh files are
                 t, c = time.perf_counter(), time.process_time()
-                write_mesh_files(staging, result.surface, output_context(setup), writers, setup.mesh_formats)
-            write_report(staging, result.report, t, c, t0, None if recorder is None else recorder.finish)
+                with stage("output files"):
+                    write_mesh_files(staging, result.surface, output_context(setup), writers, setup.mesh_formats)
+                    writers.wait()
+            with stage("recording" if recorder is not None else "report"):
+                write_report(staging, result.report, t, c, t0, None if recorder is None else recorder.finish)
     result.out_dir = Path(out_dir)
     return result
 

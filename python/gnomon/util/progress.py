@@ -1,9 +1,11 @@
-"""A small progress bar on stderr for long steps (no dependency, no global state)."""
+"""Progress on stderr: a small bar for long steps, and a line per stage of a run (no dependency, no global state)."""
 
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import TextIO
 
 
@@ -47,3 +49,31 @@ class Progress:
         if self.enabled and self.tty:
             self.stream.write("\n")
             self.stream.flush()
+
+
+class Stages:
+    """A line on stderr per stage of a run: ``with stages("fusion and mesh"): ...``.
+
+    On a terminal the stage's name shows while it runs and its time once done; elsewhere one line per
+    stage once done (``scan: fusion and mesh 1.3 s``). ``enabled=False`` makes it silent.
+    """
+
+    def __init__(self, label: str, *, enabled: bool = True, stream: TextIO | None = None):
+        self.label, self.enabled = label, enabled
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+
+    @contextmanager
+    def __call__(self, stage: str) -> Iterator[None]:
+        if not self.enabled:
+            yield
+            return
+        start = time.perf_counter()
+        if self.tty:
+            self.stream.write(f"{self.label:>12} {stage} …")
+            self.stream.flush()
+        yield
+        took = time.perf_counter() - start
+        line = f"\r{self.label:>12} {stage} {took:.1f} s" if self.tty else f"{self.label}: {stage} {took:.1f} s"
+        self.stream.write(line + "\n")
+        self.stream.flush()
