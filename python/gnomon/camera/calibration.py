@@ -65,7 +65,7 @@ import cv2
 import numpy as np
 
 from gnomon.camera.models import OpenCVCamera, Pose, TsaiCamera
-from gnomon.capture.frames import FrameSource, apply_exif_orientation, exif_orientation, to_grey
+from gnomon.capture.frames import FrameSource, apply_exif_orientation, decode_jpeg, exif_orientation, to_grey
 from gnomon.errors import GnomonError
 from gnomon.util import toml_io
 
@@ -103,7 +103,8 @@ def board_points(cols: int, rows: int, square: float) -> np.ndarray:
 def read_grey(path: str | os.PathLike) -> np.ndarray:
     """Read an image file as a 2-D grey array (uint8 or uint16), upright by its EXIF orientation.
 
-    Unreadable → GnomonError naming it.
+    Unreadable, or a JPEG whose data is corrupt inside (:func:`gnomon.capture.frames.decode_jpeg`) →
+    GnomonError naming it.
     """
     p = Path(path)
     if not p.is_file():
@@ -112,6 +113,10 @@ def read_grey(path: str | os.PathLike) -> np.ndarray:
         raw = p.read_bytes()
     except OSError as exc:
         raise GnomonError(f"{p}: cannot be read ({exc.strerror})") from None
+    if raw.startswith(b"\xff\xd8"):  # a JPEG: decoded strictly (its luma)
+        grey = decode_jpeg(p, raw, colour=False)
+        if grey is not None:
+            return grey
     flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION
     img = cv2.imdecode(np.frombuffer(raw, np.uint8), flags)
     if img is None:
