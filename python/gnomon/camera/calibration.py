@@ -265,9 +265,10 @@ _CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
 
 
 def _find_board(grey: np.ndarray, board: tuple[int, int], *, sb_flags: tuple[int, ...] = _SB_FALLBACK_FLAGS,
-                classic: bool = True) -> np.ndarray | None:
+                classic: bool = True, classic_flags: int = _CLASSIC_FLAGS) -> np.ndarray | None:
     """The board's corners in ``board``'s order, found in either orientation: the sector detector with each
-    of ``sb_flags`` in turn, then (``classic``) the classic detector; None when none finds it."""
+    of ``sb_flags`` in turn, then (``classic``) the classic detector with ``classic_flags``; None when none
+    finds it."""
     cols, rows = board
     sizes = [(cols, rows)] if cols == rows else [(cols, rows), (rows, cols)]
     for flags in sb_flags:
@@ -276,7 +277,7 @@ def _find_board(grey: np.ndarray, board: tuple[int, int], *, sb_flags: tuple[int
             if ok and corners is not None:
                 return _canonical_order(corners.reshape(-1, 2).astype(np.float64), size, board)
     for size in sizes if classic else ():
-        ok, corners = cv2.findChessboardCorners(grey, size, flags=_CLASSIC_FLAGS)
+        ok, corners = cv2.findChessboardCorners(grey, size, flags=classic_flags)
         if ok and corners is not None:
             pts = corners.reshape(-1, 2).astype(np.float64)
             g = pts.reshape(size[1], size[0], 2)
@@ -286,24 +287,70 @@ def _find_board(grey: np.ndarray, board: tuple[int, int], *, sb_flags: tuple[int
     return None
 
 
+DETECT_PX = 1000
+"""A photo's long side for finding the board (then refined at full size): OpenCV's detectors' time grows
+with the pixels, and a board that calibrates has squares of tens of pixels at that size."""
+
+
 def detect_chessboard(image: np.ndarray, board: tuple[int, int], *, refine: bool = True) -> np.ndarray | None:
     """Find the chessboard's inner corners: (cols·rows, 2) pixels in OpenCV's order, or None.
 
-    ``cv2.findChessboardCornersSB`` finds the board, in either orientation
-    (``board`` or its sides swapped, reordered to ``board``'s order, see
-    :func:`_canonical_order`), with OpenCV's accurate settings first and
-    plainer ones, then the classic detector, when they fail (as on some real
-    JPEG photos); ``cv2.cornerSubPix`` then refines each corner in a window of
-    0.4× the smallest corner spacing (larger windows average more gradient; on
-    our rendered views this halves the SB detector's error, to ≈0.03–0.06 px RMS).
+    First fast (:func:`_find_board_quick`): on the photo scaled to ``DETECT_PX`` on its long side, OpenCV's
+    classic detector, then its sector detector with plain settings; found there, the corners are scaled
+    back and refined on the full-size photo. Where neither finds the board (as on some real JPEG photos),
+    the full-size chain: ``cv2.findChessboardCornersSB`` with OpenCV's accurate settings first and plainer
+    ones next, then the classic detector (seconds per photo at 1080p, tens of seconds at 12 Mpx). The board
+    is found in either orientation (``board`` or its sides swapped, reordered to ``board``'s order, see
+    :func:`_canonical_order`). ``cv2.cornerSubPix`` then refines each corner in a window of 0.4× the
+    smallest corner spacing (larger windows average more gradient; on our rendered views this halves the
+    SB detector's error, to ≈0.03–0.06 px RMS); from either start it converges to the same corner.
     """
     grey = to_grey_u8(image)
+    pts = _find_board_quick(grey, board)
+    if pts is not None:
+        return refine_corners(grey, pts, board) if refine else pts
     pts = _find_board(grey, board)
     if pts is None:
         return None
     if not refine:
         return pts
     return refine_corners(grey, pts, board)
+
+
+def _find_board_quick(grey: np.ndarray, board: tuple[int, int], classic: bool = True) -> np.ndarray | None:
+    """The board's corners found on ``grey`` scaled to ``DETECT_PX`` (with ``classic`` the classic detector
+    with its quick check first, then the sector detector's plain settings), in full-size pixels, not refined;
+    None when not found."""
+    h, w = grey.shape[:2]
+    scale = min(1.0, DETECT_PX / max(w, h))
+    small = grey if scale == 1.0 else cv2.resize(grey, (round(w * scale), round(h * scale)),
+                                                  interpolation=cv2.INTER_AREA)
+    pts = None
+    if classic:
+        pts = _find_board(small, board, sb_flags=(), classic_flags=_CLASSIC_FLAGS | cv2.CALIB_CB_FAST_CHECK)
+    if pts is None:
+        pts = _find_board(small, board, sb_flags=(cv2.CALIB_CB_NORMALIZE_IMAGE,), classic=False)
+    if pts is None:
+        return None
+    return _origin_as_sector_detector(grey, (pts + 0.5) / scale - 0.5, board)  # pixel centres: (x + 0.5)/s − 0.5
+
+
+def _origin_as_sector_detector(grey: np.ndarray, pts: np.ndarray, board: tuple[int, int]) -> np.ndarray:
+    """Corners ``pts`` in OpenCV's order, turned by a half-turn (reversed) where needed so that the board's
+    origin is where the sector detector puts it: on a board that a half-turn changes (cols and rows of
+    different parity, e.g. 9x6), the corner whose square diagonally outside the board is the lighter (the
+    classic detector reports the other end). A chessboard on a reference plane fixes the plane's frame
+    by that origin. A board a half-turn leaves alike (e.g. 8x6) is returned as it is."""
+    cols, rows = board
+    if (cols - rows) % 2 == 0:
+        return pts
+    g = pts.reshape(rows, cols, 2)
+    first = g[0, 0] - (g[0, 1] - g[0, 0]) / 2 - (g[1, 0] - g[0, 0]) / 2  # the square outside corner 0
+    last = g[-1, -1] + (g[-1, -1] - g[-1, -2]) / 2 + (g[-1, -1] - g[-2, -1]) / 2
+
+    def level(p: np.ndarray) -> float:
+        return float(cv2.getRectSubPix(grey, (5, 5), (float(p[0]), float(p[1]))).mean())
+    return pts if level(first) >= level(last) else np.ascontiguousarray(pts[::-1])
 
 
 def refine_corners(grey: np.ndarray, pts: np.ndarray, board: tuple[int, int]) -> np.ndarray:
@@ -472,6 +519,8 @@ class CameraCalibration:
     # views taken from videos: name ("board.mp4#123") → its grey frame, and one line per video
     # saying how its views were picked
     video_frames: Mapping[str, np.ndarray] = field(default_factory=dict)
+    # the photos' grey images by name, when asked for (calibrate_images(keep_photos=True): for a recording)
+    photos: Mapping[str, np.ndarray] = field(default_factory=dict)
     video_notes: tuple[str, ...] = ()
 
     @property
@@ -482,7 +531,6 @@ class CameraCalibration:
 VIDEO_VIEWS = 20
 """How many views ``gnomon calibrate camera`` picks from a board video by default."""
 VIDEO_EXAMINED_PER_VIEW = 6  # frames examined per view wanted (evenly spaced through the video)
-VIDEO_DETECT_PX = 1000  # a video frame's long side for finding the board (then refined at full size)
 VIDEO_BLUR_FACTOR = 1.5  # a view whose edges are this much wider than the median view's is motion-blurred
 VIDEO_MIN_SHIFT = 0.02  # views whose corners moved less than this share of the image diagonal are one view
 
@@ -499,17 +547,11 @@ class VideoViews:
 
 
 def _find_board_fast(grey: np.ndarray, board: tuple[int, int]) -> np.ndarray | None:
-    """The board's corners on a frame scaled to ``VIDEO_DETECT_PX`` (OpenCV's sector detector, plain
+    """The board's corners on a video frame scaled to ``DETECT_PX`` (OpenCV's sector detector, plain
     settings: tens of ms where the accurate ones take a second on a frame without a board), scaled back
     to full size and refined there; None when not found."""
-    h, w = grey.shape[:2]
-    scale = min(1.0, VIDEO_DETECT_PX / max(w, h))
-    small = grey if scale == 1.0 else cv2.resize(grey, (round(w * scale), round(h * scale)),
-                                                  interpolation=cv2.INTER_AREA)
-    pts = _find_board(small, board, sb_flags=(cv2.CALIB_CB_NORMALIZE_IMAGE,), classic=False)
-    if pts is None:
-        return None
-    return refine_corners(grey, (pts + 0.5) / scale - 0.5, board)  # pixel centres: (x + 0.5) / scale − 0.5
+    pts = _find_board_quick(grey, board, classic=False)
+    return None if pts is None else refine_corners(grey, pts, board)
 
 
 def _view_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -616,6 +658,7 @@ def detect_in_images(
     *,
     progress: Callable[[int, int, str], None] | None = None,
     max_video_views: int = VIDEO_VIEWS,
+    keep: dict[str, np.ndarray] | None = None,
 ) -> tuple[list[str], list[np.ndarray], tuple[int, int], list[str], list[str], dict[str, np.ndarray], list[str]]:
     """Read the images (and videos: :func:`views_from_video`) and find the board in each.
 
@@ -624,7 +667,7 @@ def detect_in_images(
     Images of different sizes, or unreadable ones, are a GnomonError naming
     the image; an image without a board is skipped with a warning.
     ``progress(done, total, name)`` counts an image as one and a video as its
-    frames.
+    frames. ``keep``: filled with each photo showing the board, its grey image by name.
     """
     from gnomon.capture.frames import VIDEO_SUFFIXES
 
@@ -679,6 +722,8 @@ def detect_in_images(
             continue
         names.append(str(p))
         corners.append(c)
+        if keep is not None:
+            keep[str(p)] = img
     if progress:
         progress(total, total, "")
     assert size is not None
@@ -698,6 +743,7 @@ def calibrate_images(
     reject_factor: float = 3.0,
     progress: Callable[[int, int, str], None] | None = None,
     max_video_views: int = VIDEO_VIEWS,
+    keep_photos: bool = False,
 ) -> CameraCalibration:
     """Chessboard photos → a calibrated camera.
 
@@ -707,7 +753,8 @@ def calibrate_images(
     Tsai's coplanar two-stage method, then, with several views, a joint
     refinement (see :func:`gnomon.camera.tsai.calibrate_views`); needs
     ``pixel_pitch_mm = (dx, dy)`` and takes ``sx`` a priori; ``full``
-    optimises Cx, Cy (and sx with several views) too.
+    optimises Cx, Cy (and sx with several views) too. ``keep_photos``: the result holds the photos' grey
+    images (``photos``), e.g. for a recording of the views, which then need not be read again.
     """
     if model not in ("zhang", "tsai"):
         raise GnomonError(f"model '{model}': expected 'zhang' or 'tsai'")
@@ -716,8 +763,9 @@ def calibrate_images(
     if model == "tsai" and pixel_pitch_mm is None:
         raise GnomonError("--model tsai needs the sensor's pixel pitch (--pixel-pitch DX[,DY] in mm, e.g. 0.0028): "
                           "Tsai's method takes dx, dy a priori")
+    photos: dict[str, np.ndarray] | None = {} if keep_photos else None
     names, corners, size, skipped, warns, video_frames, notes = detect_in_images(
-        paths, board, progress=progress, max_video_views=max_video_views)
+        paths, board, progress=progress, max_video_views=max_video_views, keep=photos)
     obj = board_points(board[0], board[1], square)
     if model == "zhang":
         if len(names) < MIN_ZHANG_VIEWS:
@@ -746,6 +794,7 @@ def calibrate_images(
             skipped=tuple(skipped),
             warnings=tuple(warns) + z.warnings,
             video_frames=video_frames,
+            photos=photos or {},
             video_notes=tuple(notes),
         )
     from gnomon.camera import tsai
@@ -774,6 +823,7 @@ def calibrate_images(
         per_view_tsai=r.per_view,
         video_frames=video_frames,
         video_notes=tuple(notes),
+        photos=photos or {},
     )
 
 
