@@ -34,7 +34,7 @@ Camera file format (TOML; lengths in the board's units where any)::
     # cx, cy (pixels), sx (-), dx_mm, dy_mm (frame-buffer pixel pitch, mm)
 
     [calibration]                # optional: how the numbers were obtained
-    method = "zhang"             # "zhang" | "tsai-coplanar" | "tsai-views" | ... (+ "+full")
+    method = "zhang"             # "zhang" | "zhang-coplanar" | "tsai-coplanar" | "tsai-views" | ... (+ "+full")
     rms_px = 0.28                # over the views used
     n_views = 12
     images = ["a.png", ...]      # views used, and their RMS:
@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -394,8 +394,8 @@ class ZhangResult:
     warnings: tuple[str, ...] = ()
 
 
-def _zhang_once(objs, pixs, size, flags):
-    K0 = np.eye(3)
+def _zhang_once(objs, pixs, size, flags, K0=None):
+    K0 = np.eye(3) if K0 is None else np.asarray(K0, dtype=np.float64)
     d0 = np.zeros(5)
     o = [np.ascontiguousarray(x, dtype=np.float32).reshape(-1, 1, 3) for x in objs]
     p = [np.ascontiguousarray(x, dtype=np.float32).reshape(-1, 1, 2) for x in pixs]
@@ -424,6 +424,12 @@ def _zhang_once(objs, pixs, size, flags):
         per_view.append(float(np.sqrt(np.mean(np.sum(res * res, axis=1)))))
     std_i = np.asarray(std_i, dtype=np.float64).ravel()
     std = {k: float(std_i[i]) for i, k in enumerate(OPENCV_STD_NAMES)}
+    if flags == PAPER_MODEL_FLAGS:  # OpenCV reports no σ for a focal length of fixed aspect
+        std.update(_paper_model_std(cam, objs, pixs, rvecs, tvecs))
+    fixed = {"cx": cv2.CALIB_FIX_PRINCIPAL_POINT, "cy": cv2.CALIB_FIX_PRINCIPAL_POINT, "k1": cv2.CALIB_FIX_K1,
+             "k2": cv2.CALIB_FIX_K2, "k3": cv2.CALIB_FIX_K3, "p1": cv2.CALIB_ZERO_TANGENT_DIST,
+             "p2": cv2.CALIB_ZERO_TANGENT_DIST}
+    std = {k: v for k, v in std.items() if not flags & fixed.get(k, 0)}  # a parameter held has no σ
     all_sq = sum(r * r * len(o) for r, o in zip(per_view, objs, strict=True))
     total = float(np.sqrt(all_sq / sum(len(o) for o in objs)))
     return cam, total, per_view, poses, std
@@ -439,6 +445,7 @@ def calibrate_zhang(
     reject_factor: float = 3.0,
     reject_floor_px: float = 0.5,
     min_views: int = MIN_ZHANG_VIEWS,
+    paper_model: bool = False,
 ) -> ZhangResult:
     """Zhang's multi-view calibration through OpenCV, with outlier views rejected.
 
@@ -448,18 +455,29 @@ def calibrate_zhang(
     is dropped, worst first, recalibrating after each, while more than
     ``min_views`` remain; each drop is a warning. ``fix_k3`` holds k3 at 0
     (advisable for narrow fields of view). Fewer than ``min_views`` views → GnomonError.
+
+    ``paper_model``: the model of Bouguet & Perona's set-up, where every view of the board lies in one
+    plane (:data:`PAPER_MODEL_FLAGS`): the principal point held at the image centre, square pixels
+    (fx = fy), k1 the only distortion; started from the focal length the views' homographies give
+    (:func:`focal_from_homographies`). σ is then given for fx, fy and k1 only (the others are held).
     """
     n = len(object_points)
     names = list(names) if names is not None else [f"view {i}" for i in range(n)]
     if n < min_views:
         raise GnomonError(f"Zhang's calibration needs at least {min_views} views with a board, got {n}")
     flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    K0 = None
+    if paper_model:
+        flags = PAPER_MODEL_FLAGS
+        centre = ((image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0)
+        f0 = focal_from_homographies(object_points, image_points, centre) or float(max(image_size))
+        K0 = np.array([[f0, 0.0, centre[0]], [0.0, f0, centre[1]], [0.0, 0.0, 1.0]])
     keep = list(range(n))
     rejected: list[tuple[str, float]] = []
     warns: list[str] = []
     while True:
         cam, rms, per_view, poses, std = _zhang_once([object_points[i] for i in keep],
-                                                     [image_points[i] for i in keep], image_size, flags)
+                                                     [image_points[i] for i in keep], image_size, flags, K0)
         med = float(np.median(per_view))
         limit = max(reject_factor * med, reject_floor_px)
         worst = int(np.argmax(per_view))
@@ -490,6 +508,113 @@ def calibrate_zhang(
     )
 
 
+PAPER_MODEL_FLAGS = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_FIX_ASPECT_RATIO
+                     | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3)
+"""OpenCV's flags for the paper's camera: principal point at the image centre, square pixels, k1 only."""
+
+COPLANAR_DEG = 5.0
+"""Views whose board normals all lie within this angle (degrees) of each other are one plane's: the focal
+length and the principal point cannot both be found from them (Zhang's method needs the board turned)."""
+
+
+def _paper_model_std(cam: OpenCVCamera, objs, pixs, rvecs, tvecs) -> dict[str, float]:
+    """1-σ of the paper model's fitted parameters (f as fx and fy, k1), as OpenCV's σ: from the Jacobian of
+    the projections (``cv2.projectPoints``) in f, k1 and every view's pose, and the residuals' variance
+    (their sum of squares over the 2N − P degrees of freedom)."""
+    K, dist = cam.K, np.asarray(cam.dist, dtype=np.float64)
+    blocks, residuals = [], []
+    for obj, pix, r, t in zip(objs, pixs, rvecs, tvecs, strict=True):
+        o = np.asarray(obj, dtype=np.float64).reshape(-1, 1, 3)
+        proj, jac = cv2.projectPoints(o, np.asarray(r, np.float64), np.asarray(t, np.float64), K, dist)
+        residuals.append(np.asarray(pix, dtype=np.float64).reshape(-1, 2) - proj.reshape(-1, 2))
+        # columns: rvec (3), tvec (3), fx, fy, cx, cy, k1, k2, p1, p2, k3
+        blocks.append((jac[:, 6] + jac[:, 7] * (cam.fy / cam.fx), jac[:, 10], jac[:, :6]))
+    n_views = len(blocks)
+    rows = sum(len(b[0]) for b in blocks)
+    J = np.zeros((rows, 2 + 6 * n_views))
+    at = 0
+    for k, (df, dk1, dpose) in enumerate(blocks):
+        J[at:at + len(df), 0], J[at:at + len(df), 1] = df, dk1
+        J[at:at + len(df), 2 + 6 * k:8 + 6 * k] = dpose
+        at += len(df)
+    r = np.concatenate(residuals).ravel()
+    dof = max(rows - J.shape[1], 1)
+    cov = float(r @ r) / dof * np.linalg.pinv(J.T @ J)
+    sf, sk1 = float(np.sqrt(cov[0, 0])), float(np.sqrt(cov[1, 1]))
+    return {"fx": sf, "fy": sf * cam.fy / cam.fx, "k1": sk1}
+
+
+def focal_from_homographies(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
+                            centre: tuple[float, float]) -> float | None:
+    """The focal length (px) that makes every view's board-to-image homography a rotation, for square
+    pixels and the principal point at ``centre`` (lens distortion ignored: a starting value); None when
+    the views do not fix it (a board seen face-on).
+
+    With pixels taken from ``centre``, a homography's columns h1, h2 are K·r1, K·r2 up to scale, and
+    r1 ⟂ r2, |r1| = |r2| give, with u = 1/f², (h11·h12 + h21·h22)·u + h31·h32 = 0 and
+    (h11² + h21² − h12² − h22²)·u + h31² − h32² = 0: u by least squares over the views (Zhang 2000, with
+    the principal point known).
+    """
+    rows = []
+    for obj, pix in zip(object_points, image_points, strict=True):
+        found = cv2.findHomography(np.asarray(obj, np.float64)[:, :2], np.asarray(pix, np.float64) - centre)[0]
+        H = np.asarray(found, dtype=np.float64) if found is not None else np.zeros((0, 0))  # None: degenerate
+        if H.shape != (3, 3):
+            continue
+        H = H / np.linalg.norm(H)
+        (a, b, _), (c, d, _), (e, g, _) = H
+        rows += [(a * b + c * d, e * g), (a * a + c * c - b * b - d * d, e * e - g * g)]
+    if not rows:
+        return None
+    m = np.asarray(rows)
+    u = -float(m[:, 0] @ m[:, 1]) / float(m[:, 0] @ m[:, 0])
+    return 1.0 / np.sqrt(u) if np.isfinite(u) and u > 0 else None
+
+
+def normal_spread_deg(poses: Sequence[Pose]) -> float:
+    """The largest angle (degrees) between two views' board normals (board → camera poses)."""
+    n = np.array([p.R[:, 2] for p in poses])
+    cos = np.clip(np.abs(n @ n.T), -1.0, 1.0)  # a board's normal up to its sign
+    return float(np.degrees(np.arccos(cos.min()))) if len(n) > 1 else 0.0
+
+
+def calibrate_views(
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    *,
+    names: Sequence[str] | None = None,
+    fix_k3: bool = False,
+    reject_factor: float = 3.0,
+) -> tuple[ZhangResult, str, float]:
+    """Zhang's calibration of the views, or, when they all lie in one plane, the paper's.
+
+    The paper's model (:func:`calibrate_zhang` with ``paper_model``) is fitted first; when its board
+    normals all lie within ``COPLANAR_DEG`` of each other (:func:`normal_spread_deg`), the views are one
+    plane's (a board moved about on a desk, as in Bouguet & Perona's set-up): the focal length and the
+    principal point are not observable together there (Zhang's full model fits absurd focal lengths and a
+    distortion it cannot invert), so the paper's model is the result, with a warning that names the case
+    and its numbers. Otherwise Zhang's full model. Returns (result, method, normal spread in degrees):
+    method "zhang" or "zhang-coplanar".
+    """
+    paper = calibrate_zhang(object_points, image_points, image_size, names=names, reject_factor=reject_factor,
+                            paper_model=True)
+    spread = normal_spread_deg(paper.poses)
+    if spread >= COPLANAR_DEG:
+        full = calibrate_zhang(object_points, image_points, image_size, names=names, fix_k3=fix_k3,
+                               reject_factor=reject_factor)
+        return full, "zhang", spread
+    cam, std = paper.camera, paper.std
+    w = (f"all {len(paper.names)} views show the board in one plane (their board normals lie within {spread:.2g}° "
+         f"of each other; Zhang's method needs the board turned by more than {COPLANAR_DEG:g}° between views): "
+         "the focal length and the principal point cannot both be found from them, so the camera is the "
+         "paper's: principal point at the image centre, square pixels, k1 the only distortion: "
+         f"f = {cam.fx:.1f} ± {std['fx']:.2g} px, k1 = {cam.dist[0]:.4f} ± {std['k1']:.2g} (σ of the corners' "
+         "noise only: a principal point off the centre biases f); for a full calibration add photos of the "
+         "board tilted (held up, propped at 20–50°)")
+    return replace(paper, warnings=paper.warnings + (w,)), "zhang-coplanar", spread
+
+
 # --------------------------------------------------------------------------- photos → camera
 
 
@@ -497,7 +622,8 @@ def calibrate_zhang(
 class CameraCalibration:
     """A calibrated camera and how it was obtained: what a camera file holds.
 
-    ``method``: "zhang", or "tsai-coplanar" / "tsai-views" (+ "+full");
+    ``method``: "zhang", "zhang-coplanar" (all views in one plane: :func:`calibrate_views`), or
+    "tsai-coplanar" / "tsai-views" (+ "+full");
     ``names``/``per_view_rms_px``/``poses``: the views used (board → camera);
     ``rejected``: ((name, rms_px), ...) outlier views; ``skipped``: images
     without a board; ``std``: 1-σ parameter standard deviations.
@@ -779,10 +905,11 @@ def calibrate_images(
                 f"only {len(names)} of {len(paths)} images show the {board[0]}x{board[1]} chessboard{missing}; "
                 f"Zhang's method needs at least {MIN_ZHANG_VIEWS}"
             )
-        z = calibrate_zhang([obj] * len(names), corners, size, names=names, fix_k3=fix_k3, reject_factor=reject_factor)
+        z, method, _ = calibrate_views([obj] * len(names), corners, size, names=names, fix_k3=fix_k3,
+                                       reject_factor=reject_factor)
         return CameraCalibration(
             camera=z.camera,
-            method="zhang",
+            method=method,
             rms_px=z.rms_px,
             names=z.names,
             per_view_rms_px=z.per_view_rms_px,
