@@ -209,9 +209,9 @@ def to_grey_u8(image: np.ndarray) -> np.ndarray:
 
 
 def expand_image_args(items: Sequence[str | os.PathLike]) -> list[Path]:
-    """Command-line image arguments → files: a directory stands for its images, sorted by name; a
+    """Command-line image arguments → files: a directory stands for its images, in natural order; a
     pattern (``"calib/*.jpg"``) for the files it matches (:func:`gnomon.capture.frames.expand_glob_argument`)."""
-    from gnomon.capture.frames import expand_glob_argument
+    from gnomon.capture.frames import expand_glob_argument, natural_key
 
     out: list[Path] = []
     for it in items:
@@ -220,7 +220,7 @@ def expand_image_args(items: Sequence[str | os.PathLike]) -> list[Path]:
         if matched is not None:
             out.extend(matched)
         elif p.is_dir():
-            found = sorted(q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES)
+            found = sorted((q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES), key=natural_key)
             if not found:
                 heif = [q.name for q in p.iterdir() if q.suffix.lower() in (".heic", ".heif", ".avif")]
                 why = (f"; {heif[0]} and the like are HEIF/AVIF, which is not read: export them as JPEG or PNG"

@@ -47,7 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "quoted patterns), or videos of the board")
     c.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners per row and per column, e.g. 9x6")
     c.add_argument("--square", required=True, type=float, metavar="S",
-                   help="side of one square, in world units (e.g. mm)")
+                   help="side of one square, in world units (e.g. mm). It does not change the camera: any "
+                   "positive value gives the same intrinsics (they have no length); it only scales the views' "
+                   "board poses (the recording)")
     c.add_argument("--video-views", type=int, default=None, metavar="N",
                    help="from each video, at most N distinct views (default 20)")
     c.add_argument("--model", choices=("zhang", "tsai"), default="zhang",
