@@ -245,6 +245,29 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
         p.write_bytes(p.read_bytes()[:60])
     scan_case("frames", "truncated PNG", prepare_files=truncated, needle="frame_0007")
 
+    # a JPEG with 200 bytes zeroed in the middle (a failing card or copy): libjpeg only warns and decodes garbage
+    desk_jpeg = ROOT / "field_logs" / "desk_lamp_small" / "field_log.toml"
+
+    def corrupt_middle(c: Path) -> None:
+        p = c / "frames" / "frame_0041.jpg"
+        b = bytearray(p.read_bytes())
+        b[len(b) // 2:len(b) // 2 + 200] = bytes(200)
+        p.write_bytes(bytes(b))
+    scan_case("frames", "JPEG with 200 bytes zeroed in the middle", prepare_files=corrupt_middle, needle="frame_0041",
+              source=desk_jpeg)
+    d = fresh("corrupt JPEG dropped on request")
+    log = copy_capture(desk_jpeg.parent, d / "cap")
+    corrupt_middle(log.parent)
+    edit_toml(log, lambda dd: dd["capture"].update(on_corrupt_frame="drop"))
+    o_drop = d / "out"
+
+    def dropped_named(o=o_drop) -> str | None:
+        w = json.loads((o / "report.json").read_text())["warnings"]
+        return None if any("frame 41 (frame_0041.jpg)" in x for x in w) else "no warning naming frame 41"
+    out.append(Case("frames", "corrupt JPEG dropped on request (warning)",
+                    gnomon("scan", str(log), "--out", str(o_drop), "--quiet", "--no-rrd"), expect="ok",
+                    check=dropped_named))
+
     def natural(c: Path) -> None:
         for p in sorted((c / "frames").glob("*.png")):
             i = int(p.stem.split("_")[1])

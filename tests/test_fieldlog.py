@@ -29,6 +29,7 @@ def test_valid_log_loads(tiny_capture: Path) -> None:
     np.testing.assert_allclose(log.pose.camera_centre_world, [0, 0, 500], atol=1e-9)
     assert log.planes[0].regions[1] == (0, 30, 48, 36)
     assert log.scan.edge == "both" and log.scan.min_contrast == 20
+    assert log.capture.on_corrupt_frame == "error"  # corrupt frames are refused unless asked otherwise
 
 
 @pytest.mark.parametrize(
@@ -42,6 +43,7 @@ def test_valid_log_loads(tiny_capture: Path) -> None:
         (lambda d: d["camera"]["pose"].pop("tvec"), "[camera.pose] missing required key 'tvec'"),
         (lambda d: d["planes"][0].update(regions=[[0, 0, 480, 10]]), "outside the 48x36 image"),
         (lambda d: d["scan"].update(edge="both-ways"), "[scan] edge: expected one of"),
+        (lambda d: d["capture"].update(on_corrupt_frame="ignore"), "[capture] on_corrupt_frame: expected one of"),
         (lambda d: d["scan"].update(max_dip_frames=200), "[scan] max_dip_frames: must be in 4..128"),
         (lambda d: d["scan"].update(max_dip_frames=3), "[scan] max_dip_frames: must be in 4..128"),
         (lambda d: d["scan"].update(max_dip_frames="wide"), "[scan] max_dip_frames: expected an integer"),

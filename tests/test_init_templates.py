@@ -229,3 +229,28 @@ def test_the_lamp_options_need_the_lamp(tiny_capture: Path, capsys) -> None:
     log = tomllib.loads(out.read_text())
     assert "chessboard" not in log["planes"][0] and "photos" not in log["pencil"]
     assert "# chessboard = \"9x6\"" in out.read_text()
+
+
+def test_a_folder_of_frames_is_taken_as_its_frames_in_natural_order(tmp_path: Path, capsys) -> None:
+    """`gnomon init frames/` writes the same field log as `gnomon init "frames/*.png"` (the folder's
+    images; a stray text file is not a frame); the frames glob lists them in natural order
+    (frame_2 before frame_10); a folder without frames is one line naming it, exit 2."""
+    from gnomon.capture.frames import glob_frames
+
+    frames = tmp_path / "cap" / "frames"
+    frames.mkdir(parents=True)
+    for i in range(12):
+        cv2.imwrite(str(frames / f"frame_{i}.png"), np.full((24, 32), 10 * i, np.uint8))
+    (frames / "notes.txt").write_text("taken at noon")
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    assert main(["init", str(frames), "--out", str(tmp_path / "a" / "field_log.toml")]) == 0
+    assert main(["init", str(frames / "*.png"), "--out", str(tmp_path / "b" / "field_log.toml")]) == 0
+    written = (tmp_path / "a" / "field_log.toml").read_text()
+    assert written == (tmp_path / "b" / "field_log.toml").read_text() and "/*.png" in written
+    pattern = tomllib.loads(written)["capture"]["frames"]  # the template loads once its markers are in
+    names = [p.name for p in glob_frames(tmp_path / "a", pattern)]  # as the field log reads it
+    assert names == [f"frame_{i}.png" for i in range(12)]
+    (tmp_path / "empty").mkdir()
+    assert main(["init", str(tmp_path / "empty"), "--out", str(tmp_path / "e.toml")]) == 2
+    assert "empty: the folder holds no frames" in _one_line_error(capsys)

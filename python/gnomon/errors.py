@@ -22,6 +22,17 @@ class FrameError(GnomonError):
     """A frame that is missing, unreadable or inconsistent (names the frame)."""
 
 
+class CorruptFrameError(FrameError):
+    """A frame file whose encoded data is corrupt inside: the decoder warned (and would have handed back
+    garbage where the data was lost). ``path``: the file; ``reason``: the decoder's words; ``hint``: what
+    the user can do, appended to the message."""
+
+    def __init__(self, path: object, reason: str, hint: str = ""):
+        super().__init__(f"{path}: corrupt image data: {reason}" + (f"; {hint}" if hint else ""))
+        self.path = path
+        self.reason = reason
+
+
 class OutputError(GnomonError):
     """An output that cannot be written: no space, file too large, read-only, permission (names the path)."""
 

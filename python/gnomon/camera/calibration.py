@@ -34,7 +34,7 @@ Camera file format (TOML; lengths in the board's units where any)::
     # cx, cy (pixels), sx (-), dx_mm, dy_mm (frame-buffer pixel pitch, mm)
 
     [calibration]                # optional: how the numbers were obtained
-    method = "zhang"             # "zhang" | "tsai-coplanar" | "tsai-views" | ... (+ "+full")
+    method = "zhang"             # "zhang" | "zhang-coplanar" | "tsai-coplanar" | "tsai-views" | ... (+ "+full")
     rms_px = 0.28                # over the views used
     n_views = 12
     images = ["a.png", ...]      # views used, and their RMS:
@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -65,7 +65,7 @@ import cv2
 import numpy as np
 
 from gnomon.camera.models import OpenCVCamera, Pose, TsaiCamera
-from gnomon.capture.frames import FrameSource, apply_exif_orientation, exif_orientation, to_grey
+from gnomon.capture.frames import FrameSource, apply_exif_orientation, decode_jpeg, exif_orientation, to_grey
 from gnomon.errors import GnomonError
 from gnomon.util import toml_io
 
@@ -103,7 +103,8 @@ def board_points(cols: int, rows: int, square: float) -> np.ndarray:
 def read_grey(path: str | os.PathLike) -> np.ndarray:
     """Read an image file as a 2-D grey array (uint8 or uint16), upright by its EXIF orientation.
 
-    Unreadable → GnomonError naming it.
+    Unreadable, or a JPEG whose data is corrupt inside (:func:`gnomon.capture.frames.decode_jpeg`) →
+    GnomonError naming it.
     """
     p = Path(path)
     if not p.is_file():
@@ -112,6 +113,10 @@ def read_grey(path: str | os.PathLike) -> np.ndarray:
         raw = p.read_bytes()
     except OSError as exc:
         raise GnomonError(f"{p}: cannot be read ({exc.strerror})") from None
+    if raw.startswith(b"\xff\xd8"):  # a JPEG: decoded strictly (its luma)
+        grey = decode_jpeg(p, raw, colour=False)
+        if grey is not None:
+            return grey
     flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION
     img = cv2.imdecode(np.frombuffer(raw, np.uint8), flags)
     if img is None:
@@ -204,9 +209,9 @@ def to_grey_u8(image: np.ndarray) -> np.ndarray:
 
 
 def expand_image_args(items: Sequence[str | os.PathLike]) -> list[Path]:
-    """Command-line image arguments → files: a directory stands for its images, sorted by name; a
+    """Command-line image arguments → files: a directory stands for its images, in natural order; a
     pattern (``"calib/*.jpg"``) for the files it matches (:func:`gnomon.capture.frames.expand_glob_argument`)."""
-    from gnomon.capture.frames import expand_glob_argument
+    from gnomon.capture.frames import expand_glob_argument, natural_key
 
     out: list[Path] = []
     for it in items:
@@ -215,7 +220,7 @@ def expand_image_args(items: Sequence[str | os.PathLike]) -> list[Path]:
         if matched is not None:
             out.extend(matched)
         elif p.is_dir():
-            found = sorted(q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES)
+            found = sorted((q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES), key=natural_key)
             if not found:
                 heif = [q.name for q in p.iterdir() if q.suffix.lower() in (".heic", ".heif", ".avif")]
                 why = (f"; {heif[0]} and the like are HEIF/AVIF, which is not read: export them as JPEG or PNG"
@@ -260,9 +265,10 @@ _CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
 
 
 def _find_board(grey: np.ndarray, board: tuple[int, int], *, sb_flags: tuple[int, ...] = _SB_FALLBACK_FLAGS,
-                classic: bool = True) -> np.ndarray | None:
+                classic: bool = True, classic_flags: int = _CLASSIC_FLAGS) -> np.ndarray | None:
     """The board's corners in ``board``'s order, found in either orientation: the sector detector with each
-    of ``sb_flags`` in turn, then (``classic``) the classic detector; None when none finds it."""
+    of ``sb_flags`` in turn, then (``classic``) the classic detector with ``classic_flags``; None when none
+    finds it."""
     cols, rows = board
     sizes = [(cols, rows)] if cols == rows else [(cols, rows), (rows, cols)]
     for flags in sb_flags:
@@ -271,7 +277,7 @@ def _find_board(grey: np.ndarray, board: tuple[int, int], *, sb_flags: tuple[int
             if ok and corners is not None:
                 return _canonical_order(corners.reshape(-1, 2).astype(np.float64), size, board)
     for size in sizes if classic else ():
-        ok, corners = cv2.findChessboardCorners(grey, size, flags=_CLASSIC_FLAGS)
+        ok, corners = cv2.findChessboardCorners(grey, size, flags=classic_flags)
         if ok and corners is not None:
             pts = corners.reshape(-1, 2).astype(np.float64)
             g = pts.reshape(size[1], size[0], 2)
@@ -281,24 +287,70 @@ def _find_board(grey: np.ndarray, board: tuple[int, int], *, sb_flags: tuple[int
     return None
 
 
+DETECT_PX = 1000
+"""A photo's long side for finding the board (then refined at full size): OpenCV's detectors' time grows
+with the pixels, and a board that calibrates has squares of tens of pixels at that size."""
+
+
 def detect_chessboard(image: np.ndarray, board: tuple[int, int], *, refine: bool = True) -> np.ndarray | None:
     """Find the chessboard's inner corners: (cols·rows, 2) pixels in OpenCV's order, or None.
 
-    ``cv2.findChessboardCornersSB`` finds the board, in either orientation
-    (``board`` or its sides swapped, reordered to ``board``'s order, see
-    :func:`_canonical_order`), with OpenCV's accurate settings first and
-    plainer ones, then the classic detector, when they fail (as on some real
-    JPEG photos); ``cv2.cornerSubPix`` then refines each corner in a window of
-    0.4× the smallest corner spacing (larger windows average more gradient; on
-    our rendered views this halves the SB detector's error, to ≈0.03–0.06 px RMS).
+    First fast (:func:`_find_board_quick`): on the photo scaled to ``DETECT_PX`` on its long side, OpenCV's
+    classic detector, then its sector detector with plain settings; found there, the corners are scaled
+    back and refined on the full-size photo. Where neither finds the board (as on some real JPEG photos),
+    the full-size chain: ``cv2.findChessboardCornersSB`` with OpenCV's accurate settings first and plainer
+    ones next, then the classic detector (seconds per photo at 1080p, tens of seconds at 12 Mpx). The board
+    is found in either orientation (``board`` or its sides swapped, reordered to ``board``'s order, see
+    :func:`_canonical_order`). ``cv2.cornerSubPix`` then refines each corner in a window of 0.4× the
+    smallest corner spacing (larger windows average more gradient; on our rendered views this halves the
+    SB detector's error, to ≈0.03–0.06 px RMS); from either start it converges to the same corner.
     """
     grey = to_grey_u8(image)
+    pts = _find_board_quick(grey, board)
+    if pts is not None:
+        return refine_corners(grey, pts, board) if refine else pts
     pts = _find_board(grey, board)
     if pts is None:
         return None
     if not refine:
         return pts
     return refine_corners(grey, pts, board)
+
+
+def _find_board_quick(grey: np.ndarray, board: tuple[int, int], classic: bool = True) -> np.ndarray | None:
+    """The board's corners found on ``grey`` scaled to ``DETECT_PX`` (with ``classic`` the classic detector
+    with its quick check first, then the sector detector's plain settings), in full-size pixels, not refined;
+    None when not found."""
+    h, w = grey.shape[:2]
+    scale = min(1.0, DETECT_PX / max(w, h))
+    small = grey if scale == 1.0 else cv2.resize(grey, (round(w * scale), round(h * scale)),
+                                                  interpolation=cv2.INTER_AREA)
+    pts = None
+    if classic:
+        pts = _find_board(small, board, sb_flags=(), classic_flags=_CLASSIC_FLAGS | cv2.CALIB_CB_FAST_CHECK)
+    if pts is None:
+        pts = _find_board(small, board, sb_flags=(cv2.CALIB_CB_NORMALIZE_IMAGE,), classic=False)
+    if pts is None:
+        return None
+    return _origin_as_sector_detector(grey, (pts + 0.5) / scale - 0.5, board)  # pixel centres: (x + 0.5)/s − 0.5
+
+
+def _origin_as_sector_detector(grey: np.ndarray, pts: np.ndarray, board: tuple[int, int]) -> np.ndarray:
+    """Corners ``pts`` in OpenCV's order, turned by a half-turn (reversed) where needed so that the board's
+    origin is where the sector detector puts it: on a board that a half-turn changes (cols and rows of
+    different parity, e.g. 9x6), the corner whose square diagonally outside the board is the lighter (the
+    classic detector reports the other end). A chessboard on a reference plane fixes the plane's frame
+    by that origin. A board a half-turn leaves alike (e.g. 8x6) is returned as it is."""
+    cols, rows = board
+    if (cols - rows) % 2 == 0:
+        return pts
+    g = pts.reshape(rows, cols, 2)
+    first = g[0, 0] - (g[0, 1] - g[0, 0]) / 2 - (g[1, 0] - g[0, 0]) / 2  # the square outside corner 0
+    last = g[-1, -1] + (g[-1, -1] - g[-1, -2]) / 2 + (g[-1, -1] - g[-2, -1]) / 2
+
+    def level(p: np.ndarray) -> float:
+        return float(cv2.getRectSubPix(grey, (5, 5), (float(p[0]), float(p[1]))).mean())
+    return pts if level(first) >= level(last) else np.ascontiguousarray(pts[::-1])
 
 
 def refine_corners(grey: np.ndarray, pts: np.ndarray, board: tuple[int, int]) -> np.ndarray:
@@ -342,8 +394,8 @@ class ZhangResult:
     warnings: tuple[str, ...] = ()
 
 
-def _zhang_once(objs, pixs, size, flags):
-    K0 = np.eye(3)
+def _zhang_once(objs, pixs, size, flags, K0=None):
+    K0 = np.eye(3) if K0 is None else np.asarray(K0, dtype=np.float64)
     d0 = np.zeros(5)
     o = [np.ascontiguousarray(x, dtype=np.float32).reshape(-1, 1, 3) for x in objs]
     p = [np.ascontiguousarray(x, dtype=np.float32).reshape(-1, 1, 2) for x in pixs]
@@ -372,6 +424,12 @@ def _zhang_once(objs, pixs, size, flags):
         per_view.append(float(np.sqrt(np.mean(np.sum(res * res, axis=1)))))
     std_i = np.asarray(std_i, dtype=np.float64).ravel()
     std = {k: float(std_i[i]) for i, k in enumerate(OPENCV_STD_NAMES)}
+    if flags == PAPER_MODEL_FLAGS:  # OpenCV reports no σ for a focal length of fixed aspect
+        std.update(_paper_model_std(cam, objs, pixs, rvecs, tvecs))
+    fixed = {"cx": cv2.CALIB_FIX_PRINCIPAL_POINT, "cy": cv2.CALIB_FIX_PRINCIPAL_POINT, "k1": cv2.CALIB_FIX_K1,
+             "k2": cv2.CALIB_FIX_K2, "k3": cv2.CALIB_FIX_K3, "p1": cv2.CALIB_ZERO_TANGENT_DIST,
+             "p2": cv2.CALIB_ZERO_TANGENT_DIST}
+    std = {k: v for k, v in std.items() if not flags & fixed.get(k, 0)}  # a parameter held has no σ
     all_sq = sum(r * r * len(o) for r, o in zip(per_view, objs, strict=True))
     total = float(np.sqrt(all_sq / sum(len(o) for o in objs)))
     return cam, total, per_view, poses, std
@@ -387,6 +445,7 @@ def calibrate_zhang(
     reject_factor: float = 3.0,
     reject_floor_px: float = 0.5,
     min_views: int = MIN_ZHANG_VIEWS,
+    paper_model: bool = False,
 ) -> ZhangResult:
     """Zhang's multi-view calibration through OpenCV, with outlier views rejected.
 
@@ -396,18 +455,29 @@ def calibrate_zhang(
     is dropped, worst first, recalibrating after each, while more than
     ``min_views`` remain; each drop is a warning. ``fix_k3`` holds k3 at 0
     (advisable for narrow fields of view). Fewer than ``min_views`` views → GnomonError.
+
+    ``paper_model``: the model of Bouguet & Perona's set-up, where every view of the board lies in one
+    plane (:data:`PAPER_MODEL_FLAGS`): the principal point held at the image centre, square pixels
+    (fx = fy), k1 the only distortion; started from the focal length the views' homographies give
+    (:func:`focal_from_homographies`). σ is then given for fx, fy and k1 only (the others are held).
     """
     n = len(object_points)
     names = list(names) if names is not None else [f"view {i}" for i in range(n)]
     if n < min_views:
         raise GnomonError(f"Zhang's calibration needs at least {min_views} views with a board, got {n}")
     flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    K0 = None
+    if paper_model:
+        flags = PAPER_MODEL_FLAGS
+        centre = ((image_size[0] - 1) / 2.0, (image_size[1] - 1) / 2.0)
+        f0 = focal_from_homographies(object_points, image_points, centre) or float(max(image_size))
+        K0 = np.array([[f0, 0.0, centre[0]], [0.0, f0, centre[1]], [0.0, 0.0, 1.0]])
     keep = list(range(n))
     rejected: list[tuple[str, float]] = []
     warns: list[str] = []
     while True:
         cam, rms, per_view, poses, std = _zhang_once([object_points[i] for i in keep],
-                                                     [image_points[i] for i in keep], image_size, flags)
+                                                     [image_points[i] for i in keep], image_size, flags, K0)
         med = float(np.median(per_view))
         limit = max(reject_factor * med, reject_floor_px)
         worst = int(np.argmax(per_view))
@@ -438,6 +508,113 @@ def calibrate_zhang(
     )
 
 
+PAPER_MODEL_FLAGS = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_FIX_ASPECT_RATIO
+                     | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K2 | cv2.CALIB_FIX_K3)
+"""OpenCV's flags for the paper's camera: principal point at the image centre, square pixels, k1 only."""
+
+COPLANAR_DEG = 5.0
+"""Views whose board normals all lie within this angle (degrees) of each other are one plane's: the focal
+length and the principal point cannot both be found from them (Zhang's method needs the board turned)."""
+
+
+def _paper_model_std(cam: OpenCVCamera, objs, pixs, rvecs, tvecs) -> dict[str, float]:
+    """1-σ of the paper model's fitted parameters (f as fx and fy, k1), as OpenCV's σ: from the Jacobian of
+    the projections (``cv2.projectPoints``) in f, k1 and every view's pose, and the residuals' variance
+    (their sum of squares over the 2N − P degrees of freedom)."""
+    K, dist = cam.K, np.asarray(cam.dist, dtype=np.float64)
+    blocks, residuals = [], []
+    for obj, pix, r, t in zip(objs, pixs, rvecs, tvecs, strict=True):
+        o = np.asarray(obj, dtype=np.float64).reshape(-1, 1, 3)
+        proj, jac = cv2.projectPoints(o, np.asarray(r, np.float64), np.asarray(t, np.float64), K, dist)
+        residuals.append(np.asarray(pix, dtype=np.float64).reshape(-1, 2) - proj.reshape(-1, 2))
+        # columns: rvec (3), tvec (3), fx, fy, cx, cy, k1, k2, p1, p2, k3
+        blocks.append((jac[:, 6] + jac[:, 7] * (cam.fy / cam.fx), jac[:, 10], jac[:, :6]))
+    n_views = len(blocks)
+    rows = sum(len(b[0]) for b in blocks)
+    J = np.zeros((rows, 2 + 6 * n_views))
+    at = 0
+    for k, (df, dk1, dpose) in enumerate(blocks):
+        J[at:at + len(df), 0], J[at:at + len(df), 1] = df, dk1
+        J[at:at + len(df), 2 + 6 * k:8 + 6 * k] = dpose
+        at += len(df)
+    r = np.concatenate(residuals).ravel()
+    dof = max(rows - J.shape[1], 1)
+    cov = float(r @ r) / dof * np.linalg.pinv(J.T @ J)
+    sf, sk1 = float(np.sqrt(cov[0, 0])), float(np.sqrt(cov[1, 1]))
+    return {"fx": sf, "fy": sf * cam.fy / cam.fx, "k1": sk1}
+
+
+def focal_from_homographies(object_points: Sequence[np.ndarray], image_points: Sequence[np.ndarray],
+                            centre: tuple[float, float]) -> float | None:
+    """The focal length (px) that makes every view's board-to-image homography a rotation, for square
+    pixels and the principal point at ``centre`` (lens distortion ignored: a starting value); None when
+    the views do not fix it (a board seen face-on).
+
+    With pixels taken from ``centre``, a homography's columns h1, h2 are K·r1, K·r2 up to scale, and
+    r1 ⟂ r2, |r1| = |r2| give, with u = 1/f², (h11·h12 + h21·h22)·u + h31·h32 = 0 and
+    (h11² + h21² − h12² − h22²)·u + h31² − h32² = 0: u by least squares over the views (Zhang 2000, with
+    the principal point known).
+    """
+    rows = []
+    for obj, pix in zip(object_points, image_points, strict=True):
+        found = cv2.findHomography(np.asarray(obj, np.float64)[:, :2], np.asarray(pix, np.float64) - centre)[0]
+        H = np.asarray(found, dtype=np.float64) if found is not None else np.zeros((0, 0))  # None: degenerate
+        if H.shape != (3, 3):
+            continue
+        H = H / np.linalg.norm(H)
+        (a, b, _), (c, d, _), (e, g, _) = H
+        rows += [(a * b + c * d, e * g), (a * a + c * c - b * b - d * d, e * e - g * g)]
+    if not rows:
+        return None
+    m = np.asarray(rows)
+    u = -float(m[:, 0] @ m[:, 1]) / float(m[:, 0] @ m[:, 0])
+    return 1.0 / np.sqrt(u) if np.isfinite(u) and u > 0 else None
+
+
+def normal_spread_deg(poses: Sequence[Pose]) -> float:
+    """The largest angle (degrees) between two views' board normals (board → camera poses)."""
+    n = np.array([p.R[:, 2] for p in poses])
+    cos = np.clip(np.abs(n @ n.T), -1.0, 1.0)  # a board's normal up to its sign
+    return float(np.degrees(np.arccos(cos.min()))) if len(n) > 1 else 0.0
+
+
+def calibrate_views(
+    object_points: Sequence[np.ndarray],
+    image_points: Sequence[np.ndarray],
+    image_size: tuple[int, int],
+    *,
+    names: Sequence[str] | None = None,
+    fix_k3: bool = False,
+    reject_factor: float = 3.0,
+) -> tuple[ZhangResult, str, float]:
+    """Zhang's calibration of the views, or, when they all lie in one plane, the paper's.
+
+    The paper's model (:func:`calibrate_zhang` with ``paper_model``) is fitted first; when its board
+    normals all lie within ``COPLANAR_DEG`` of each other (:func:`normal_spread_deg`), the views are one
+    plane's (a board moved about on a desk, as in Bouguet & Perona's set-up): the focal length and the
+    principal point are not observable together there (Zhang's full model fits absurd focal lengths and a
+    distortion it cannot invert), so the paper's model is the result, with a warning that names the case
+    and its numbers. Otherwise Zhang's full model. Returns (result, method, normal spread in degrees):
+    method "zhang" or "zhang-coplanar".
+    """
+    paper = calibrate_zhang(object_points, image_points, image_size, names=names, reject_factor=reject_factor,
+                            paper_model=True)
+    spread = normal_spread_deg(paper.poses)
+    if spread >= COPLANAR_DEG:
+        full = calibrate_zhang(object_points, image_points, image_size, names=names, fix_k3=fix_k3,
+                               reject_factor=reject_factor)
+        return full, "zhang", spread
+    cam, std = paper.camera, paper.std
+    w = (f"all {len(paper.names)} views show the board in one plane (their board normals lie within {spread:.2g}° "
+         f"of each other; Zhang's method needs the board turned by more than {COPLANAR_DEG:g}° between views): "
+         "the focal length and the principal point cannot both be found from them, so the camera is the "
+         "paper's: principal point at the image centre, square pixels, k1 the only distortion: "
+         f"f = {cam.fx:.1f} ± {std['fx']:.2g} px, k1 = {cam.dist[0]:.4f} ± {std['k1']:.2g} (σ of the corners' "
+         "noise only: a principal point off the centre biases f); for a full calibration add photos of the "
+         "board tilted (held up, propped at 20–50°)")
+    return replace(paper, warnings=paper.warnings + (w,)), "zhang-coplanar", spread
+
+
 # --------------------------------------------------------------------------- photos → camera
 
 
@@ -445,7 +622,8 @@ def calibrate_zhang(
 class CameraCalibration:
     """A calibrated camera and how it was obtained: what a camera file holds.
 
-    ``method``: "zhang", or "tsai-coplanar" / "tsai-views" (+ "+full");
+    ``method``: "zhang", "zhang-coplanar" (all views in one plane: :func:`calibrate_views`), or
+    "tsai-coplanar" / "tsai-views" (+ "+full");
     ``names``/``per_view_rms_px``/``poses``: the views used (board → camera);
     ``rejected``: ((name, rms_px), ...) outlier views; ``skipped``: images
     without a board; ``std``: 1-σ parameter standard deviations.
@@ -467,6 +645,8 @@ class CameraCalibration:
     # views taken from videos: name ("board.mp4#123") → its grey frame, and one line per video
     # saying how its views were picked
     video_frames: Mapping[str, np.ndarray] = field(default_factory=dict)
+    # the photos' grey images by name, when asked for (calibrate_images(keep_photos=True): for a recording)
+    photos: Mapping[str, np.ndarray] = field(default_factory=dict)
     video_notes: tuple[str, ...] = ()
 
     @property
@@ -477,7 +657,6 @@ class CameraCalibration:
 VIDEO_VIEWS = 20
 """How many views ``gnomon calibrate camera`` picks from a board video by default."""
 VIDEO_EXAMINED_PER_VIEW = 6  # frames examined per view wanted (evenly spaced through the video)
-VIDEO_DETECT_PX = 1000  # a video frame's long side for finding the board (then refined at full size)
 VIDEO_BLUR_FACTOR = 1.5  # a view whose edges are this much wider than the median view's is motion-blurred
 VIDEO_MIN_SHIFT = 0.02  # views whose corners moved less than this share of the image diagonal are one view
 
@@ -494,17 +673,11 @@ class VideoViews:
 
 
 def _find_board_fast(grey: np.ndarray, board: tuple[int, int]) -> np.ndarray | None:
-    """The board's corners on a frame scaled to ``VIDEO_DETECT_PX`` (OpenCV's sector detector, plain
+    """The board's corners on a video frame scaled to ``DETECT_PX`` (OpenCV's sector detector, plain
     settings: tens of ms where the accurate ones take a second on a frame without a board), scaled back
     to full size and refined there; None when not found."""
-    h, w = grey.shape[:2]
-    scale = min(1.0, VIDEO_DETECT_PX / max(w, h))
-    small = grey if scale == 1.0 else cv2.resize(grey, (round(w * scale), round(h * scale)),
-                                                  interpolation=cv2.INTER_AREA)
-    pts = _find_board(small, board, sb_flags=(cv2.CALIB_CB_NORMALIZE_IMAGE,), classic=False)
-    if pts is None:
-        return None
-    return refine_corners(grey, (pts + 0.5) / scale - 0.5, board)  # pixel centres: (x + 0.5) / scale − 0.5
+    pts = _find_board_quick(grey, board, classic=False)
+    return None if pts is None else refine_corners(grey, pts, board)
 
 
 def _view_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -611,6 +784,7 @@ def detect_in_images(
     *,
     progress: Callable[[int, int, str], None] | None = None,
     max_video_views: int = VIDEO_VIEWS,
+    keep: dict[str, np.ndarray] | None = None,
 ) -> tuple[list[str], list[np.ndarray], tuple[int, int], list[str], list[str], dict[str, np.ndarray], list[str]]:
     """Read the images (and videos: :func:`views_from_video`) and find the board in each.
 
@@ -619,7 +793,7 @@ def detect_in_images(
     Images of different sizes, or unreadable ones, are a GnomonError naming
     the image; an image without a board is skipped with a warning.
     ``progress(done, total, name)`` counts an image as one and a video as its
-    frames.
+    frames. ``keep``: filled with each photo showing the board, its grey image by name.
     """
     from gnomon.capture.frames import VIDEO_SUFFIXES
 
@@ -674,6 +848,8 @@ def detect_in_images(
             continue
         names.append(str(p))
         corners.append(c)
+        if keep is not None:
+            keep[str(p)] = img
     if progress:
         progress(total, total, "")
     assert size is not None
@@ -693,6 +869,7 @@ def calibrate_images(
     reject_factor: float = 3.0,
     progress: Callable[[int, int, str], None] | None = None,
     max_video_views: int = VIDEO_VIEWS,
+    keep_photos: bool = False,
 ) -> CameraCalibration:
     """Chessboard photos → a calibrated camera.
 
@@ -702,7 +879,8 @@ def calibrate_images(
     Tsai's coplanar two-stage method, then, with several views, a joint
     refinement (see :func:`gnomon.camera.tsai.calibrate_views`); needs
     ``pixel_pitch_mm = (dx, dy)`` and takes ``sx`` a priori; ``full``
-    optimises Cx, Cy (and sx with several views) too.
+    optimises Cx, Cy (and sx with several views) too. ``keep_photos``: the result holds the photos' grey
+    images (``photos``), e.g. for a recording of the views, which then need not be read again.
     """
     if model not in ("zhang", "tsai"):
         raise GnomonError(f"model '{model}': expected 'zhang' or 'tsai'")
@@ -711,8 +889,9 @@ def calibrate_images(
     if model == "tsai" and pixel_pitch_mm is None:
         raise GnomonError("--model tsai needs the sensor's pixel pitch (--pixel-pitch DX[,DY] in mm, e.g. 0.0028): "
                           "Tsai's method takes dx, dy a priori")
+    photos: dict[str, np.ndarray] | None = {} if keep_photos else None
     names, corners, size, skipped, warns, video_frames, notes = detect_in_images(
-        paths, board, progress=progress, max_video_views=max_video_views)
+        paths, board, progress=progress, max_video_views=max_video_views, keep=photos)
     obj = board_points(board[0], board[1], square)
     if model == "zhang":
         if len(names) < MIN_ZHANG_VIEWS:
@@ -726,10 +905,11 @@ def calibrate_images(
                 f"only {len(names)} of {len(paths)} images show the {board[0]}x{board[1]} chessboard{missing}; "
                 f"Zhang's method needs at least {MIN_ZHANG_VIEWS}"
             )
-        z = calibrate_zhang([obj] * len(names), corners, size, names=names, fix_k3=fix_k3, reject_factor=reject_factor)
+        z, method, _ = calibrate_views([obj] * len(names), corners, size, names=names, fix_k3=fix_k3,
+                                       reject_factor=reject_factor)
         return CameraCalibration(
             camera=z.camera,
-            method="zhang",
+            method=method,
             rms_px=z.rms_px,
             names=z.names,
             per_view_rms_px=z.per_view_rms_px,
@@ -741,6 +921,7 @@ def calibrate_images(
             skipped=tuple(skipped),
             warnings=tuple(warns) + z.warnings,
             video_frames=video_frames,
+            photos=photos or {},
             video_notes=tuple(notes),
         )
     from gnomon.camera import tsai
@@ -769,6 +950,7 @@ def calibrate_images(
         per_view_tsai=r.per_view,
         video_frames=video_frames,
         video_notes=tuple(notes),
+        photos=photos or {},
     )
 
 

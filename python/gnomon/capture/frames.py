@@ -11,6 +11,10 @@ queue.
 Problems with the input raise :class:`FrameError` naming the frame: a file that
 cannot be decoded or is truncated (the decoder only warns about those), a frame whose size
 differs from the first, a video that ends before the number of frames it announced (or the field log expects).
+A JPEG whose data is corrupt inside (bytes lost or zeroed mid-file: libjpeg warns and decodes the rest as
+garbage) raises :class:`~gnomon.errors.CorruptFrameError`: JPEGs are decoded by libjpeg-turbo through
+simplejpeg, which stops on the decoder's warnings (:func:`decode_jpeg`); a source built with
+``on_corrupt="drop"`` leaves such a frame out instead and lists it (:attr:`FrameSource.dropped`).
 
 Image files are turned upright by their EXIF orientation tag (as a phone
 records a portrait photo) wherever Gnomon reads them: :func:`decode_image_file`,
@@ -29,7 +33,7 @@ import queue
 import re
 import threading
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -38,8 +42,9 @@ from typing import cast
 
 import cv2
 import numpy as np
+import simplejpeg
 
-from gnomon.errors import FrameError
+from gnomon.errors import CorruptFrameError, FrameError
 
 FRAMES_IN_FLIGHT = 8
 """Frames decoded ahead of the consumer, at most (image files: submitted to the decoding threads and
@@ -92,6 +97,7 @@ def grey_8bit_scale(image: np.ndarray) -> np.ndarray:
 _JPEG_SOI, _JPEG_SOS, _JPEG_EOI = b"\xff\xd8", b"\xff\xda", b"\xff\xd9"
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _PNG_IEND = b"IEND\xaeB`\x82"
+_PNG_EXIF = b"eXIf"  # the type of a PNG's EXIF chunk
 
 
 def truncation_problem(raw: bytes) -> str | None:
@@ -135,11 +141,14 @@ def exif_orientation(raw: bytes) -> int:
     """The EXIF orientation tag (1–8) of an encoded image; 1 (upright) when absent or unreadable.
 
     Read by Pillow, which finds it in a JPEG's APP1 segments (EXIF, or XMP without EXIF); a JPEG whose
-    header has no APP1 segment (:func:`_jpeg_has_app1`: OpenCV's and most encoders' frames) is upright
-    without opening it in Pillow (≈ 0.4 ms per frame).
+    header has no APP1 segment (:func:`_jpeg_has_app1`: OpenCV's and most encoders' frames), and a PNG
+    without an ``eXIf`` chunk anywhere, are upright without opening them in Pillow (≈ 0.4 ms per JPEG frame;
+    a PNG is decoded whole by Pillow's EXIF look-up, ≈ 20 ms at 1080p).
     """
     if raw.startswith(_JPEG_SOI) and not _jpeg_has_app1(raw):
         return 1
+    if raw.startswith(_PNG_SIGNATURE) and _PNG_EXIF not in raw:
+        return 1  # Pillow would decode the whole PNG to look for its EXIF chunk (≈ 20 ms at 1080p)
     return _exif_orientation_pillow(raw)
 
 
@@ -217,9 +226,14 @@ def decode_image_file(path: Path) -> tuple[np.ndarray, bytes]:
 
     Raises :class:`FrameError` naming the file when it cannot be read or
     decoded, or when it is truncated (see :func:`truncation_problem`: the
-    decoder would only warn and hand back a partly grey image).
+    decoder would only warn and hand back a partly grey image), and
+    :class:`~gnomon.errors.CorruptFrameError` when a JPEG's data is corrupt inside (:func:`decode_jpeg`).
     """
     raw = _read_image_bytes(path)
+    if raw.startswith(_JPEG_SOI):
+        decoded = decode_jpeg(path, raw, colour=True)
+        if decoded is not None:
+            return decoded, raw
     return _decode(path, raw, cv2.IMREAD_UNCHANGED), raw
 
 
@@ -235,17 +249,46 @@ def decode_frame_file(path: Path, keep_colour: bool = False) -> tuple[np.ndarray
     :func:`to_grey` of the image as stored. Errors as :func:`decode_image_file`.
     """
     raw = _read_image_bytes(path)
-    jpeg = raw.startswith(_JPEG_SOI)
-    image = None
-    if keep_colour or not jpeg:
-        image = _decode(path, raw, cv2.IMREAD_UNCHANGED)
-    colour = image[:, :, :3] if (keep_colour and image is not None and image.ndim == 3) else None
-    if jpeg:
+    if raw.startswith(_JPEG_SOI):
+        grey = decode_jpeg(path, raw, colour=False)
+        if grey is not None:
+            colour = decode_jpeg(path, raw, colour=True) if keep_colour else None
+            return grey, (colour if colour is not None and colour.ndim == 3 else None), raw
+        # a JPEG simplejpeg does not decode (CMYK, 12-bit, an unusual sampling): OpenCV's decoder
+        image = _decode(path, raw, cv2.IMREAD_UNCHANGED) if keep_colour else None
         grey = _decode(path, raw, cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH | cv2.IMREAD_IGNORE_ORIENTATION)
-    else:
-        assert image is not None
-        grey = to_grey(image)
-    return grey, colour, raw
+        return grey, (image[:, :, :3] if image is not None and image.ndim == 3 else None), raw
+    image = _decode(path, raw, cv2.IMREAD_UNCHANGED)
+    return to_grey(image), (image[:, :, :3] if keep_colour and image.ndim == 3 else None), raw
+
+
+def decode_jpeg(path: Path, raw: bytes, colour: bool) -> np.ndarray | None:
+    """A JPEG's bytes (``raw``, of ``path``) decoded strictly by libjpeg-turbo (simplejpeg), upright by its
+    EXIF orientation: with ``colour`` as BGR (H, W, 3) (a grey JPEG: (H, W)), else its luma (H, W), uint8.
+
+    libjpeg only warns about data corrupt inside the file (bytes zeroed or lost mid-file: "Corrupt JPEG
+    data: premature end of data segment", "bad Huffman code", "found marker … instead of RST") and
+    decodes the rest as garbage; OpenCV's decoder prints the warning and returns that image. Here a
+    warning stops the decoding: :class:`~gnomon.errors.CorruptFrameError` naming the file and the
+    decoder's words. The pixels are libjpeg-turbo's own, as OpenCV's (the same library, the same
+    integer DCT): equal value for value (``tests/test_frame_decoding.py``).
+
+    None for a JPEG simplejpeg does not decode at all (CMYK, 12-bit samples, a sampling TurboJPEG does not
+    know): the caller decodes it with OpenCV, unchecked.
+    """
+    try:
+        image = simplejpeg.decode_jpeg(raw, "BGR" if colour else "GRAY", strict=True)
+    except ValueError as exc:
+        try:  # a warning (the data decodes without strict) or an error (it does not)?
+            simplejpeg.decode_jpeg(raw, "GRAY", strict=False)
+        except ValueError:
+            return None
+        raise CorruptFrameError(path, str(exc).strip() or "the decoder warned") from None
+    if colour and simplejpeg.decode_jpeg_header(raw)[2] == "Gray":
+        image = image[:, :, 0]
+    elif not colour:
+        image = image[:, :, 0]
+    return apply_exif_orientation(np.ascontiguousarray(image), exif_orientation(raw))
 
 
 def _read_image_bytes(path: Path) -> bytes:
@@ -420,20 +463,52 @@ def frame_pass(source: Iterable[Frame]) -> Iterator[Iterator[Frame]]:
             close()
 
 
+ON_CORRUPT = ("error", "drop")
+"""What a frame source does with a corrupt image file (``[capture] on_corrupt_frame``): refuse it, naming it
+(:class:`~gnomon.errors.CorruptFrameError`), or leave it out and list it (:attr:`FrameSource.dropped`)."""
+
+
+@dataclass(frozen=True)
+class DroppedFrame:
+    """A frame left out of a pass: its capture index, file name and why (the decoder's words)."""
+
+    index: int
+    name: str
+    reason: str
+
+
+def dropped_frames_warning(dropped: Sequence[DroppedFrame]) -> str:
+    """The warning a scan gives for the corrupt frames it left out (each named, with the decoder's words)."""
+    named = "; ".join(f"frame {d.index} ({d.name}): {d.reason}" for d in dropped[:5])
+    more = f"; and {len(dropped) - 5} more" if len(dropped) > 5 else ""
+    return (f"{len(dropped)} corrupt frame{'s' if len(dropped) > 1 else ''} left out ([capture] on_corrupt_frame "
+            f"= \"drop\"): {named}{more}; the shadow's times are interpolated across the gap, less accurately "
+            "on the pixels its edges crossed then: replace the files from the camera's card or a backup to use them")
+
+
 class FrameSource:
     """A sequence of frames from an image list or a video file.
 
     ``expected_count``: when given, a source that delivers fewer frames raises
     :class:`FrameError` (a truncated video or a missing file is not a shorter scan).
+    ``on_corrupt`` (:data:`ON_CORRUPT`): an image file whose data is corrupt inside
+    (:func:`decode_jpeg`) raises :class:`~gnomon.errors.CorruptFrameError` naming it (``"error"``), or is
+    left out of the pass and listed in :attr:`dropped` (``"drop"``: the frames after it keep their
+    capture indices, so a tracker sees a gap in time there, as for a skipped frame).
     """
 
     def __init__(self, image_files: tuple[Path, ...] = (), video: Path | None = None,
-                 expected_count: int | None = None):
+                 expected_count: int | None = None, on_corrupt: str = "error"):
         if bool(image_files) == (video is not None):
             raise ValueError("give either image files or a video")
+        if on_corrupt not in ON_CORRUPT:
+            raise ValueError(f"on_corrupt {on_corrupt!r}: expected one of {ON_CORRUPT}")
         self.image_files = tuple(image_files)
         self.video = video
         self.expected_count = expected_count
+        self.on_corrupt = on_corrupt
+        # The corrupt frames the last pass left out (on_corrupt = "drop"), in order.
+        self.dropped: list[DroppedFrame] = []
         # Frames delivered with their colour image too (besides grey): the first, and those a scan's
         # colours are taken from (gnomon.capture.texture.LitColour).
         self.color_frames: frozenset[int] = frozenset({0})
@@ -542,22 +617,27 @@ class FrameSource:
         pending: deque[Future[_Decoded]] = deque()
         files = enumerate(self.image_files)
         workers = self.decode_threads or decode_workers()
+        drop = self.on_corrupt == "drop"
+        self.dropped = []
         with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="gnomon-frame-decode") as pool, \
                 ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-frame-digest") as hasher:
             try:
                 # Start with one frame per thread (a peek decodes little more than the first),
                 # then keep FRAMES_IN_FLIGHT ahead.
                 for i, path in files:
-                    pending.append(pool.submit(_decode_file, i, path, i in colour))
+                    pending.append(pool.submit(_decode_file, i, path, i in colour, drop))
                     if len(pending) >= workers:
                         break
                 while pending:
                     decoded = pending.popleft().result()
                     for i, path in files:
-                        pending.append(pool.submit(_decode_file, i, path, i in colour))
+                        pending.append(pool.submit(_decode_file, i, path, i in colour, drop))
                         if len(pending) >= FRAMES_IN_FLIGHT:
                             break
                     hasher.submit(digest.update, decoded.raw)  # one thread: in the files' order
+                    if decoded.grey is None:  # corrupt, and dropped
+                        self.dropped.append(DroppedFrame(decoded.index, decoded.name, decoded.corrupt))
+                        continue
                     if first is None:
                         first = (decoded.grey.shape, decoded.grey.dtype)
                     else:
@@ -609,13 +689,25 @@ class _Decoded:
 
     index: int
     name: str
-    grey: np.ndarray  # its size and sample type are the file's
+    grey: np.ndarray | None  # its size and sample type are the file's; None: corrupt and dropped
     color: np.ndarray | None
     raw: bytes  # the file's bytes, for the input digest
+    corrupt: str = ""  # why the file was dropped (the decoder's words)
 
 
-def _decode_file(index: int, path: Path, keep_colour: bool) -> _Decoded:
-    grey, color, raw = decode_frame_file(path, keep_colour)
+CORRUPT_FRAME_HINT = ("replace it from the camera's card or a backup, or leave it out with [capture] "
+                      "on_corrupt_frame = \"drop\"")
+
+
+def _decode_file(index: int, path: Path, keep_colour: bool, drop: bool = False) -> _Decoded:
+    """One image file decoded (on a decoding thread); a corrupt one, with ``drop``, as a :class:`_Decoded`
+    without an image, otherwise a :class:`~gnomon.errors.CorruptFrameError` saying what the user can do."""
+    try:
+        grey, color, raw = decode_frame_file(path, keep_colour)
+    except CorruptFrameError as exc:
+        if not drop:
+            raise CorruptFrameError(path, exc.reason, CORRUPT_FRAME_HINT) from None
+        return _Decoded(index, path.name, None, None, path.read_bytes(), exc.reason)
     return _Decoded(index, path.name, grey, color, raw)
 
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from gnomon.capture.frames import Frame, FrameSource, decode_frame_file
 from gnomon.capture.tracking import SecondDips, ShadowTimes, TrackedSequence, TrackerSettings, track_source
-from gnomon.errors import GnomonError
+from gnomon.errors import CorruptFrameError, GnomonError
 
 __all__ = ["TileGrid", "TileResult", "TiledTracker", "current_rss_bytes", "peak_rss_bytes", "reset_peak_rss", "stitch",
            "track_tile"]
@@ -119,18 +119,18 @@ class TileResult:
 def track_tile(image_files: tuple[Path, ...], video: Path | None, expected_count: int | None,
                settings: TrackerSettings,
                shape: tuple[int, int], bounds: tuple[int, int, int, int], skip: np.ndarray | None,
-               keep_first_frame: bool) -> TileResult:
+               keep_first_frame: bool, on_corrupt: str = "error") -> TileResult:
     """Track one tile of a capture (runs on a worker; reads the frames itself).
 
     ``settings``: :class:`gnomon.capture.tracking.TrackerSettings`; ``shape``: the
     full image (H, W); ``bounds``: the tile's ``(row0, row1, col0, col1)``;
     ``skip``: capture frames the light excludes. The first frame is returned
-    only with ``keep_first_frame`` (one tile is enough).
+    only with ``keep_first_frame`` (one tile is enough); ``on_corrupt``: as :class:`FrameSource`'s.
     """
     t0 = time.perf_counter()
     reset_peak_rss()
     rss_start = current_rss_bytes()
-    source = FrameSource(tuple(image_files), video, expected_count)
+    source = FrameSource(tuple(image_files), video, expected_count, on_corrupt)
     r0, r1, c0, c1 = bounds
     tracked = track_source(source, settings, shape, skip=skip, crop=(slice(r0, r1), slice(c0, c1)),
                            where=f"{source.name}: tile rows {r0}:{r1}, columns {c0}:{c1}")
@@ -198,7 +198,8 @@ class TiledTracker:
         bounds = self.grid.bounds(shape)
         futures = [
             self.client.submit(track_tile, source.image_files, source.video, source.expected_count, settings,
-                               shape, b, skip, i == 0, pure=False, retries=self.retries,
+                               shape, b, skip, i == 0, getattr(source, "on_corrupt", "error"), pure=False,
+                               retries=self.retries,
                                key=f"gnomon-tile-{b[0]}-{b[2]}-{os.getpid()}-{time.time_ns()}")
             for i, b in enumerate(bounds)
         ]
@@ -233,5 +234,10 @@ class TiledTracker:
         wanted = set(range(0, n, max(self.frame_stride, 1))) | {i for i in source.color_frames if i < n}
         for i in sorted(wanted):
             path = source.image_files[i]
-            grey, color, _ = decode_frame_file(path, i in source.color_frames)
+            try:
+                grey, color, _ = decode_frame_file(path, i in source.color_frames)
+            except CorruptFrameError:
+                if getattr(source, "on_corrupt", "error") == "drop":
+                    continue  # the tiles leave it out too, and the scan names it
+                raise
             on_frame(Frame(i, grey, color, path.name))

@@ -60,7 +60,7 @@ import numpy as np
 
 from gnomon import _kernel
 from gnomon.capture.cloud_levels import HeldFrame, cloud_levels
-from gnomon.capture.frames import Frame, FrameSource, frame_pass
+from gnomon.capture.frames import DroppedFrame, Frame, FrameSource, frame_pass
 from gnomon.capture.noise import image_noise_dn
 from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, KernelLutError, KernelParameterError
 from gnomon.util.progress import Progress
@@ -468,7 +468,8 @@ class TrackedSequence:
     and BGR when the capture is in colour); ``noise_dn``: image noise (DN of
     the input); ``lut``: the capture's decoding table (DN of the input →
     linear, :func:`linear` for the times' levels); ``info``: how the pass ran
-    when that is worth reporting (a tiled pass: tiles, workers, memory).
+    when that is worth reporting (a tiled pass: tiles, workers, memory);
+    ``dropped``: the corrupt frames the source left out (``[capture] on_corrupt_frame = "drop"``).
     """
 
     times: ShadowTimes
@@ -481,6 +482,7 @@ class TrackedSequence:
     info: dict = field(default_factory=dict)
     second: SecondDips | None = None  # the second candidate dips, when the pass kept them
     levelled: list[int] = field(default_factory=list)  # capture frames of illumination dips levelled per pixel
+    dropped: list[DroppedFrame] = field(default_factory=list)
 
     @property
     def n_frames(self) -> int:
@@ -549,15 +551,16 @@ def track_source(
         raise FrameError(f"{source.name}: no frames")
     tracker.flush()
     used, dips = tracker.fed, sorted(tracker.refused)
-    if source.expected_count is not None and seen < source.expected_count:
-        raise FrameError(f"{source.name}: only {seen} frames, expected {source.expected_count}")
+    dropped = list(getattr(source, "dropped", ()))  # a drop-in source may not drop frames
+    if source.expected_count is not None and seen + len(dropped) < source.expected_count:
+        raise FrameError(f"{source.name}: only {seen + len(dropped)} frames, expected {source.expected_count}")
     if len(used) < 2:
         raise FrameError(f"{source.name}: fewer than two usable frames (sun below the horizon or clouds)")
     noise_dn = float(np.median([n.result() for n in noise])) if noise else 1.0
     times = tracker.finish(noise_dn)
     return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, tracker.lut,
                            second=tracker.second_dips() if settings.second_dips else None,
-                           levelled=list(tracker.levelled))
+                           levelled=list(tracker.levelled), dropped=dropped)
 
 
 # The width (TrackerSettings.max_width, frames) a scan starts from; the kernel's widest is MAX_DIP_FRAMES.

@@ -47,7 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "quoted patterns), or videos of the board")
     c.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners per row and per column, e.g. 9x6")
     c.add_argument("--square", required=True, type=float, metavar="S",
-                   help="side of one square, in world units (e.g. mm)")
+                   help="side of one square, in world units (e.g. mm). It does not change the camera: any "
+                   "positive value gives the same intrinsics (they have no length); it only scales the views' "
+                   "board poses (the recording)")
     c.add_argument("--video-views", type=int, default=None, metavar="N",
                    help="from each video, at most N distinct views (default 20)")
     c.add_argument("--model", choices=("zhang", "tsai"), default="zhang",
@@ -174,7 +176,8 @@ def _record_calibration(cal, path: Path) -> None:
                        image_scale=1.0) as rec:
         rec.log_camera(cam.K, cam.width, cam.height, np.eye(3), np.zeros(3), "board units")
         for i, (name, pose, rms) in enumerate(zip(cal.names, cal.poses, cal.per_view_rms_px, strict=True)):
-            rec.log_frame(i, cal.video_frames[name] if name in cal.video_frames else calibration.read_grey(name))
+            image = cal.photos.get(name, cal.video_frames.get(name))
+            rec.log_frame(i, image if image is not None else calibration.read_grey(name))
             rec.log_image_points(i, cam.project(Pose(pose.R, pose.t).world_to_camera(board)), name="board")
             rec.log_metrics({"view_rms_px": float(rms)}, index=i)
         for w in cal.warnings:
@@ -207,6 +210,10 @@ def run(args: argparse.Namespace) -> int:
     if video_views < calibration.MIN_ZHANG_VIEWS:
         raise GnomonError(f"--video-views {video_views}: must be ≥ {calibration.MIN_ZHANG_VIEWS}")
     paths = calibration.expand_image_args(args.images)
+    if not args.no_rrd:
+        from gnomon.recording.recorder import warm_rerun_import
+
+        warm_rerun_import()  # rerun is imported (≈ 1 s) while the boards are found
     with Progress("boards", len(paths), enabled=not args.quiet) as bar:
 
         def progress(done: int, total: int, name: str) -> None:
@@ -225,6 +232,7 @@ def run(args: argparse.Namespace) -> int:
             reject_factor=args.reject,
             progress=progress,
             max_video_views=video_views,
+            keep_photos=not args.no_rrd,
         )
     for w in cal.warnings:
         print(f"gnomon: warning: {w}", file=sys.stderr)

@@ -198,8 +198,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "to measure; a desk lamp located from pencil photos; or the sun from the site and the frames' "
         "times), and the scan settings.",
     )
-    p.add_argument("frames", nargs="+", type=Path, help="the frames (image files, or a quoted pattern such as "
-                   "\"frames/*.jpg\") or one video")
+    p.add_argument("frames", nargs="+", type=Path, help="the frames: image files, their folder, or a quoted "
+                   "pattern such as \"frames/*.jpg\" (in natural order: frame_2 before frame_10), or one video")
     p.add_argument("--camera", type=Path, default=None, help="a camera file from `gnomon calibrate camera`")
     p.add_argument("--light", choices=LIGHTS, default="two-plane",
                    help="the set-up: two planes and no light to measure (default), a desk lamp, or the sun")
@@ -207,7 +207,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="lamp: the pencil photos (files or a quoted pattern), listed in [pencil]")
     p.add_argument("--board", default=None, metavar="COLSxROWS",
                    help="lamp: the chessboard lying on the desk, inner corners (e.g. 9x6)")
-    p.add_argument("--square", type=float, default=None, help="lamp: the board's square, in the field log's units")
+    p.add_argument("--square", type=float, default=None,
+                   help="lamp: the board's square, measured, in the field log's units. It matters: the board "
+                   "places the desk, the pencil's length places the lamp, and the two must share one scale (a "
+                   "wrong square moves the desk against the lamp, which no rescaling of the result undoes)")
     p.add_argument("--board-image", type=Path, default=None, metavar="PHOTO",
                    help="lamp: the photo of the board on the desk (default: the capture's first frame)")
     p.add_argument("--out", type=Path, default=None, help="field log to write (default: field_log.toml "
@@ -278,13 +281,32 @@ def _sun_times(files: list[Path], video: bool, fps: float | None) -> str:
                if video else ": fill in") + "\n")
 
 
+def _folder_frames(folder: Path) -> tuple[Path, ...]:
+    """A folder given as the frames: its image files (any case of their suffix), or the one video in it;
+    a one-line error naming it when it holds neither."""
+    from gnomon.camera.calibration import IMAGE_SUFFIXES
+    from gnomon.errors import GnomonError
+
+    entries = [p for p in folder.iterdir() if p.is_file()]
+    images = tuple(p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES)
+    videos = tuple(p for p in entries if p.suffix.lower() in VIDEO_SUFFIXES)
+    if images:
+        return images
+    if len(videos) == 1:
+        return videos
+    raise GnomonError(f"{folder}: " + (f"{len(videos)} videos and no images: give one video" if videos else
+                                       f"the folder holds no frames (images: {', '.join(IMAGE_SUFFIXES)}; or "
+                                       "one video)"))
+
+
 def run(args: argparse.Namespace) -> int:
     from gnomon.capture.frames import FrameSource, expand_glob_argument, natural_key, video_fps
     from gnomon.errors import GnomonError
     from gnomon.util import atomic
     from gnomon.util.validate import check_output_file, input_file
 
-    files = sorted((f for a in args.frames for f in (expand_glob_argument(a, "frame") or (a,))), key=natural_key)
+    files = sorted((f for a in args.frames for f in (_folder_frames(a) if Path(a).is_dir()
+                                                      else expand_glob_argument(a, "frame") or (a,))), key=natural_key)
     for f in files:
         input_file(f, "frame")
     if args.light != "lamp":

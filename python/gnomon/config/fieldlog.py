@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from gnomon.camera.models import CalibratedCamera, Pose
-from gnomon.capture.frames import VIDEO_SUFFIXES, glob_frames, image_size, video_size
+from gnomon.capture.frames import ON_CORRUPT, VIDEO_SUFFIXES, glob_frames, image_size, video_size
 from gnomon.config.lights import LightSections, light_kind
 from gnomon.config.plausibility import check_field_log
 from gnomon.config.specs import (
@@ -59,6 +59,7 @@ def _parse_capture(t: Table, base: Path) -> CaptureSpec:
     time_pattern = t.string("time_pattern") if "time_pattern" in t.data else None
     start = t.string("start") if "start" in t.data else None
     fps = t.number("fps", positive=True) if "fps" in t.data else None
+    on_corrupt = t.string("on_corrupt_frame", "error", ON_CORRUPT)
     if timestamps == "filename" and time_pattern is None:
         raise FieldLogError(f"{t.path}: [capture] timestamps = 'filename' needs 'time_pattern'")
     if timestamps == "start+fps" and (start is None or fps is None):
@@ -67,7 +68,7 @@ def _parse_capture(t: Table, base: Path) -> CaptureSpec:
 
     def spec(files: tuple[Path, ...], video: Path | None) -> CaptureSpec:
         return CaptureSpec(pattern, files, video, units, gamma, frame_count, timestamps=timestamps,
-                           time_pattern=time_pattern, start=start, fps=fps)
+                           time_pattern=time_pattern, start=start, fps=fps, on_corrupt_frame=on_corrupt)
 
     if not pattern.strip():
         raise t.error("frames", "is empty; give a glob such as 'frames/*.png' or a video file")

@@ -81,9 +81,10 @@ class ScanSetup:
 
 
 def frame_source(log: FieldLog) -> FrameSource:
-    """The field log's frames (image files or a video)."""
+    """The field log's frames (image files or a video), corrupt ones refused or dropped as
+    ``[capture] on_corrupt_frame`` says."""
     c = log.capture
-    return FrameSource(c.image_files, c.video, c.frame_count)
+    return FrameSource(c.image_files, c.video, c.frame_count, c.on_corrupt_frame)
 
 
 def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:

@@ -34,6 +34,7 @@ class CaptureSpec:
     time_pattern: str | None = None
     start: str | None = None
     fps: float | None = None
+    on_corrupt_frame: str = "error"  # "error" | "drop": gnomon.capture.frames.ON_CORRUPT
 
 
 @dataclass(frozen=True)

@@ -80,8 +80,8 @@ class TwoPlaneLight(LightModel):
                            f"{est.conditioning:.4f} < {MIN_LAMP_CONDITIONING}): the lamp lies on a line, "
                            "not at a point"),
             }
-            warnings.append(f"lamp estimate is degenerate: the shadow planes share one direction (ratio "
-                            f"{est.conditioning:.4f}); report.json gives the line the lamp lies on, not a point")
+            # No warning: a two-plane scan needs no lamp position (each plane comes from its own two
+            # lines), so there is nothing for the user to do; report.json says why there is a line.
         else:
             light["estimated_position"] = self.pose.camera_to_world(est.point).tolist()
             light["estimated_position_plane_rms"] = est.plane_rms

@@ -271,7 +271,8 @@ def run_scan_bench(field_log: str, out_dir: str, mesh_formats: tuple[str, ...] |
     from gnomon.runs.scan import ScanOptions, run_scan
 
     log = load_field_log(field_log)
-    source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count)
+    source = FrameSource(log.capture.image_files, log.capture.video, log.capture.frame_count,
+                         log.capture.on_corrupt_frame)
     threads = decode_workers() if source.video is None else 1
     one_thread = None
     if threads > 1:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from gnomon.capture.colours import COLOUR_SAMPLES, frame_hook, lit_colours
-from gnomon.capture.frames import FrameSource
+from gnomon.capture.frames import FrameSource, dropped_frames_warning
 from gnomon.capture.texture import LitColour, sample_indices
 from gnomon.capture.tracking import ShadowTimes, TrackedSequence, track_source, track_widening
 from gnomon.config.fieldlog import load_field_log
@@ -184,6 +184,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
         with timed(timings, "ray_map_s"):  # what is left of it after tracking
             ray_map = rays.result()
     check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
+    if tracked.dropped:
+        warnings.append(dropped_frames_warning(tracked.dropped))
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
     if tracked.levelled:
         more = " …" if len(tracked.levelled) > 8 else ""

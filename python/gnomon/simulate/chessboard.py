@@ -162,6 +162,36 @@ def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
     return cv2.Rodrigues(np.asarray(axis, dtype=np.float64) * angle)[0]
 
 
+def _board_outline(camera: TruthCamera, cols: int, rows: int,
+                   square: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The board's paper outline (one square beyond the inner corners; (4, 3), board frame), its centre
+    (board frame) and the camera's focal length in pixels."""
+    outline = np.array(
+        [[-square, -square, 0], [cols * square, -square, 0], [cols * square, rows * square, 0],
+         [-square, rows * square, 0]],
+        dtype=np.float64,
+    )
+    centre = np.array([(cols - 1) * square / 2, (rows - 1) * square / 2, 0.0])
+    f = camera.fx if isinstance(camera, TruthPinhole) else camera.f_mm / camera.dy_mm
+    return outline, centre, f
+
+
+def _in_view(camera: TruthCamera, corners_cam: np.ndarray, margin_px: float) -> bool:
+    """Whether points (camera frame) are in front of the camera and at least ``margin_px`` inside the image."""
+    if np.any(corners_cam[:, 2] <= 0):
+        return False
+    pix = camera.project(corners_cam)
+    return bool(np.all(pix[:, 0] > margin_px) and np.all(pix[:, 0] < camera.width - 1 - margin_px)
+                and np.all(pix[:, 1] > margin_px) and np.all(pix[:, 1] < camera.height - 1 - margin_px))
+
+
+def _random_ray(rng: np.random.Generator, camera: TruthCamera, f: float, spread: float) -> np.ndarray:
+    """The pinhole ray (x, y, 1) through a random pixel within ``spread`` × the image size of its centre."""
+    u = rng.uniform(0.5 - spread, 0.5 + spread) * camera.width
+    v = rng.uniform(0.5 - spread, 0.5 + spread) * camera.height
+    return np.array([(u - camera.cx) / f, (v - camera.cy) / f, 1.0])
+
+
 def random_poses(
     camera: TruthCamera,
     cols: int,
@@ -183,13 +213,7 @@ def random_poses(
     ``spread`` × the image size from the image centre.
     """
     rng = np.random.default_rng(seed)
-    outline = np.array(
-        [[-square, -square, 0], [cols * square, -square, 0], [cols * square, rows * square, 0],
-         [-square, rows * square, 0]],
-        dtype=np.float64,
-    )
-    centre = np.array([(cols - 1) * square / 2, (rows - 1) * square / 2, 0.0])
-    f = camera.fx if isinstance(camera, TruthPinhole) else camera.f_mm / camera.dy_mm
+    outline, centre, f = _board_outline(camera, cols, rows, square)
     poses: list[tuple[np.ndarray, np.ndarray]] = []
     tries = 0
     while len(poses) < n:
@@ -203,17 +227,53 @@ def random_poses(
         R = _rot(axis, tilt) @ _rot(np.array([0, 0, 1.0]), spin)
         width_frac = rng.uniform(*fill)
         depth = f * (cols + 1) * square / (width_frac * camera.width)
-        u = rng.uniform(0.5 - spread, 0.5 + spread) * camera.width
-        v = rng.uniform(0.5 - spread, 0.5 + spread) * camera.height
-        ray = np.array([(u - camera.cx) / f, (v - camera.cy) / f, 1.0])
+        ray = _random_ray(rng, camera, f, spread)
         t = ray * depth - R @ centre
-        corners_cam = outline @ R.T + t
-        if np.any(corners_cam[:, 2] <= 0):
+        if _in_view(camera, outline @ R.T + t, margin_px):
+            poses.append((R, t))
+    return poses
+
+
+def coplanar_poses(
+    camera: TruthCamera,
+    cols: int,
+    rows: int,
+    square: float,
+    n: int = 12,
+    *,
+    seed: int = 0,
+    tilt_deg: float = 50.0,
+    fill: float = 0.35,
+    margin_px: float = 20.0,
+    spread: float = 0.3,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``n`` board poses (R, t) that all lie in one plane: the board moved about and turned on a desk that
+    the camera sees tilted by ``tilt_deg`` from face-on (the paper's calibration set-up).
+
+    The desk is at the depth where a board in the image's centre spans ``fill`` of the image's width; each
+    board is turned about the desk's normal by a random angle and centred on the desk where a random ray
+    within ``spread`` × the image size of its centre meets it, with the whole board (plus one square)
+    in view. Every pose has the desk's normal as its z axis: the views are exactly coplanar.
+    """
+    rng = np.random.default_rng(seed)
+    outline, centre, f = _board_outline(camera, cols, rows, square)
+    desk = _rot(np.array([1.0, 0.0, 0.0]), math.radians(tilt_deg))  # board frame → camera, turned about x
+    normal = desk[:, 2]
+    depth = f * (cols + 1) * square / (fill * camera.width)
+    point = np.array([0.0, 0.0, depth])  # the desk passes through it
+    poses: list[tuple[np.ndarray, np.ndarray]] = []
+    tries = 0
+    while len(poses) < n:
+        tries += 1
+        if tries > 10000:
+            raise RuntimeError("could not place the boards in view; use a smaller board or fill")
+        R = desk @ _rot(np.array([0, 0, 1.0]), rng.uniform(0, 2 * math.pi))
+        ray = _random_ray(rng, camera, f, spread)
+        lam = float(normal @ point) / float(normal @ ray)
+        if not lam > 0:
             continue
-        pix = camera.project(corners_cam)
-        if np.all(pix[:, 0] > margin_px) and np.all(pix[:, 0] < camera.width - 1 - margin_px) and np.all(
-            pix[:, 1] > margin_px
-        ) and np.all(pix[:, 1] < camera.height - 1 - margin_px):
+        t = ray * lam - R @ centre
+        if _in_view(camera, outline @ R.T + t, margin_px):
             poses.append((R, t))
     return poses
 
@@ -334,8 +394,10 @@ def write_chessboard_views(
     seed: int = 0,
     supersample: int = 3,
     noise_dn: float = 1.0,
+    coplanar: bool = False,
 ) -> dict:
-    """Render ``n_views`` PNG views and a ``truth.toml`` into ``out_dir``.
+    """Render ``n_views`` PNG views and a ``truth.toml`` into ``out_dir``; ``coplanar``: the board lies on
+    one desk in every view (:func:`coplanar_poses`), else it is held up turned and tilted (:func:`random_poses`).
 
     ``truth.toml`` holds the camera (model, intrinsics, distortion), the board
     and each view's pose (rvec radians, tvec in the board's units). Returns
@@ -346,7 +408,7 @@ def write_chessboard_views(
     camera = camera or default_truth_camera()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    poses = random_poses(camera, cols, rows, square, n_views, seed=seed)
+    poses = (coplanar_poses if coplanar else random_poses)(camera, cols, rows, square, n_views, seed=seed)
     rays = SampleRays(camera, supersample)
     views = []
     for k, (R, t) in enumerate(poses):
