@@ -97,6 +97,7 @@ class Scan:
     warnings: list[str] = field(default_factory=list)
     folder: Path | None = None
     coverage: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)  # facts worth knowing, with nothing to do (report.json's notes)
 
     @property
     def valid(self) -> np.ndarray:
@@ -117,6 +118,8 @@ class Scan:
             s = self.report["site"]
             rows.append(("site", f"{s['latitude_deg']:.5f}° N, {s['longitude_deg']:.5f}° E"))
         rows.append(("warnings", str(len(self.warnings))))
+        if self.notes:
+            rows.append(("notes", str(len(self.notes))))
         rows.append(("folder", str(self.folder) if self.folder is not None else "(in memory)"))
         return rows
 
@@ -165,7 +168,7 @@ def _from_result(result, folder: Path | None) -> Scan:
                 rgb=s.rgb, points=s.points_world, colors=s.colors, normals=s.normals,
                 point_sigma=s.sigma[s.valid], pixels=s.uv, mesh=mesh, K=K, dist=dist, R=R, t=t,
                 units=str(result.report["units"]), report=result.report, warnings=list(result.warnings),
-                folder=folder, coverage=result.coverage)
+                notes=list(result.notes), folder=folder, coverage=result.coverage)
 
 
 @contextmanager
@@ -343,4 +346,5 @@ def load_scan(folder: str | os.PathLike) -> Scan:
                 coverage=_load_npy(f / "coverage.npy", (h, w)),
                 points=pts["xyz"], colors=pts.get("rgb"), normals=pts.get("normals"),
                 point_sigma=pts.get("sigma"), pixels=pts.get("uv"), mesh=mesh, K=K, dist=dist, R=R, t=t,
-                units=units, report=report, warnings=list(report.get("warnings", [])), folder=f)
+                units=units, report=report, warnings=list(report.get("warnings", [])),
+                notes=list(report.get("notes", [])), folder=f)

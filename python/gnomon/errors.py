@@ -70,3 +70,13 @@ class FrameNote(str):
         note = super().__new__(cls, text)
         note.frames = tuple(int(f) for f in frames)
         return note
+
+    def reworded(self, text: str) -> FrameNote:
+        """The same kind of note, about the same frames, with another text (e.g. prefixed)."""
+        return type(self)(text, self.frames)
+
+
+class Remark(FrameNote):
+    """A fact about a scan the user may want to know but need not act on (frames levelled under clouds,
+    night frames skipped, pixels refused as another shadow's): a scan reports it as a note, apart from
+    its warnings, which each say what to do."""

@@ -72,6 +72,8 @@ def run_facade_sun(out: Path, *, small: bool, progress: bool) -> dict:
     sun = result.report["sun"]
     print(f"  heading             {sun['heading_deg']:.3f}° ({sun['heading_source']}); "
           f"gnomon {sun['gnomon_heading_deg']:.3f}°, truth {float(truth['heading_deg']):.3f}°")
+    for n in result.notes:
+        print(f"  note: {n}")
     for w in result.warnings:
         print(f"  warning: {w}")
     return {"facade_sun": {**acc.as_dict(), "heading": sun}}

@@ -64,6 +64,8 @@ def run(args: argparse.Namespace) -> int:
           f"shown while the shadow moved; {stats.stopped}")
     print(f"{cov['points']} points ({100 * cov['fraction_of_image']:.1f} % of the image); "
           f"{cov['mesh_faces']} mesh faces -> {out}")
+    for n in result.notes:
+        print(f"note: {n}")
     for w in result.warnings:
         print(f"warning: {w}")
     return 0

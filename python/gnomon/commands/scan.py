@@ -84,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
                        if name != "disagreement")
     print(f"{cov['points']} points ({100 * cov['fraction_of_image']:.1f} % of the image), "
           f"shadow planes: {planes}; {cov['mesh_faces']} mesh faces -> {out}")
+    for n in s.notes:
+        print(f"gnomon: note: {n}", file=sys.stderr)
     for w in s.warnings:
         print(f"gnomon: warning: {w}", file=sys.stderr)
     return 0

@@ -28,7 +28,7 @@ import numpy as np
 
 from gnomon.camera.models import CameraModel
 from gnomon.capture.tracking import ShadowTimes, TrackedSequence
-from gnomon.errors import FrameNote
+from gnomon.errors import Remark
 from gnomon.geometry.reference_lines import ReferenceLines, ReferencePlane, measure_reference_lines
 from gnomon.geometry.uncertainty import line_time_sigma
 
@@ -133,7 +133,7 @@ def best_line_sigma(lines: list[ReferenceLines]) -> np.ndarray:
 
 def skipped_frames_warning(frames: list[int], why: str) -> str:
     more = " …" if len(frames) > 8 else ""
-    return FrameNote(f"{len(frames)} frames skipped as {why} (frames {frames[:8]}{more})", frames)
+    return Remark(f"{len(frames)} frames skipped as {why} (frames {frames[:8]}{more})", frames)
 
 
 class LightModel:

@@ -29,7 +29,7 @@ import pandas as pd
 
 from gnomon.camera.models import CameraModel, Pose
 from gnomon.capture.tracking import ShadowTimes, TrackedSequence, linear
-from gnomon.errors import FrameNote, GnomonError
+from gnomon.errors import GnomonError, Remark
 from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines, ReferencePlane
 from gnomon.geometry.triangulation import triangulate
 from gnomon.geometry.uncertainty import MIN_FRAMES_PER_TRANSITION, linear_noise_at_threshold
@@ -220,8 +220,8 @@ class SunLight(LightModel):
         self.timeline = SunTimeline(self.clock.times, np.asarray(used), list(skipped_dips), night)
         warnings: list[str] = []
         if night:
-            warnings.append(FrameNote(f"{len(night)} frames skipped: the sun is below the horizon "
-                                      f"(first {self.clock.times[night[0]].isoformat()})", night))
+            warnings.append(Remark(f"{len(night)} frames skipped: the sun is below the horizon "
+                                   f"(first {self.clock.times[night[0]].isoformat()})", night))
         if skipped_dips:
             warnings.append(skipped_frames_warning(list(skipped_dips), "cloud dips"))
         return warnings
@@ -448,8 +448,8 @@ class SunWithPole(SunLight):
         n_had = max(int(had.sum()), 1)
         refused = n_had - int((had & sound).sum())
         if refused > REFUSED_NOTE * n_had:
-            notes.append(f"{refused} of {n_had} pixels ({100 * refused / n_had:.0f} %) were refused as not the "
-                         f"pole's shadow ({', '.join(f'{k}: {v}' for k, v in rejected.items() if v)})")
+            notes.append(Remark(f"{refused} of {n_had} pixels ({100 * refused / n_had:.0f} %) were refused as not "
+                                f"the pole's shadow ({', '.join(f'{k}: {v}' for k, v in rejected.items() if v)})"))
         return Screening(sound, rejected, notes)
 
     def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:

@@ -28,7 +28,7 @@ from gnomon.capture.tracking import (
     linear,
 )
 from gnomon.config.setup import ScanSetup
-from gnomon.errors import FrameError
+from gnomon.errors import FrameError, FrameNote
 from gnomon.geometry.reference_lines import ReferenceLines
 from gnomon.geometry.surface import points_from_depth, ray_plane_angles
 from gnomon.geometry.triangulation import triangulate_depth
@@ -379,7 +379,9 @@ def reconstruct_edges(setup: ScanSetup, tracked: TrackedSequence, ray_map: np.nd
     for e in edges:
         if e.degenerate:
             warnings.append(f"{e.name} edge: {e.degenerate} frames dropped as degenerate shadow planes")
-        warnings.extend(f"{e.name} edge: {note}" for note in e.notes)
+        for note in e.notes:  # a FrameNote keeps its kind and frames
+            text = f"{e.name} edge: {note}"
+            warnings.append(note.reworded(text) if isinstance(note, FrameNote) else text)
     check_plane_coverage(edges, setup.inputs.field_log, warnings)
     n_planes = max(int(np.isfinite(e.planes[:, 0]).sum()) for e in edges)
     if n_planes < 2:

@@ -14,6 +14,7 @@ from gnomon.capture.tracking import (
     TrackedSequence,
 )
 from gnomon.config.setup import ScanSetup
+from gnomon.errors import Remark
 from gnomon.geometry.meshing import (
     GridMesh,
 )
@@ -128,7 +129,8 @@ def report_outputs(report: dict[str, Any], setup: ScanSetup, cropped: np.ndarray
     """The crop, where the light knows it the site (georeferencing), the stages' CPU seconds and the warnings
     in the report."""
     report["cpu_timings_s"] = cpu
-    report["warnings"] = warnings
+    report["warnings"] = [w for w in warnings if not isinstance(w, Remark)]  # each says what to do
+    report["notes"] = [w for w in warnings if isinstance(w, Remark)]  # facts, nothing to do
     if setup.crop is not None:
         report["output"] = {"crop": setup.crop.to_report(), "cropped_points": int(cropped.sum())}
         report["coverage"]["cropped"] = int(cropped.sum())

@@ -13,6 +13,7 @@ import numpy as np
 
 from gnomon.capture.frames import Frame, FrameSource
 from gnomon.config.setup import ScanSetup
+from gnomon.errors import Remark
 from gnomon.geometry.surface import Surface, SurfacePoints
 from gnomon.reconstruct.edges import EdgeResult
 from gnomon.reconstruct.fused import FusedMaps
@@ -73,8 +74,8 @@ def record_points_part(recorder, surface: Surface | SurfacePoints, shadow_time: 
 def record_mesh_part(recorder, surface: Surface, warnings: list[str], metrics: dict) -> None:
     """The mesh, the warnings and the metrics."""
     recorder.log_mesh(surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb)
-    for w in warnings:
-        recorder.log_warning(w)
+    for w in warnings:  # a Remark (a fact, nothing to do) as information, the others as warnings
+        recorder.log_warning(w, level="INFO" if isinstance(w, Remark) else "WARN")
     recorder.log_metrics(metrics)
 
 

@@ -33,7 +33,7 @@ from gnomon.capture.tracking import ShadowTimes, TrackedSequence, track_source, 
 from gnomon.config.fieldlog import load_field_log
 from gnomon.config.setup import ScanSetup, frame_source, resolve_scan
 from gnomon.config.specs import FieldLog
-from gnomon.errors import FrameNote, GnomonError
+from gnomon.errors import GnomonError, Remark
 from gnomon.geometry.meshing import GridMesh
 from gnomon.geometry.reference_lines import ReferenceLines
 from gnomon.geometry.surface import Surface, SurfacePoints, mesh_surface, surface_points
@@ -104,6 +104,7 @@ class ScanResult:
     warnings: list[str] = field(default_factory=list)
     out_dir: Path | None = None
     coverage: np.ndarray | None = None  # (H, W) uint8 classes (gnomon.outputs.images.COVERAGE_CLASSES)
+    notes: list[str] = field(default_factory=list)  # facts worth knowing with nothing to do (gnomon.errors.Remark)
 
     @property
     def points_world(self) -> np.ndarray:
@@ -189,9 +190,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
     warnings += setup.light.after_tracking(tracked.used, tracked.skipped_dips)
     if tracked.levelled:
         more = " …" if len(tracked.levelled) > 8 else ""
-        warnings.append(FrameNote(f"{len(tracked.levelled)} frames of sudden illumination dips (clouds) levelled "
-                                  f"pixel by pixel and tracked (frames {tracked.levelled[:8]}{more})",
-                                  tracked.levelled))
+        warnings.append(Remark(f"{len(tracked.levelled)} frames of sudden illumination dips (clouds) levelled "
+                               f"pixel by pixel and tracked (frames {tracked.levelled[:8]}{more})", tracked.levelled))
     warnings += setup.light.choose_dips(tracked, ray_map, setup.planes, setup.max_depth_jump,
                                         min_contrast_dn(setup.tracker.min_contrast, tracked.noise_dn))
     # The colours need only the tracked times (final from here on): combined on a thread meanwhile.
@@ -218,7 +218,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
     report = scan_report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
     report_outputs(report, setup, cropped, cpu, warnings)
     result = ScanResult(setup, tracked.times, edges, fused.shadow_time, fused.depth, fused.sigma, fused.keep,
-                        fused.undersampled, surface, report, warnings, coverage=coverage)
+                        fused.undersampled, surface, report, [w for w in warnings if not isinstance(w, Remark)],
+                        coverage=coverage, notes=[w for w in warnings if isinstance(w, Remark)])
     if recorder is None:
         return result, None
 
