@@ -119,7 +119,7 @@ def write_enu_points(path: Path, surface: Surface | SurfacePoints, site: dict[st
     enu = surface.points_world.astype(np.float64) @ m[:3, :3].T + m[:3, 3]
     comments = [f"gnomon {__version__}", ply.units_comment("m"), "frame ENU",
                 f"origin latitude {site['latitude_deg']!r} longitude {site['longitude_deg']!r} "
-                f"altitude {site['altitude_m']!r} (WGS84)"]
+                f"altitude {site['altitude_m']!r} ({site.get('datum', 'WGS84')})"]
     scale = float(np.linalg.norm(m[0, :3]))  # metres per world unit
     # float32 keeps ~0.1 mm at 1 km from the site
     ply.write_points_ply(path, enu.astype(np.float32), surface.colors, surface.sigma[surface.valid] * scale,
