@@ -55,6 +55,7 @@ class MarkerDetection:
     contrast: float
     x_score: float
     asymmetry: float
+    sigma_px: float = float("nan")  # the centre's 1 σ per axis from the image noise (symmetric_centre_sigma)
 
 
 def _circle_profile(img: np.ndarray, centre: tuple[float, float], radius: float, n: int = 64) -> np.ndarray:
@@ -88,6 +89,38 @@ def _sample(img: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return out.ravel().astype(np.float64)
 
 
+def _symmetry_system(img: np.ndarray, radius: int):
+    """The blurred image, its gradients and the half-disc of offsets of :func:`_symmetric_centre`."""
+    b = cv2.GaussianBlur(img, (0, 0), 0.7)
+    gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    yy, xx = np.mgrid[-radius : radius + 1, -radius : radius + 1]
+    half = (xx * xx + yy * yy <= radius * radius) & ((yy > 0) | ((yy == 0) & (xx > 0)))
+    d = np.stack([xx[half], yy[half]], axis=1).astype(np.float64)
+    return b, gx, gy, d
+
+
+def _symmetry_residuals(system, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The asymmetry I(p + d) − I(p − d) over the half-disc, and its Jacobian in p (M, 2)."""
+    b, gx, gy, d = system
+    pa, pb = p + d, p - d
+    r = _sample(b, pa) - _sample(b, pb)
+    J = np.stack([_sample(gx, pa) - _sample(gx, pb), _sample(gy, pa) - _sample(gy, pb)], axis=1)
+    return r, J
+
+
+def symmetric_centre_sigma(img: np.ndarray, centre: tuple[float, float], radius: int) -> float:
+    """The 1-σ (px, per axis) of a point-symmetric pattern's centre found by :func:`_symmetric_centre`, from
+    the image noise its asymmetry residuals show: σ_r² (JᵀJ)⁻¹ at the centre (``img`` as given to it)."""
+    r, J = _symmetry_residuals(_symmetry_system(img, radius), np.array(centre, dtype=np.float64))
+    dof = len(r) - 2
+    a = J.T @ J
+    if dof <= 0 or np.linalg.cond(a) > 1e12:
+        return float("nan")
+    cov = np.linalg.inv(a) * float(r @ r) / dof
+    return float(np.sqrt(max(np.trace(cov), 0.0) / 2.0))
+
+
 def _symmetric_centre(img: np.ndarray, start: tuple[float, float], radius: int, iters: int = 30) -> tuple[float, float]:
     """Sub-pixel centre of a point-symmetric pattern: minimise Σ (I(p + d) − I(p − d))² over a disk.
 
@@ -97,17 +130,10 @@ def _symmetric_centre(img: np.ndarray, start: tuple[float, float], radius: int, 
     blurred junction — on our synthetic frames ≈0.02 px instead of ≈0.1 px.
     Gauss–Newton on the lightly blurred image with bilinear sampling.
     """
-    b = cv2.GaussianBlur(img, (0, 0), 0.7)
-    gx = cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-    gy = cv2.Sobel(b, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-    yy, xx = np.mgrid[-radius : radius + 1, -radius : radius + 1]
-    half = (xx * xx + yy * yy <= radius * radius) & ((yy > 0) | ((yy == 0) & (xx > 0)))
-    d = np.stack([xx[half], yy[half]], axis=1).astype(np.float64)
+    system = _symmetry_system(img, radius)
     p = np.array(start, dtype=np.float64)
     for _ in range(iters):
-        pa, pb = p + d, p - d
-        r = _sample(b, pa) - _sample(b, pb)
-        J = np.stack([_sample(gx, pa) - _sample(gx, pb), _sample(gy, pa) - _sample(gy, pb)], axis=1)
+        r, J = _symmetry_residuals(system, p)
         step = np.linalg.lstsq(J, -r, rcond=None)[0]
         if not np.all(np.isfinite(step)) or np.hypot(*step) > radius:
             return float("nan"), float("nan")
@@ -181,7 +207,8 @@ def find_marker(
             "clean 2x2 checker (squares that overlap or gap, seen at a grazing angle), give its centre as "
             "pixel = [u, v] instead of pixel_hint"
         )
-    return MarkerDetection(name=name, hint=(u0, v0), pixel=(u, v), contrast=contrast, x_score=x_score, asymmetry=asym)
+    return MarkerDetection(name=name, hint=(u0, v0), pixel=(u, v), contrast=contrast, x_score=x_score, asymmetry=asym,
+                           sigma_px=symmetric_centre_sigma(img, (u, v), radius_px))
 
 
 def find_markers(
@@ -302,6 +329,11 @@ class PlanePose:
     frame. ``residuals_px``: observed − reprojected pixels (N, 2);
     ``std_normal_deg``/``std_offset``: 1-σ uncertainties from the LM
     covariance (NaN with no redundancy, e.g. with exactly 3 points).
+    Marks nobody measured (:func:`fit_rectangle_pose`) also give ``marks_xy``
+    (N, 2) each mark's estimated place in the plane's frame, ``rectangle``
+    the sides of the rectangle they form (along x, along y) and ``corners``
+    the indices of the marks at its corners; ``std_offset`` is then 0 unless
+    a known length set the distance (the distance is the unit by convention).
     """
 
     pose: Pose
@@ -318,6 +350,17 @@ class PlanePose:
     method: str
     names: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
+    marks_xy: np.ndarray | None = None
+    rectangle: tuple[float, float] | None = None
+    corners: tuple[int, ...] = ()
+    located_px: np.ndarray | None = None  # (N,) each mark's localisation σ (px per axis), when known
+
+    def scaled(self, k: float) -> PlanePose:
+        """The same plane with every length multiplied by ``k`` > 0 (another distance along the same rays)."""
+        return replace(self, pose=Pose(R=self.pose.R, t=self.pose.t * k), offset_cam=self.offset_cam * k,
+                       point_world=self.point_world * k, std_offset=self.std_offset * k,
+                       marks_xy=None if self.marks_xy is None else self.marks_xy * k,
+                       rectangle=None if self.rectangle is None else (self.rectangle[0] * k, self.rectangle[1] * k))
 
     def to_report(self) -> dict[str, Any]:
         """JSON-ready summary (for report.json): residuals and the plane."""
@@ -334,6 +377,11 @@ class PlanePose:
             "rvec": [float(x) for x in self.pose.rvec],
             "tvec": [float(x) for x in self.pose.t],
             "warnings": list(self.warnings),
+            **({} if self.marks_xy is None else {
+                "marks_xy": {n: [float(a), float(b)] for n, (a, b) in zip(self.names, self.marks_xy, strict=True)},
+                "rectangle": [float(x) for x in self.rectangle or ()],
+                "corners": [self.names[i] for i in self.corners]}),
+            **({} if self.located_px is None else {"located_px": [float(x) for x in self.located_px]}),
         }
 
 
@@ -598,3 +646,190 @@ def plane_in_camera(point_world: np.ndarray, normal_world: np.ndarray,
     n = world_to_camera.R @ (np.asarray(normal_world, dtype=np.float64) / np.linalg.norm(normal_world))
     d = float(n @ world_to_camera.world_to_camera(np.asarray(point_world, dtype=np.float64)))
     return (n, d) if d >= 0 else (-n, -d)
+
+
+# --------------------------------------------------------------------------- marks nobody measured
+
+
+#: Each triangle of three of a rectangle's corners covers half of it, a little more or less in perspective:
+#: less than this share of the quadrilateral means three marks on one line.
+MIN_CORNER_SHARE = 0.05
+
+
+def _rectangle_corners(norm: np.ndarray, where: str) -> np.ndarray:
+    """Indices (4,) of the marks at a rectangle's corners, in order around it: of the marks' convex hull
+    (in undistorted normalised coordinates), the four vertices spanning the largest quadrilateral."""
+    from itertools import combinations
+
+    hull = [int(i) for i in cv2.convexHull(norm.astype(np.float32).reshape(-1, 1, 2), returnPoints=False).ravel()]
+    if len(hull) < 4:
+        raise GnomonError(f"{where}: the marks' outline has {len(hull)} corners; marks taken as a rectangle need "
+                          "4 at its corners (more may lie inside or on its sides)")
+
+    def area(p: np.ndarray) -> float:  # of a polygon, its vertices in order
+        return 0.5 * abs(float(np.dot(p[:, 0], np.roll(p[:, 1], -1)) - np.dot(p[:, 1], np.roll(p[:, 0], -1))))
+
+    best = max(combinations(hull, 4), key=lambda quad: area(norm[list(quad)]))  # hull order: convex
+    quad = norm[list(best)]
+    if min(area(quad[[i, (i + 1) % 4, (i + 2) % 4]]) for i in range(4)) < MIN_CORNER_SHARE * area(quad):
+        raise GnomonError(f"{where}: three of the four outermost marks lie on one line; marks taken as a "
+                          "rectangle need one at each of its 4 corners")
+    return np.array(best)
+
+
+def _rectangle_points(p: np.ndarray) -> np.ndarray:
+    """The corners (4, 3) of the rectangle of parameters ``p`` = (rvec, tvec, log height), width 1, in its
+    own frame (z = 0), in the order (0, 0), (1, 0), (1, h), (0, h)."""
+    h = float(np.exp(p[6]))
+    return np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, h, 0.0], [0.0, h, 0.0]])
+
+
+def _rectangle_start(norm: np.ndarray, where: str) -> np.ndarray:
+    """Closed-form parameters (rvec, tvec, log h) of the rectangle whose corners (width 1) are seen at the
+    normalised image points ``norm`` (4, 2): the homography from the unit square, its first two columns the
+    rectangle's sides (orthogonalised), its third the corner's position."""
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], dtype=np.float32)
+    H = cv2.getPerspectiveTransform(square, norm.astype(np.float32)).astype(np.float64)
+    if not np.all(np.isfinite(H)):
+        raise GnomonError(f"{where}: three of the marks lie on one line; a rectangle needs 4 corners")
+    if H[2, 2] < 0:  # the corner in front of the camera
+        H = -H
+    a, b = np.linalg.norm(H[:, 0]), np.linalg.norm(H[:, 1])
+    r1 = H[:, 0] / a
+    r2 = H[:, 1] - (H[:, 1] @ r1) * r1
+    r2 /= np.linalg.norm(r2)
+    R = np.stack([r1, r2, np.cross(r1, r2)], axis=1)
+    return np.concatenate([cv2.Rodrigues(R)[0].ravel(), H[:, 2] / a, [np.log(b / a)]])
+
+
+@dataclass(frozen=True)
+class MarkScale:
+    """A known length between two marks of one plane: their indices and the length (world units)."""
+
+    first: int
+    second: int
+    length: float
+
+
+def fit_rectangle_pose(
+    camera,
+    pixels: np.ndarray,
+    sigma_px: np.ndarray,
+    *,
+    names: Sequence[str] | None = None,
+    scale: MarkScale | None = None,
+    source: str = "image",
+) -> PlanePose:
+    """A plane from ≥ 4 marks at the corners of a rectangle of unknown size and proportions.
+
+    ``pixels`` (N, 2) the marks as found (distorted); ``sigma_px`` (N,) how far (px, per axis, 1 σ) each
+    may lie from where the rectangle puts it: its localisation and its placement off a true rectangle
+    together. The four marks spanning the largest quadrilateral of their outline are the rectangle's
+    corners; the others are free points of the plane (they fix nothing; their place on it is reported).
+    For a calibrated camera the corners fix the plane's orientation (two vanishing points) and, beyond
+    it, one right angle: 1 degree of freedom checks the rectangle (a focal length can mimic it on one
+    plane). The fit is Levenberg–Marquardt on the pixel residuals (over σ) of 7 parameters: the pose of
+    the rectangle of width 1 and its height, from the homography's closed form.
+
+    The plane's frame: origin at the rectangle's centre, z towards the camera (up from a desk, out of a
+    wall), x along the side nearer the image's rows (to the right), y = z × x. Its units: ``scale``'s
+    length between two marks, or else the plane's distance from the camera's centre (it is 1).
+    ``std_normal_deg`` from the covariance at ``sigma_px`` (scaled up by χ²/dof when the marks fit worse
+    than that); ``std_offset`` the distance's σ when ``scale`` sets it, else 0 (the distance is the unit
+    by convention; a plane tied to another later gets its tie's σ). ``marks_xy`` (N, 2) every mark's
+    place in the plane's frame (free marks: where their ray meets the plane); ``rectangle`` its sides
+    (along x, along y).
+    """
+    pix = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
+    sig = np.broadcast_to(np.asarray(sigma_px, dtype=np.float64), (len(pix),)).copy()
+    names = tuple(names) if names is not None else tuple(f"p{i}" for i in range(len(pix)))
+    where = f"{source}: plane (marks as a rectangle)"
+    if len(pix) < 4:
+        raise GnomonError(f"{where}: a rectangle needs 4 marks at its corners, got {len(pix)}")
+    rays = camera.rays(pix)
+    if not np.all(np.isfinite(rays)):
+        raise GnomonError(f"{where}: some pixels have no ray in the camera model (outside its valid field)")
+    norm = rays[:, :2] / rays[:, 2:3]
+    corners = _rectangle_corners(norm, where)
+    p0 = _rectangle_start(norm[corners], where)
+
+    def project(p: np.ndarray) -> np.ndarray:
+        R = cv2.Rodrigues(p[:3].reshape(3))[0]
+        return np.asarray(camera.project(_rectangle_points(p) @ R.T + p[3:6]))
+
+    def fun(p: np.ndarray) -> np.ndarray:
+        return np.nan_to_num(((pix[corners] - project(p)) / sig[corners, None]).ravel(), nan=1e6)
+
+    sol = levenberg_marquardt(fun, p0)
+    p = sol.x
+    R_r = cv2.Rodrigues(p[:3].reshape(3))[0]
+    corners_cam = _rectangle_points(p) @ R_r.T + p[3:6]
+    n_away = R_r[:, 2] if R_r[:, 2] @ p[3:6] > 0 else -R_r[:, 2]
+    # every mark on the plane: the corners as fitted, the others where their rays meet it
+    offset = float(n_away @ p[3:6])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        marks_cam = rays * (offset / (rays @ n_away))[:, None]
+    marks_cam[corners] = corners_cam
+    # the plane's frame: centre, x along the side nearer the image rows, z towards the camera
+    z = -n_away
+    sides = [R_r[:, 0], R_r[:, 1]]
+    x = max(sides, key=lambda s: abs(float(s[0])))
+    x = x if x[0] >= 0 else -x
+    y = np.cross(z, x)
+    frame = np.stack([x, y, z], axis=1)
+    centre = corners_cam.mean(axis=0)
+    units = offset  # the plane at distance 1 ...
+    if scale is not None:  # ... or the marks' known spacing
+        units = float(np.linalg.norm(marks_cam[scale.first] - marks_cam[scale.second])) / scale.length
+    xy = ((marks_cam - centre) @ frame)[:, :2] / units
+    residuals = pix - camera.project(marks_cam)
+    lengths = np.linalg.norm(residuals, axis=1)
+    dof = 2 * len(corners) - 7
+    chi2 = float(np.sum(sol.fun**2))
+    inflate = max(1.0, chi2 / dof) if dof > 0 else 1.0
+    cov = np.linalg.pinv(sol.jac.T @ sol.jac) * inflate
+
+    def plane_of(q: np.ndarray) -> np.ndarray:
+        Rq = cv2.Rodrigues(q[:3].reshape(3))[0]
+        nq = Rq[:, 2] if Rq[:, 2] @ n_away > 0 else -Rq[:, 2]
+        dq = float(nq @ q[3:6])
+        if scale is None:
+            return np.concatenate([nq, [1.0]])
+        cq = _rectangle_points(q) @ Rq.T + q[3:6]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mq = rays * (dq / (rays @ nq))[:, None]
+        mq[corners] = cq
+        return np.concatenate([nq, [dq * scale.length / float(np.linalg.norm(mq[scale.first] - mq[scale.second]))]])
+
+    J = np.zeros((4, 7))
+    for i in range(7):
+        h = 1e-7 * max(1.0, abs(p[i]))
+        dp = np.zeros(7)
+        dp[i] = h
+        J[:, i] = (plane_of(p + dp) - plane_of(p - dp)) / (2 * h)
+    C = J @ cov @ J.T
+    std_n = float(np.degrees(np.sqrt(max(np.trace(C[:3, :3]), 0.0))))
+    std_d = float(np.sqrt(max(C[3, 3], 0.0))) if scale is not None else 0.0
+    rect = (float(np.linalg.norm(corners_cam[1] - corners_cam[0])) / units,
+            float(np.linalg.norm(corners_cam[3] - corners_cam[0])) / units)
+    if abs(float(x @ R_r[:, 0])) < 0.5:
+        rect = rect[::-1]
+    pose = Pose(R=frame, t=centre / units)
+    return PlanePose(
+        pose=pose,
+        normal_cam=n_away,
+        offset_cam=offset / units,
+        point_world=np.zeros(3),
+        normal_world=np.array([0.0, 0.0, -1.0]),
+        pixels=pix,
+        residuals_px=residuals,
+        rms_px=float(np.sqrt(np.mean(lengths[corners] ** 2))),
+        max_px=float(lengths.max()),
+        std_normal_deg=std_n,
+        std_offset=std_d,
+        method="rectangle",
+        names=names,
+        marks_xy=xy,
+        rectangle=rect,
+        corners=tuple(int(c) for c in corners),
+    )

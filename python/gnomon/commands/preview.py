@@ -67,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
                 r = entry["residuals_px"].get(name, [np.nan, np.nan])
                 marks.append(MarkerMark(str(m.id), np.asarray(pix), None if m.exact else m.pixel_hint,
                                         float(np.hypot(*r))))
-            xy = np.array([m.plane_xy for m in plane.markers])
+            xy = (np.array(list(entry["marks_xy"].values())) if plane.unmeasured_marks  # as the fit placed them
+                  else np.array([m.plane_xy for m in plane.markers]))
             lo, hi = xy.min(axis=0), xy.max(axis=0)
             pad = 0.15 * (hi - lo).max()
             extent = (lo[0] - pad, hi[0] + pad, lo[1] - pad, hi[1] + pad)
@@ -95,6 +96,11 @@ def run(args: argparse.Namespace) -> int:
     atomic.write_bytes(out, data.tobytes())
     for e in report:
         print(f"{e['plane']}: {e['n_points']} marks, reprojection RMS {e['rms_px']:.3f} px (max {e['max_px']:.3f})"
-              + (f", {e['angle_to_first_deg']:.2f}° to the first plane" if "angle_to_first_deg" in e else ""))
+              + (f", {e['angle_to_first_deg']:.2f}° to the first plane" if "angle_to_first_deg" in e else "")
+              + (f", normal ± {e['std_normal_deg']:.2f}° (1 σ)" if "marks_xy" in e else "")
+              + ("; its distance is a first guess (its marks have no plane_xy): the scan measures it where its "
+                 "shadow lines meet the first plane's" if e.get("distance") == "provisional" else ""))
+        for w in e["warnings"]:
+            print(f"warning: {w}")
     print(f"wrote {out}")
     return 0

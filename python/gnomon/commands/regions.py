@@ -77,11 +77,13 @@ def run(args: argparse.Namespace) -> int:
         plane_region_mask,
         resolve_reference_planes,
         tracker_settings,
+        untied_planes,
     )
     from gnomon.errors import FieldLogError
     from gnomon.geometry.reference_lines import PlaneInCamera
+    from gnomon.reconstruct.corners import tie_message
     from gnomon.reconstruct.edges import edge_time_maps
-    from gnomon.runs.regions import hull_mask, propose_regions
+    from gnomon.runs.regions import hull_mask, propose_regions, tie_on_seeds
     from gnomon.util import atomic, validate
     from gnomon.util.validate import check_output_folder
 
@@ -117,6 +119,18 @@ def run(args: argparse.Namespace) -> int:
     maps = edge_time_maps(tracked, log.scan.edge)
     planes = [PlaneInCamera.from_world(p.point, p.normal, log.pose) for p in log.planes]
     names = [p.name for p in log.planes]
+    untied = untied_planes(planes_report)
+    if untied:  # planes whose marks fix only their orientation: their distance where they meet the first
+        planes, ties = tie_on_seeds(maps, tracked.n_frames, planes, names, seeds, log.camera, untied)
+        for (name, anchor), tie in zip(untied, ties.values(), strict=True):
+            error, warning = tie_message(name, anchor, tie, (np.nan, np.nan))
+            if error:
+                raise FieldLogError(f"{log.path}: {error}")
+            assert tie is not None
+            print(f"{name}: {abs(tie.offset / planes[names.index(anchor)].offset):.4f} times the {anchor}'s "
+                  "distance from "
+                  f"the camera (± {100 * tie.sigma / abs(tie.offset):.3f} %), where their shadow lines meet "
+                  f"in {tie.frames} frames" + (f"; warning: {warning}" if warning else ""))
     proposals = propose_regions(maps, tracked.n_frames, planes, names, seeds, log.camera,
                                 tolerance=args.tolerance, margin_px=max(args.margin, 0))
 

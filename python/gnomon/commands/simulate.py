@@ -58,6 +58,14 @@ def register(subparsers) -> None:
     p.add_argument("--stick", choices=("rocked", "translated"), default="rocked",
                    help="two_plane: the stick rocked as it sweeps (the lamp is a point), or only translated "
                    "parallel to itself (the shadow planes fix the lamp only along a line)")
+    p.add_argument("--marks", choices=("measured", "unmeasured"), default="measured",
+                   help="two_plane: the checkers' positions on their planes given in the field log, or not "
+                   "(at a rectangle's corners of unknown size; no camera pose; units \"relative\")")
+    p.add_argument("--marks-off-px", type=float, default=0.0, metavar="PX",
+                   help="two_plane with --marks unmeasured: move each mark off the rectangle by up to this (image px)")
+    p.add_argument("--mark-distance", action="store_true",
+                   help="two_plane with --marks unmeasured: give the desk's first two marks' distance (mm) "
+                   "instead of units \"relative\"")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -82,6 +90,7 @@ def _options(args: argparse.Namespace) -> dict:
     if args.scene == "two_plane":
         opts["markers"] = args.markers
         opts["stick"] = args.stick
+        opts.update(marks=args.marks, marks_off_px=args.marks_off_px, mark_distance=args.mark_distance)
     else:
         opts["pencil_photos"] = args.pencil_photos
     return opts
@@ -92,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
 
     # finite numbers here; their ranges are the scene configuration's to check
     from gnomon.util import validate
-    for name in ("noise", "blur", "gamma", "lamp_radius", "stick_radius", "pole_radius"):
+    for name in ("noise", "blur", "gamma", "lamp_radius", "stick_radius", "pole_radius", "marks_off_px"):
         validate.number(getattr(args, name), "--" + name.replace("_", "-"))
     t0 = time.perf_counter()
     field_log = api.simulate(args.scene, args.out, progress=not args.quiet, **_options(args))

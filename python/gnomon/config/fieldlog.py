@@ -182,23 +182,53 @@ def _parse_plane(t: Table, index: int, width: int, height: int) -> PlaneSpec:
         if np.linalg.norm(x_axis) < 1e-9:
             raise t.error("x_axis", "must not be parallel to the normal")
         x_axis = x_axis / np.linalg.norm(x_axis)
-    markers = []
+    markers: list[MarkerSpec] = []
     raw_markers = t.take("markers", [])
     if not isinstance(raw_markers, list):
         raise t.error("markers", "expected a list of { id, plane_xy = [x, y], pixel_hint = [u, v] } tables")
     for k, m in enumerate(raw_markers):
         mt = Table(t.path, f"{t.name}.markers.{k}", m)
-        mid, xy = mt.integer("id", k), mt.vector("plane_xy", 2)
+        mid = mt.integer("id", k)
+        xy = mt.vector("plane_xy", 2) if "plane_xy" in mt.data else None
+        if markers and (xy is None) != (markers[0].plane_xy is None):
+            raise mt.error("plane_xy", "give it for every mark of the plane or for none (marks nobody measured: "
+                                       "the corners of a rectangle of unknown size)")
         if ("pixel" in mt.data) == ("pixel_hint" in mt.data):
             raise mt.error("pixel", "give either 'pixel_hint' (a printed checker marker, refined) or 'pixel' "
                                     "(an exact pixel, e.g. a clicked cross)")
         exact = "pixel" in mt.data
         markers.append(MarkerSpec(mid, xy, mt.vector("pixel" if exact else "pixel_hint", 2), exact))
         mt.done()
+    unmeasured = bool(markers) and markers[0].plane_xy is None
     if markers and x_axis is None:
-        raise FieldLogError(f"{t.path}: [{t.name}] markers need 'x_axis' (the plane's 2-D frame)")
+        if not unmeasured:
+            raise FieldLogError(f"{t.path}: [{t.name}] markers need 'x_axis' (the plane's 2-D frame)")
+        x_axis = _any_axis_across(normal)  # the fitted frame's x in the world: any axis across the normal
     if markers and len(markers) < 4:
         raise t.error("markers", f"a plane from markers needs at least 4, got {len(markers)}")
+    ids = [m.id for m in markers]
+    if len(set(ids)) != len(ids):
+        raise t.error("markers", f"mark ids must differ, got {ids}")
+    mark_distance = None
+    if "mark_distance" in t.data:
+        if not unmeasured:
+            raise t.error("mark_distance", "is for marks without plane_xy (their plane_xy already give every "
+                                           "distance)")
+        spacing = t.subtable("mark_distance")
+        assert spacing is not None
+        between = spacing.take("between")
+        if not (isinstance(between, list) and len(between) == 2 and all(b in ids for b in between)
+                and between[0] != between[1]):
+            raise spacing.error("between", f"expected two of this plane's mark ids {ids}, got {between!r}")
+        mark_distance = (int(between[0]), int(between[1]), spacing.number("length", positive=True))
+        spacing.done()
+    off_rectangle_px = 1.0
+    if "off_rectangle_px" in t.data:
+        if not unmeasured:
+            raise t.error("off_rectangle_px", "is for marks without plane_xy (taken as a rectangle's corners)")
+        off_rectangle_px = t.number("off_rectangle_px")
+        if off_rectangle_px < 0:
+            raise t.error("off_rectangle_px", f"must be ≥ 0 px, got {off_rectangle_px:g}")
     chessboard = square = None
     if "chessboard" in t.data:
         text = t.string("chessboard")
@@ -219,7 +249,14 @@ def _parse_plane(t: Table, index: int, width: int, height: int) -> PlaneSpec:
         raise FieldLogError(f"{t.path}: [{t.name}] give one of markers, chessboard, aruco or charuco per plane")
     t.done()
     return PlaneSpec(name, point, normal, tuple(regions), x_axis, tuple(markers), chessboard, square, image,
-                     tuple(polygons), mask_file, aruco, charuco)
+                     tuple(polygons), mask_file, aruco, charuco, mark_distance, off_rectangle_px)
+
+
+def _any_axis_across(normal: np.ndarray) -> np.ndarray:
+    """A unit vector across ``normal`` (unit): world x, or y when the normal is near x."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    axis = helper - (helper @ normal) * normal
+    return axis / np.linalg.norm(axis)
 
 
 def _dictionary_name(t: Table) -> str:

@@ -46,7 +46,7 @@ import numpy as np
 
 from gnomon.camera.models import CameraModel, Pose
 from gnomon.config.fieldlog import parse_camera
-from gnomon.config.specs import UNITS
+from gnomon.config.specs import LENGTH_UNITS
 from gnomon.config.tables import Table
 from gnomon.errors import FieldLogError
 from gnomon.util import toml_io
@@ -81,7 +81,8 @@ _IGNORED_SECTIONS = ("capture", "light", "scan", "site")
 
 
 # What measures a plane in a scan's field log (gnomon.config.setup.resolve_reference_planes).
-_MARK_KEYS = ("markers", "chessboard", "square", "image", "x_axis", "aruco", "charuco")
+_MARK_KEYS = ("markers", "chessboard", "square", "image", "x_axis", "aruco", "charuco", "mark_distance",
+              "off_rectangle_px")
 
 
 def _pose_from_marked_planes(path: Path, data: dict[str, Any]
@@ -143,7 +144,7 @@ def load_pencil_log(path: str | Path) -> PencilLog:
 
     capture_units = None
     capture = root.data.get("capture")
-    if isinstance(capture, dict) and capture.get("units") in UNITS:
+    if isinstance(capture, dict) and capture.get("units") in LENGTH_UNITS:
         capture_units = capture["units"]
     for name in _IGNORED_SECTIONS:
         root.data.pop(name, None)
@@ -161,7 +162,7 @@ def load_pencil_log(path: str | Path) -> PencilLog:
     plane_name = t.string("plane", next(iter(planes)))
     if plane_name not in planes:
         raise t.error("plane", f"no [[planes]] entry is named {plane_name!r} (have: {', '.join(map(repr, planes))})")
-    units = t.string("units", capture_units or "mm", UNITS)
+    units = t.string("units", capture_units or "mm", LENGTH_UNITS)
     empty = base / t.string("empty") if "empty" in t.data else None
     if empty is not None and not empty.is_file():
         raise t.error("empty", f"{empty} not found")

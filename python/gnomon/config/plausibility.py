@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from gnomon.config.specs import RELATIVE
 from gnomon.errors import FieldLogError, GnomonError
 from gnomon.util.validate import (
     MAX_DIP_FRAMES,
@@ -76,6 +77,7 @@ def check_field_log(log) -> None:
             cols, rows = plane.chessboard
             raise FieldLogError(f"{p}: [planes.{i}] chessboard: {cols}x{rows} inner corners; "
                                 f"a chessboard needs at least {MIN_CHESSBOARD}x{MIN_CHESSBOARD}")
+    _check_scale(log)
     if log.pose is not None:
         _check_lamp(log, log.pose)
     if log.site is not None and log.site.timezone is not None and not _zone_exists(log.site.timezone):
@@ -88,6 +90,56 @@ def check_field_log(log) -> None:
             raise FieldLogError(f"{p}: [pole] base → top rises {elevation:.1f}° above the horizontal; a pole "
                                 f"stands (≥ {MIN_POLE_ELEVATION_DEG:g}°; world z is up). Are base and top swapped "
                                 "with another axis?")
+
+
+def _lengths(log) -> list[str]:
+    """Where the field log gives a length (so its units are not "relative")."""
+    out = []
+    for plane in log.planes:
+        where = f"[[planes]] {plane.name}"
+        if plane.markers and not plane.unmeasured_marks:
+            out.append(f"{where}: its marks' plane_xy")
+        if plane.chessboard is not None or plane.aruco is not None or plane.charuco is not None:
+            out.append(f"{where}: its board's or markers' size")
+        if plane.mark_distance is not None:
+            out.append(f"{where}: mark_distance")
+    if log.pose is not None:
+        out.append("[camera.pose] tvec")
+    if log.light.kind in ("lamp", "sun"):
+        out.append(f"[light] kind = {log.light.kind!r}")
+    return out
+
+
+def _check_scale(log) -> None:
+    """What fixes the lengths when a plane's marks were not measured (no ``plane_xy``): the first plane
+    placed by marks (the world frame) needs a known length (``mark_distance``), else ``[capture] units =
+    "relative"``; a plane after it without one has its distance from where it meets the first (measured
+    after tracking). A declared ``[camera.pose]`` cannot be checked by such marks."""
+    p = log.path
+    marked = [pl for pl in log.planes if pl.markers or pl.chessboard or pl.aruco or pl.charuco]
+    unmeasured = [pl for pl in marked if pl.unmeasured_marks]
+    if log.capture.units == RELATIVE:
+        given = _lengths(log)
+        if given:
+            raise FieldLogError(f"{p}: [capture] units = \"relative\" says no length is known, but {given[0]} "
+                                "gives one: set units to its unit (\"mm\" or \"m\")")
+        if not unmeasured or marked[0] is not unmeasured[0]:
+            raise FieldLogError(f"{p}: [capture] units = \"relative\": the unit is the first marked plane's "
+                                "distance from the camera, so that plane needs marks without plane_xy")
+    if not unmeasured:
+        return
+    if log.pose is not None:
+        raise FieldLogError(f"{p}: [camera.pose] declares the planes, and the marks of [[planes]] "
+                            f"{unmeasured[0].name} have no plane_xy: such marks give a plane's orientation, not "
+                            "a pose to check; remove [camera.pose] (the marks then place the planes) or give "
+                            "plane_xy")
+    first = marked[0]
+    if first.unmeasured_marks and first.mark_distance is None and log.capture.units != RELATIVE:
+        raise FieldLogError(
+            f"{p}: [[planes]] {first.name}: its marks have no plane_xy, so nothing fixes the lengths: give "
+            "mark_distance = { between = [id, id], length = L } (two of its marks' distance, measured, in "
+            f"[capture] units), or [capture] units = \"relative\" (lengths in units of the {first.name}'s "
+            "distance from the camera)")
 
 
 def _check_lamp(log, pose) -> None:

@@ -9,6 +9,8 @@ model and the reconstruction settings. Nothing after it reads the field log.
 from __future__ import annotations
 
 import dataclasses
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -19,7 +21,15 @@ import numpy as np
 from gnomon.camera.aruco import plane_pose_from_aruco, plane_pose_from_charuco
 from gnomon.camera.calibration import fit_camera_to_frames, read_grey
 from gnomon.camera.models import CalibratedCamera, CameraModel, OpenCVCamera, Pose
-from gnomon.camera.plane_pose import PlanePose, fit_plane_pose, plane_pose_from_chessboard, plane_pose_from_markers
+from gnomon.camera.plane_pose import (
+    MarkScale,
+    PlanePose,
+    find_markers,
+    fit_plane_pose,
+    fit_rectangle_pose,
+    plane_pose_from_chessboard,
+    plane_pose_from_markers,
+)
 from gnomon.capture.frames import FrameSource, to_grey
 from gnomon.capture.tracking import DEFAULT_DIP_FRAMES, TrackerSettings, decoding_lut
 from gnomon.config.fieldlog import check_geometry
@@ -31,9 +41,10 @@ from gnomon.geometry.reference_lines import PlaneInCamera, ReferencePlane, regio
 from gnomon.light import LightModel
 from gnomon.util.chi2 import chi2_isf
 
-__all__ = ["FocalFit", "ScanInputs", "ScanSetup", "crop_of", "dip_width_policy", "first_frame", "fit_focal",
+__all__ = ["FocalFit", "ScanInputs", "ScanSetup", "alone_focal_factor", "best_focal_factor", "check_rectangle_marks",
+           "crop_of", "dip_width_policy", "first_frame", "fit_focal",
            "focal_diagnosis", "frame_source", "marked_points", "plane_region_mask", "resolve_reference_planes",
-           "resolve_scan", "site_datum", "tracker_settings"]
+           "provisional_distance", "resolve_scan", "site_datum", "tracker_settings", "untied_planes"]
 
 
 @dataclass(frozen=True)
@@ -71,6 +82,9 @@ class ScanSetup:
     cloud_formats: tuple[str, ...] = ()  # [output] cloud_formats: the survey files (LAZ by default when georeferenced)
     crs: str | None = None  # [output] crs: the survey files' CRS (None: the site's UTM zone)
     site_datum: dict[str, Any] | None = None  # [site]'s altitude datum, geoid and heading's north, for the report
+    # (plane, anchor) names: planes whose marks fix only their orientation, at a provisional distance
+    # until the shadow ties them to the anchor where they meet (gnomon.reconstruct.corners)
+    untied: tuple[tuple[str, str], ...] = ()
 
     def georeference(self) -> dict[str, Any] | None:
         """report.json's ``site``: where the world frame is on Earth (a sun scan), else None."""
@@ -113,7 +127,7 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
         clouds = ("laz",) if georeferenced else ()
     return ScanSetup(log.camera, pose, planes, tracker, light, s.edge, s.max_depth_jump, log.capture.units,
                      inputs, tuple(warnings), crop_of(log), log.output.mesh_formats, dip_width_policy(log),
-                     clouds, log.output.crs, site_datum(log))
+                     clouds, log.output.crs, site_datum(log), untied_planes(planes_report))
 
 
 def site_datum(log: FieldLog) -> dict[str, Any] | None:
@@ -128,6 +142,12 @@ def site_datum(log: FieldLog) -> dict[str, Any] | None:
     if s.declination_deg is not None:
         datum["declination_deg"] = s.declination_deg
     return datum
+
+
+def untied_planes(planes_report: list[dict[str, Any]]) -> tuple[tuple[str, str], ...]:
+    """(plane, anchor) of each plane :func:`resolve_reference_planes` left at a provisional distance: the
+    first measured plane (the world frame) is every such plane's anchor."""
+    return tuple((e["plane"], planes_report[0]["plane"]) for e in planes_report if e.get("distance") == "provisional")
 
 
 def crop_of(log: FieldLog) -> Crop | None:
@@ -196,6 +216,8 @@ def _measure_plane(log: FieldLog, plane: PlaneSpec, image: np.ndarray, name: str
     camera, _ = fit_camera_to_frames(log.camera, image.shape[1], image.shape[0], f"{log.path}: [camera]", name)
     if plane.aruco is not None or plane.charuco is not None:
         return _plane_pose_from_aruco(log, plane, image, camera, where)
+    if plane.unmeasured_marks:
+        return _measure_rectangle(plane, image, camera, where)
     if plane.markers:
         names = [f"{plane.name} marker {m.id}" for m in plane.markers]
         pixels = np.array([m.pixel_hint for m in plane.markers])
@@ -206,6 +228,33 @@ def _measure_plane(log: FieldLog, plane: PlaneSpec, image: np.ndarray, name: str
                                        exact=exact)
     assert plane.chessboard is not None and plane.square is not None
     return plane_pose_from_chessboard(image, camera, plane.chessboard, plane.square, source=where)
+
+
+def _measure_rectangle(plane: PlaneSpec, image: np.ndarray, camera: CameraModel, where: str) -> PlanePose:
+    """A plane from marks nobody measured, taken as a rectangle's corners (:func:`fit_rectangle_pose`), its
+    pose from the world frame (the plane's ``point``, ``normal``, ``x_axis`` placing the fitted frame:
+    origin at the rectangle's centre, z towards the camera) to the camera."""
+    names = [f"{plane.name} marker {m.id}" for m in plane.markers]
+    pixels = np.array([m.pixel_hint for m in plane.markers], dtype=np.float64)
+    located = np.array([CLICKED_SIGMA_PX if m.exact else np.nan for m in plane.markers])
+    found = [k for k, m in enumerate(plane.markers) if not m.exact]
+    if found:
+        dets = find_markers(image, pixels[found], names=[names[k] for k in found], source=where)
+        pixels[found] = np.array([d.pixel for d in dets])
+        located[found] = [float(np.hypot(d.sigma_px, FOUND_MARK_FLOOR_PX)) if np.isfinite(d.sigma_px)
+                          else MARKER_SIGMA_PX for d in dets]
+    ids = [m.id for m in plane.markers]
+    scale = None
+    if plane.mark_distance is not None:
+        a, b, length = plane.mark_distance
+        scale = MarkScale(ids.index(a), ids.index(b), length)
+    pp = fit_rectangle_pose(camera, pixels, np.hypot(located, plane.off_rectangle_px), names=names, scale=scale,
+                            source=where)
+    assert plane.x_axis is not None  # the parser gives one
+    B = np.stack([plane.x_axis, np.cross(plane.normal, plane.x_axis), plane.normal], axis=1)
+    R = pp.pose.R @ B.T
+    return dataclasses.replace(pp, pose=Pose(R=R, t=pp.pose.t - R @ plane.point), point_world=plane.point.copy(),
+                               normal_world=-plane.normal, located_px=located)
 
 
 def _measure_planes(log: FieldLog, source: FrameSource) -> list[tuple[PlaneSpec, PlanePose]]:
@@ -230,6 +279,9 @@ def _measure_planes(log: FieldLog, source: FrameSource) -> list[tuple[PlaneSpec,
 MARKER_SIGMA_PX = 1.0
 #: ... of a marker pixel given as it is (``pixel``: a clicked cross).
 CLICKED_SIGMA_PX = 1.5
+#: A found 2×2 checker's centre errs by more than its image noise says (blur, compression, the pixel
+#: grid: 0.02–0.04 px against the simulator's truth where the noise says 0.005–0.01): added in quadrature.
+FOUND_MARK_FLOOR_PX = 0.05
 #: Chance that a correct plane's markers fail the consistency check (a χ² test of their residuals).
 MARKER_CHECK_P = 1e-3
 #: A plane whose orientation is off by more than this (from the declared plane, or as the 1-σ
@@ -241,7 +293,8 @@ MAX_PLANE_TILT_DEG = 5.0
 FOCAL_FACTORS = np.geomspace(0.5, 2.0, 57)
 
 
-def focal_diagnosis(camera: Any, points: np.ndarray, pixels: np.ndarray, limit_rms_px: float) -> str:
+def focal_diagnosis(camera: Any, points: np.ndarray, pixels: np.ndarray, limit_rms_px: float,
+                    others: dict[str, float] | None = None) -> str:
     """Why a plane's points do not fit it, as far as the camera's focal length can tell (one clause).
 
     ``camera`` an :class:`~gnomon.camera.models.OpenCVCamera` (other models: no
@@ -256,29 +309,72 @@ def focal_diagnosis(camera: Any, points: np.ndarray, pixels: np.ndarray, limit_r
     no scale bringing them below half their present value means the points
     themselves are not where their plane coordinates put them (hand-placed
     marks, a surface that is not flat, a wrong id).
+
+    With 4 points one plane alone cannot tell a focal length from one
+    misplaced mark: ``others`` (the best factor of each other marked plane
+    alone, :func:`best_focal_factor`) then decides. The camera is blamed only
+    when another plane agrees on the factor (within :data:`FOCAL_AGREEMENT`);
+    otherwise the clause says that the planes disagree and the marks are off.
+    Without ``others`` (None) the clause only warns that 4 points cannot tell.
     """
     if not isinstance(camera, OpenCVCamera) or len(pixels) < 4:
         return ""
+    factor, best_rms, here = best_focal_factor(camera, lambda cam: fit_plane_pose(cam, points, pixels).rms_px)
+    return _focal_clause(camera, factor, best_rms, here, limit_rms_px, len(pixels) > 4, others,
+                         "the points are not where their plane coordinates put them (marks placed by hand, a "
+                         "surface that is not flat, a wrong id)")
+
+
+#: Two planes' best focal factors agree when they differ by less than this (relative): two steps of
+#: :data:`FOCAL_FACTORS`.
+FOCAL_AGREEMENT = 0.05
+
+
+def best_focal_factor(camera: OpenCVCamera, rms_at: Any) -> tuple[float, float, float]:
+    """(factor, rms px at it, rms px at the camera's focal length): of :data:`FOCAL_FACTORS`, the one
+    whose scaled camera (``fx``, ``fy`` times it) ``rms_at(camera)`` fits best (NaN factor: none fits),
+    searched on every 4th factor and then on every one within 3 of the best of those."""
     rms = np.full(len(FOCAL_FACTORS), np.inf)
-    for i, k in enumerate(FOCAL_FACTORS):
-        scaled = dataclasses.replace(camera, fx=camera.fx * k, fy=camera.fy * k)
-        try:
-            rms[i] = fit_plane_pose(scaled, points, pixels).rms_px
-        except (GnomonError, ValueError):  # no pose at that focal length (e.g. IPPE gives a non-finite start)
-            continue
-    here = fit_plane_pose(camera, points, pixels).rms_px
-    best = int(np.argmin(rms))
+
+    def at(i: int) -> float:
+        if rms[i] == np.inf:
+            k = FOCAL_FACTORS[i]
+            try:
+                rms[i] = rms_at(dataclasses.replace(camera, fx=camera.fx * k, fy=camera.fy * k))
+            except (GnomonError, ValueError, np.linalg.LinAlgError):  # no pose at that focal length
+                rms[i] = np.nan
+        return float(np.nan_to_num(rms[i], nan=np.inf))
+
+    # every 4th factor, then every one around the best of those (a fit's residual varies smoothly with it)
+    coarse = min(range(0, len(FOCAL_FACTORS), 4), key=at)
+    for i in range(max(coarse - 3, 0), min(coarse + 4, len(FOCAL_FACTORS))):
+        at(i)
+    best = int(np.argmin(np.nan_to_num(rms, nan=np.inf)))
     if not np.isfinite(rms[best]):
+        return float("nan"), float("nan"), float("nan")
+    return float(FOCAL_FACTORS[best]), float(rms[best]), float(rms_at(camera))
+
+
+def _focal_clause(camera: OpenCVCamera, factor: float, best_rms: float, here: float, limit_rms_px: float,
+                  alone_tells: bool, others: dict[str, float] | None, marks_off: str) -> str:
+    """The clause of :func:`focal_diagnosis` (and of marks taken as a rectangle) from a plane's best factor.
+    ``alone_tells``: the plane's own points can tell a focal length from a misplaced mark (more than the
+    parameters they fix)."""
+    if not np.isfinite(factor):
         return ""
-    if rms[best] <= limit_rms_px and rms[best] < 0.25 * here and abs(FOCAL_FACTORS[best] - 1.0) > 0.02:
-        caveat = " (or a mark is off: 4 points cannot tell)" if len(pixels) == 4 else ""
-        return (f"; they fit to {rms[best]:.1f} px rms with the focal length × {FOCAL_FACTORS[best]:.2f} "
-                f"({camera.fx * FOCAL_FACTORS[best]:.0f} px instead of {camera.fx:.0f}): the camera's calibration "
-                f"does not fit these frames (zoom, focus or crop changed since){caveat}")
-    if rms[best] > 0.5 * here:
-        return (f"; no focal length fits them better than {rms[best]:.1f} px rms (× {FOCAL_FACTORS[best]:.2f}): "
-                "the points are not where their plane coordinates put them (marks placed by hand, a surface "
-                "that is not flat, a wrong id)")
+    if best_rms <= limit_rms_px and best_rms < 0.25 * here and abs(factor - 1.0) > 0.02:
+        agree = {n: k for n, k in (others or {}).items() if abs(k / factor - 1.0) < FOCAL_AGREEMENT}
+        fits = f"they fit to {best_rms:.1f} px rms with the focal length × {factor:.2f}"
+        if alone_tells or agree or not others:
+            caveat = ("" if alone_tells or agree else " (or a mark is off: 4 points cannot tell)")
+            also = (" as do " + ", ".join(f"{n}'s (× {k:.2f})" for n, k in agree.items())) if agree else ""
+            return (f"; {fits}{also} ({camera.fx * factor:.0f} px instead of {camera.fx:.0f}): the camera's "
+                    f"calibration does not fit these frames (zoom, focus or crop changed since){caveat}")
+        told = ", ".join(f"{n} × {k:.2f}" for n, k in others.items())
+        return (f"; {fits}, but the other planes' marks do not agree on it ({told} alone): the marks are off, "
+                "not the camera")
+    if best_rms > 0.5 * here:
+        return f"; no focal length fits them better than {best_rms:.1f} px rms (× {factor:.2f}): {marks_off}"
     return ""
 
 
@@ -315,23 +411,27 @@ class FocalFit:
         return out
 
 
-def _pose_chi2(camera: OpenCVCamera, factor: float, points: np.ndarray, pixels: np.ndarray,
+def _pose_chi2(camera: OpenCVCamera, factor: float, points: np.ndarray | None, pixels: np.ndarray,
                sigma_px: np.ndarray) -> tuple[float, float]:
-    """(χ², rms px) of one plane's points fitted with the focal length scaled by ``factor`` (inf: no pose)."""
+    """(χ², rms px) of one plane's points fitted with the focal length scaled by ``factor`` (inf: no pose);
+    ``points`` None: marks nobody measured, fitted as a rectangle's corners."""
     scaled = dataclasses.replace(camera, fx=camera.fx * factor, fy=camera.fy * factor)
     try:
-        pp = fit_plane_pose(scaled, points, pixels)
+        pp = (fit_plane_pose(scaled, points, pixels) if points is not None
+              else fit_rectangle_pose(scaled, pixels, sigma_px))
     except (GnomonError, ValueError):
         return np.inf, np.inf
     lengths = np.linalg.norm(pp.residuals_px, axis=1)
     return float(np.sum((lengths / sigma_px) ** 2)), float(pp.rms_px)
 
 
-def fit_focal(camera: OpenCVCamera, planes: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]) -> FocalFit:
+def fit_focal(camera: OpenCVCamera, planes: list[tuple[str, np.ndarray | None, np.ndarray, np.ndarray]]) -> FocalFit:
     """The focal length that best explains several planes' marked points, each plane with its own pose.
 
     ``planes``: (name, points (N, 2) plane or (N, 3) coplanar world
-    coordinates, pixels (N, 2), σ px (N,)) with N ≥ 4. Each plane's points
+    coordinates, or None for marks nobody measured (a rectangle's corners:
+    one right angle constrains the focal length), pixels (N, 2), σ px (N,))
+    with N ≥ 4. Each plane's points
     fix its pose and, beyond it, constrain the focal length (Zhang's two
     constraints per plane view; here with the principal point, the aspect
     and the distortion of ``camera`` held, so one unknown): the factor
@@ -373,10 +473,12 @@ def fit_focal(camera: OpenCVCamera, planes: list[tuple[str, np.ndarray, np.ndarr
                     tuple(at_fit), tuple(alone), tuple(alone_rms))
 
 
-def marked_points(log: FieldLog, source: FrameSource) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
-    """Every plane with markers: (name, its markers' world coordinates (N, 3), their pixels as found or
-    given (N, 2), their σ px (N,)), measured on the plane's image or the first frame, not checked."""
-    return [(plane.name, plane.marker_world(), pp.pixels, _marker_sigmas(plane, len(pp.pixels)))
+def marked_points(log: FieldLog, source: FrameSource) -> list[tuple[str, np.ndarray | None, np.ndarray, np.ndarray]]:
+    """Every plane with markers: (name, its markers' world coordinates (N, 3) or None when nobody measured
+    them, their pixels as found or given (N, 2), their σ px (N,)), measured on the plane's image or the
+    first frame, not checked."""
+    return [(plane.name, None, pp.pixels, _rectangle_sigmas(plane, pp)) if plane.unmeasured_marks
+            else (plane.name, plane.marker_world(), pp.pixels, _marker_sigmas(plane, len(pp.pixels)))
             for plane, pp in _measure_planes(log, source) if plane.markers]
 
 
@@ -387,7 +489,8 @@ def _marker_sigmas(plane: PlaneSpec, n: int) -> np.ndarray:
     return np.full(n, MARKER_SIGMA_PX)
 
 
-def check_plane_markers(log: FieldLog, plane: PlaneSpec, pp: PlanePose, declared: Pose | None) -> str | None:
+def check_plane_markers(log: FieldLog, plane: PlaneSpec, pp: PlanePose, declared: Pose | None,
+                        others: Callable[[], dict[str, float]] | None = None) -> str | None:
     """Whether a plane's markers fit one plane: a warning (returned) when their residuals fail a χ² test
     at the markers' localisation σ (p = :data:`MARKER_CHECK_P`); a :class:`FieldLogError` naming the
     plane and its worst marker when the plane they give would be meaningless (tilted more than
@@ -413,7 +516,7 @@ def check_plane_markers(log: FieldLog, plane: PlaneSpec, pp: PlanePose, declared
     residuals = f"residuals {pp.rms_px:.1f} px rms, {lengths.max():.1f} px at most"
     expected = float(np.sqrt(np.mean(sigmas**2) * limit / (2 * n)))
     failing = statistic > limit or (np.isfinite(tilt) and tilt > MAX_PLANE_TILT_DEG)
-    why = focal_diagnosis(log.camera, plane.marker_world(), pp.pixels, expected) if (
+    why = focal_diagnosis(log.camera, plane.marker_world(), pp.pixels, expected, others and others()) if (
         failing and plane.markers and len(plane.markers) == n) else ""
     if np.isfinite(tilt) and tilt > MAX_PLANE_TILT_DEG:
         what = (f"the plane through its markers is {tilt:.0f}° from the declared one" if declared is not None
@@ -429,6 +532,113 @@ def check_plane_markers(log: FieldLog, plane: PlaneSpec, pp: PlanePose, declared
                 + ("from the declared one" if declared is not None else "uncertain (1 σ)")
                 + f"{why}; check the markers' pixel_hint and id")
     return None
+
+
+#: A plane from marks nobody measured whose 1-σ tilt moves it, across its marks, by more than this share
+#: of its distance from the camera is worth a warning: the scan's own depth error on the simulated
+#: captures is 0.04–0.1 % of the distance.
+MAX_PLANE_DEPTH_SHARE = 0.001
+
+
+def _rectangle_sigmas(plane: PlaneSpec, pp: PlanePose) -> np.ndarray:
+    """Each mark's σ (px) against the rectangle: its localisation and its placement off a rectangle."""
+    located = pp.located_px if pp.located_px is not None else np.full(len(pp.pixels), MARKER_SIGMA_PX)
+    return np.hypot(located, plane.off_rectangle_px)
+
+
+def _tilt_share(pp: PlanePose) -> float:
+    """How far the plane's 1-σ tilt moves it across its marks, as a share of its distance from the camera."""
+    assert pp.marks_xy is not None
+    reach = float(np.max(np.linalg.norm(pp.marks_xy - pp.marks_xy.mean(axis=0), axis=1)))
+    return float(np.tan(np.radians(pp.std_normal_deg)) * reach / pp.offset_cam)
+
+
+def check_rectangle_marks(log: FieldLog, plane: PlaneSpec, pp: PlanePose,
+                          others: Callable[[], dict[str, float]] | None = None) -> str | None:
+    """Whether marks nobody measured are a rectangle's corners, and how well they fix their plane.
+
+    A warning (returned) when their residuals fail a χ² test (p = :data:`MARKER_CHECK_P`, 1 degree of
+    freedom: the rectangle's right angle) at their σ (localisation and ``off_rectangle_px``): it names the
+    mark farthest off and its residual, and blames the camera's focal length only when another plane's
+    marks agree on the factor (:func:`_focal_clause`); or when the plane's 1-σ tilt moves it by more than
+    :data:`MAX_PLANE_DEPTH_SHARE` of its distance across its marks. A :class:`FieldLogError` when the
+    plane's normal is uncertain by more than :data:`MAX_PLANE_TILT_DEG`.
+    """
+    sigmas = _rectangle_sigmas(plane, pp)
+    corners = list(pp.corners)
+    lengths = np.linalg.norm(pp.residuals_px, axis=1)
+    statistic = float(np.sum((lengths[corners] / sigmas[corners]) ** 2))
+    dof = 2 * len(corners) - 7
+    limit = chi2_isf(MARKER_CHECK_P, dof)
+    worst = corners[int(np.argmax(lengths[corners] / sigmas[corners]))]
+    worst_name = pp.names[worst].removeprefix(f"{plane.name} ")
+    where = f"{log.path}: [[planes]] {plane.name}"
+    tilt = float(pp.std_normal_deg)
+    share = _tilt_share(pp)
+    placed = f"off_rectangle_px = {plane.off_rectangle_px:g}"
+    advice = ("measure the marks' positions (plane_xy), or place them on a rectangle (a ruler and a square) and "
+              "lower off_rectangle_px, or give this plane a chessboard")
+    residuals = (f"residuals {pp.rms_px:.1f} px rms, {worst_name} {lengths[worst]:.1f} px off; 4 marks cannot "
+                 "tell which corner is off")
+    expected = float(np.sqrt(np.mean(sigmas[corners] ** 2) * limit / (2 * len(corners))))
+    uncertain = not np.isfinite(tilt) or tilt > MAX_PLANE_TILT_DEG
+    why = ""
+    if statistic > limit and isinstance(log.camera, OpenCVCamera):  # the marks misfit: is the camera at fault?
+        factor, best_rms, here = best_focal_factor(
+            log.camera, lambda cam: fit_rectangle_pose(cam, pp.pixels, sigmas).rms_px)
+        why = _focal_clause(log.camera, factor, best_rms, here, expected, False, others and others(),
+                            "the marks are not a rectangle's corners")
+    if "calibration does not fit" in why:
+        advice = ("calibrate the camera as it was set for the capture, or fit its focal length to the planes' "
+                  f"marks with `gnomon calibrate focal {log.path.name}`")
+    if uncertain:
+        raise FieldLogError(f"{where}: its {len(pp.pixels)} marks taken as a rectangle's corners leave its normal "
+                            f"uncertain by {tilt:.1f}° (1 σ, marks within {placed} px of a rectangle; {residuals})"
+                            f"{why}: no reference plane; {advice}")
+    if statistic > limit:
+        return (f"{where}: its marks are not a rectangle's corners ({residuals}; marks within {placed} px of a "
+                f"rectangle leave at most {expected:.1f} px rms){why}; the plane's normal is uncertain by "
+                f"{tilt:.2f}° (1 σ); {advice}")
+    if share > MAX_PLANE_DEPTH_SHARE:
+        return (f"{where}: its {len(pp.pixels)} marks taken as a rectangle's corners (none measured) leave its "
+                f"normal uncertain by {tilt:.2f}° (1 σ, marks within {placed} px of a rectangle): across its marks "
+                f"that moves the plane by {100 * share:.2f} % of its distance, and the depths with it; {advice}")
+    return None
+
+
+def alone_focal_factor(log: FieldLog, plane: PlaneSpec, pp: PlanePose) -> float:
+    """The focal factor (of :data:`FOCAL_FACTORS`) that fits one marked plane's marks best on its own
+    (NaN for another camera model or a plane without marks)."""
+    if not isinstance(log.camera, OpenCVCamera) or not plane.markers or len(plane.markers) != len(pp.pixels):
+        return float("nan")
+    if plane.unmeasured_marks:
+        sigmas = _rectangle_sigmas(plane, pp)
+        return best_focal_factor(log.camera, lambda cam: fit_rectangle_pose(cam, pp.pixels, sigmas).rms_px)[0]
+    return best_focal_factor(log.camera, lambda cam: fit_plane_pose(cam, plane.marker_world(), pp.pixels).rms_px)[0]
+
+
+def _at_distance(pp: PlanePose, point: np.ndarray, k: float) -> PlanePose:
+    """A plane moved along the camera's rays, its distance times ``k``: the pose keeps its rotation and
+    carries the plane's world ``point`` to ``k`` times where it was in the camera frame."""
+    R, t = pp.pose.R, pp.pose.t
+    return dataclasses.replace(
+        pp, pose=Pose(R=R, t=k * (R @ point + t) - R @ point), offset_cam=pp.offset_cam * k,
+        std_offset=pp.std_offset * k, marks_xy=None if pp.marks_xy is None else pp.marks_xy * k,
+        rectangle=None if pp.rectangle is None else (pp.rectangle[0] * k, pp.rectangle[1] * k))
+
+
+def provisional_distance(camera: CameraModel, first: PlanePose, pp: PlanePose) -> float:
+    """A first guess of the distance of a plane whose marks fix only its orientation: where its line
+    with the ``first`` plane passes half-way between their nearest marks in the image (the corner between
+    a desk and a wall lies between the desk's marks and the wall's). The shadow measures it after tracking
+    (:func:`gnomon.geometry.plane_tie.tie_by_corner`)."""
+    gaps = np.linalg.norm(first.pixels[:, None, :] - pp.pixels[None, :, :], axis=2)
+    i, j = np.unravel_index(int(np.argmin(gaps)), gaps.shape)
+    ray = camera.rays(0.5 * (first.pixels[i] + pp.pixels[j])[None])[0]
+    a, b = float(first.normal_cam @ ray), float(pp.normal_cam @ ray)
+    if not (a > 1e-9 and b > 1e-9):
+        return float(first.offset_cam)
+    return float(first.offset_cam / a * b)
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -454,13 +664,37 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
     if not measured:
         return log, []
     declared = log.pose is not None
+    # marks nobody measured fix a plane's orientation, not its distance: a first guess until the shadow
+    # ties it to the first plane (the world frame) where they meet
+    provisional = set()
+    for k, (plane, pp) in enumerate(measured):
+        if k > 0 and plane.unmeasured_marks and plane.mark_distance is None:
+            guess = provisional_distance(log.camera, measured[0][1], pp)
+            measured[k] = (plane, _at_distance(pp, plane.point, guess / pp.offset_cam))
+            provisional.add(plane.name)
     pose = log.pose if log.pose is not None else measured[0][1].pose
     report: list[dict[str, Any]] = []
     placed = {}
+    factors: dict[str, float] = {}
+
+    def others(name: str) -> dict[str, float]:  # the other marked planes' focal factors, each alone
+        for plane, pp in measured:
+            if plane.name not in factors and plane.markers:
+                factors[plane.name] = alone_focal_factor(log, plane, pp)
+        return {n: k for n, k in factors.items() if n != name and np.isfinite(k)}
+
     for plane, pp in measured:
         entry = {"plane": plane.name, **pp.to_report(), "pixels": pp.pixels.tolist()}
+        if plane.unmeasured_marks:
+            entry["distance"] = ("provisional" if plane.name in provisional
+                                 else "mark_distance" if plane.mark_distance is not None else "unit")
+            entry["off_rectangle_px"] = plane.off_rectangle_px
         try:
-            warning = check_plane_markers(log, plane, pp, log.pose)
+            theirs = functools.partial(others, plane.name)
+            if plane.unmeasured_marks:
+                warning = check_rectangle_marks(log, plane, pp, theirs)
+            else:
+                warning = check_plane_markers(log, plane, pp, log.pose, theirs)
         except FieldLogError as exc:  # the planes measured before it may say why (e.g. the camera does not fit)
             earlier = [e["marker_warning"].removeprefix(f"{log.path}: ") for e in report if "marker_warning" in e]
             if not earlier:

@@ -14,7 +14,11 @@ import numpy as np
 
 from gnomon.camera.models import CalibratedCamera, Pose
 
-UNITS = ("mm", "m")
+LENGTH_UNITS = ("mm", "m")
+UNITS = (*LENGTH_UNITS, "relative")
+#: ``[capture] units = "relative"``: no length is known; the unit is the first plane's distance from the
+#: camera's centre (that plane's marks nobody measured set the world frame).
+RELATIVE = "relative"
 
 
 EDGES = ("enter", "leave", "both")
@@ -43,11 +47,13 @@ class MarkerSpec:
 
     A printed 2×2 checker marker is given by a rough ``pixel_hint`` that the
     scan refines (``exact`` False); any other mark (a hand-drawn cross) by
-    its exact ``pixel``, used as given (``exact`` True).
+    its exact ``pixel``, used as given (``exact`` True). ``plane_xy`` None:
+    nobody measured where it is (the plane's marks are then a rectangle's
+    corners of unknown size, :func:`gnomon.camera.plane_pose.fit_rectangle_pose`).
     """
 
     id: int
-    plane_xy: np.ndarray  # (2,) in the plane's own 2-D frame, world units
+    plane_xy: np.ndarray | None  # (2,) in the plane's own 2-D frame, world units; None: not measured
     pixel_hint: np.ndarray  # (2,) pixels
     exact: bool = False
 
@@ -103,6 +109,15 @@ class PlaneSpec:
     mask_file: Path | None = None  # an image: non-zero where the plane is bare and swept
     aruco: ArucoSpec | None = None  # ArUco markers on the plane (found by ID)
     charuco: CharucoSpec | None = None  # a ChArUco board on the plane
+    # marks nobody measured (no plane_xy): a known length between two of them (ids, world units) ...
+    mark_distance: tuple[int, int, float] | None = None
+    # ... and how far (px, 1 σ per axis) they may lie off a true rectangle's corners
+    off_rectangle_px: float = 1.0
+
+    @property
+    def unmeasured_marks(self) -> bool:
+        """Marks without ``plane_xy``: a rectangle of unknown size (its orientation, not its distance)."""
+        return bool(self.markers) and self.markers[0].plane_xy is None
 
     @property
     def has_regions(self) -> bool:
@@ -116,8 +131,8 @@ class PlaneSpec:
         return self.point + xy[:, :1] * self.x_axis + xy[:, 1:] * y_axis
 
     def marker_world(self) -> np.ndarray:
-        """(N, 3) world coordinates of the markers' centres."""
-        assert self.x_axis is not None
+        """(N, 3) world coordinates of the markers' centres (measured marks only)."""
+        assert self.x_axis is not None and not self.unmeasured_marks
         y_axis = np.cross(self.normal, self.x_axis)
         xy = np.array([m.plane_xy for m in self.markers]).reshape(-1, 2)
         return self.point + xy[:, :1] * self.x_axis + xy[:, 1:] * y_axis

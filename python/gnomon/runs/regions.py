@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 
 from gnomon.camera.models import CameraModel
+from gnomon.geometry.plane_tie import CornerTie
 from gnomon.geometry.reference_lines import (
     MIN_POINTS,
     PlaneInCamera,
@@ -51,10 +52,11 @@ from gnomon.geometry.reference_lines import (
     lines_on_plane,
     mask_crossings,
 )
+from gnomon.reconstruct.corners import tie_camera_planes
 from gnomon.util.fitting import fit_plane_robust
 
 __all__ = ["PlaneRegion", "follow_the_sweep", "hull_mask", "monotone_sweep", "nearest_plane", "pixel_footprint",
-           "predicted_times", "propose_regions", "ransac_shadow_plane", "shadow_lines", "smooth_times"]
+           "predicted_times", "propose_regions", "ransac_shadow_plane", "shadow_lines", "smooth_times", "tie_on_seeds"]
 
 # The first lines (over the seed, which may hold objects) are RANSAC lines of this tolerance, in pixels on the plane.
 RANSAC_PIXELS = 2.0
@@ -499,6 +501,21 @@ def propose_regions(
             current = [_clean(np.isfinite(r) & (r <= tolerances[k]), margin_px, min_area_px, seeds[k])
                        for k, r in enumerate(residuals)]
     return [PlaneRegion(names[k], current[k], residuals[k], tolerances[k], found[k]) for k in range(len(planes))]
+
+
+def tie_on_seeds(time_maps: list[np.ndarray], n_frames: int, planes: list[PlaneInCamera], names: list[str],
+                 seeds: list[np.ndarray], camera: CameraModel,
+                 untied: tuple[tuple[str, str], ...]) -> tuple[list[PlaneInCamera], dict[str, CornerTie | None]]:
+    """The planes, each of ``untied`` (plane, anchor) moved to the distance where its shadow lines meet its
+    anchor's (:func:`gnomon.reconstruct.corners.tie_camera_planes`), the lines fitted over the seeds with
+    RANSAC (they may hold objects); and each tie (None: too few frames' lines met)."""
+    lines_of: dict[str, list[ReferenceLines]] = {}
+    for name in {n for pair in untied for n in pair}:
+        k = names.index(name)
+        tolerance = RANSAC_PIXELS * pixel_footprint(planes[k], camera, seeds[k])
+        lines_of[name] = [lines_on_plane(times, n_frames, planes[k], seeds[k], camera, name,
+                                         ransac_tolerance=tolerance, max_scatter=None) for times in time_maps]
+    return tie_camera_planes(planes, names, untied, lines_of)
 
 
 def hull_mask(shape: tuple[int, int], pixels: np.ndarray, shrink: float = 0.0) -> np.ndarray:

@@ -49,6 +49,7 @@ from gnomon.outputs.scan_files import (
     writes_texture,
 )
 from gnomon.outputs.writers import Writers
+from gnomon.reconstruct.corners import tie_planes
 from gnomon.reconstruct.edges import (
     EdgeResult,
     Levels,
@@ -182,6 +183,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
                                                      progress=progress, where=f"{setup.inputs.field_log}: [camera]")
         setup = dataclasses.replace(setup, tracker=tracker)  # the dip width tracked with
         warnings += notes
+        setup = tie_planes(setup, tracked, warnings)  # planes that only their orientation placed
         with timed(timings, "ray_map_s"):  # what is left of it after tracking
             ray_map = rays.result()
     check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)

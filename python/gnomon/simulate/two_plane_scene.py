@@ -148,6 +148,14 @@ MARKERS = {
     DESK: ((-190.0, -80.0), (190.0, -80.0), (-215.0, 40.0), (215.0, 40.0)),
     WALL: ((-200.0, 95.0), (200.0, 95.0), (-200.0, 175.0), (200.0, 175.0)),
 }
+# Marks nobody measured (``marks = "unmeasured"``): the corners of a rectangle on each plane, in order
+# around it, before each is moved up to ``marks_off_px`` in the image.
+RECTANGLES = {
+    DESK: ((-200.0, -80.0), (200.0, -80.0), (200.0, 40.0), (-200.0, 40.0)),
+    WALL: ((-200.0, 95.0), (200.0, 95.0), (200.0, 175.0), (-200.0, 175.0)),
+}
+MARKS = ("measured", "unmeasured")
+MAX_MARKS_OFF_PX = 20.0
 MARKER_CHECKER = 40.0         # side of the 2×2 checker, mm
 MARKER_PAPER = 1.5 * MARKER_CHECKER   # side of the white paper square, mm (as gnomon.simulate.marker_images)
 MARKER_WHITE, MARKER_BLACK = 0.80, 0.06
@@ -171,11 +179,22 @@ class TwoPlaneConfig(SweepConfig):
     turn about several directions and fix the lamp at a point) or
     ``"translated"`` (moved parallel to itself: every shadow plane contains
     the stick's one direction, and the planes fix the lamp only along the
-    line through it in that direction).
+    line through it in that direction). ``marks``: ``"measured"`` (the field
+    log gives each checker's ``plane_xy`` and the camera's pose) or
+    ``"unmeasured"`` (the checkers at the corners of a rectangle on each plane,
+    :data:`RECTANGLES`, each moved on its plane so that its image moves by a
+    random vector of length up to ``marks_off_px`` (uniform in that disc,
+    from the seed); the field log gives neither ``plane_xy`` nor the pose, says
+    ``off_rectangle_px`` = ``marks_off_px / 2``, the per-axis σ of a uniform
+    disc, and has ``units = "relative"``, or with ``mark_distance`` the desk's
+    first two marks' true distance in mm).
     """
 
     markers: str = "checker"
     stick: str = "rocked"
+    marks: str = "measured"
+    marks_off_px: float = 0.0
+    mark_distance: bool = False
 
     @property
     def scene_name(self) -> str:
@@ -187,6 +206,14 @@ class TwoPlaneConfig(SweepConfig):
             raise self.error(f"--markers {self.markers!r}: expected one of {', '.join(MARKER_KINDS)}")
         if self.stick not in STICK_MOTIONS:
             raise self.error(f"--stick {self.stick!r}: expected one of {', '.join(STICK_MOTIONS)}")
+        if self.marks not in MARKS:
+            raise self.error(f"--marks {self.marks!r}: expected one of {', '.join(MARKS)}")
+        if not (0.0 <= self.marks_off_px <= MAX_MARKS_OFF_PX):
+            raise self.error(f"--marks-off-px {self.marks_off_px}: must be 0 to {MAX_MARKS_OFF_PX:g} px")
+        if self.marks == "unmeasured" and self.markers != "checker":
+            raise self.error("--marks unmeasured: with --markers checker (ArUco markers carry their size)")
+        if self.marks != "unmeasured" and (self.marks_off_px > 0 or self.mark_distance):
+            raise self.error("--marks-off-px and --mark-distance: with --marks unmeasured")
 
 
 def plane_y_axis(normal, x_axis) -> np.ndarray:
@@ -240,6 +267,31 @@ class TwoPlaneScene(DeskLampScene):
     def lamp_position(self) -> np.ndarray:
         return LAMP.astype(np.float64)
 
+    def marker_centres(self, oid: int) -> np.ndarray:
+        """(4, 2) the markers' centres on plane ``oid`` (plane coordinates, mm): :data:`MARKERS`, or with
+        unmeasured marks the :data:`RECTANGLES`' corners each moved so that its image moves by up to
+        ``marks_off_px`` (a random vector uniform in that disc, from the seed; one Newton step through the
+        projection's Jacobian at the corner)."""
+        cache = self.__dict__.setdefault("_marker_centres", {})
+        if oid not in cache:
+            if self.config.marks != "unmeasured":
+                cache[oid] = np.array(MARKERS[oid], dtype=np.float64)
+            else:
+                corners = np.array(RECTANGLES[oid], dtype=np.float64)
+                rng = np.random.default_rng([self.config.seed, 8, oid])
+                radius = self.config.marks_off_px * np.sqrt(rng.uniform(0.0, 1.0, len(corners)))
+                angle = rng.uniform(0.0, 2 * np.pi, len(corners))
+                shift = radius[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+                moved = corners.copy()
+                for k, c in enumerate(corners):
+                    h = 1.0
+                    base = self.project(plane_to_world(oid, c))
+                    J = np.stack([(self.project(plane_to_world(oid, c + h * e)) - base) / h
+                                  for e in np.eye(2)], axis=1)  # d pixel / d plane (2, 2)
+                    moved[k] = c + np.linalg.solve(J, shift[k])
+                cache[oid] = moved
+        return np.asarray(cache[oid])
+
     def _stick_motion(self, u_start: float, u_end: float, tt: np.ndarray):
         """The rocked sweep's stick, or (``stick = "translated"``) one that keeps the direction it has
         half-way through the sweep: each pose keeps the rocked pose's centre and length."""
@@ -272,7 +324,7 @@ class TwoPlaneScene(DeskLampScene):
         ab = world_to_plane(oid, X)
         albedo = self._texture(ab, 1 if oid == DESK else 5)
         cls = np.zeros(ab.shape[:-1], dtype=np.int8)
-        for k, centre in enumerate(MARKERS[oid]):
+        for k, centre in enumerate(self.marker_centres(oid)):
             if self.config.markers == "aruco":
                 bits = aruco_bits(ARUCO_DICTIONARY, 4 * PLANE_ORDER.index(oid) + k)
                 cls = np.maximum(cls, aruco_class(ab - np.asarray(centre), bits, MARKER_CHECKER, MARKER_PAPER))
@@ -299,7 +351,7 @@ class TwoPlaneScene(DeskLampScene):
             ab = world_to_plane(plane_id, P)
             grow = np.zeros(P.shape[:2], dtype=bool)
             px_mm = self.camera_distance / self.lens.fx * 1.5 * 3.0   # generous: ~1.5 px at grazing view
-            for centre in MARKERS[plane_id]:
+            for centre in self.marker_centres(plane_id):
                 q = np.abs(ab - np.asarray(centre))
                 grow |= (q < MARKER_PAPER / 2.0 + 1.0 + px_mm).all(axis=-1)
             grow &= m
@@ -448,7 +500,7 @@ class TwoPlaneScene(DeskLampScene):
         rng = np.random.default_rng([self.config.seed, 6])
         ids, xy, world, pix, hints, corner_pix = [], [], [], [], [], []
         for p_i, oid in enumerate(PLANE_ORDER):
-            centres = np.array(MARKERS[oid], dtype=np.float64)
+            centres = self.marker_centres(oid)
             X = plane_to_world(oid, centres)
             uv = self.project(X)
             ang = rng.uniform(0.0, 2 * np.pi, len(X))
@@ -497,6 +549,8 @@ class TwoPlaneScene(DeskLampScene):
             "marker_pixels": self.marker_pixels.copy(),
             "marker_hints": self.marker_hints.copy(),
         })
+        if self.config.marks == "unmeasured":
+            arrays["marker_rectangle_xy"] = np.array([RECTANGLES[oid] for oid in PLANE_ORDER])
         if self.config.markers == "aruco":
             arrays["marker_corner_pixels"] = self.marker_corner_pixels.copy()
         return arrays
@@ -522,6 +576,15 @@ class TwoPlaneScene(DeskLampScene):
                         for k in range(self.marker_ids.shape[1])
                     ],
                 }
+            elif self.config.marks == "unmeasured":  # the marks' pixels only: no plane frame, no positions
+                for key in ("point", "normal", "x_axis"):
+                    planes[-1].pop(key)
+                planes[-1]["off_rectangle_px"] = self.config.marks_off_px / 2.0
+                planes[-1]["markers"] = [
+                    {"id": int(self.marker_ids[p_i, k]),
+                     "pixel_hint": [float(x) for x in self.marker_hints[p_i, k]]}
+                    for k in range(self.marker_ids.shape[1])
+                ]
             else:
                 planes[-1]["markers"] = [
                     {"id": int(self.marker_ids[p_i, k]),
@@ -529,9 +592,18 @@ class TwoPlaneScene(DeskLampScene):
                      "pixel_hint": [float(x) for x in self.marker_hints[p_i, k]]}
                     for k in range(self.marker_ids.shape[1])
                 ]
+        capture, camera = self.capture_table(), self.camera_table()
+        if self.config.marks == "unmeasured":
+            camera.pop("pose")
+            if self.config.mark_distance:
+                a, b = self.marker_plane_xy[0, 0], self.marker_plane_xy[0, 1]
+                planes[0]["mark_distance"] = {"between": [int(self.marker_ids[0, 0]), int(self.marker_ids[0, 1])],
+                                              "length": float(np.linalg.norm(a - b))}
+            else:
+                capture["units"] = "relative"
         return {
-            "capture": self.capture_table(),
-            "camera": self.camera_table(),
+            "capture": capture,
+            "camera": camera,
             "planes": planes,
             "light": {"kind": "two-plane"},
             "scan": {"min_contrast": 20},
