@@ -43,7 +43,8 @@ HEADER = '''\
 
 STEPS = {
     "two-plane": "# Next: fill in the markers below, check with `gnomon preview {name}`,\n"
-                 "# propose the regions with `gnomon regions {name}`, then `gnomon scan {name}`.",
+                 "# propose the regions with `gnomon regions {name}` (from the markers, or grown from rough\n"
+                 "# rectangles of bare desk and wall given as regions), then `gnomon scan {name}`.",
     "lamp": "# Next: fill in the desk's board (or markers) and each pencil photo's base and tip,\n"
             "# locate the lamp with `gnomon calibrate lamp {name}` (it writes lamp.toml), check with\n"
             "# `gnomon preview {name}`, draw two rough bands of bare desk (regions), grow them with\n"

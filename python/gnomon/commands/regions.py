@@ -100,12 +100,14 @@ def run(args: argparse.Namespace) -> int:
                             "the planes cannot be placed")
     measured = {entry["plane"]: np.array(entry["pixels"]) for entry in planes_report}
     shape = (log.camera.height, log.camera.width)
-    seeds = []
+    seeds, start = [], {}
     for plane in log.planes:
         if plane.has_regions:
             seeds.append(plane_region_mask(plane, shape))
+            start[plane.name] = "its regions"
         elif plane.name in measured and len(measured[plane.name]) >= 3:
             seeds.append(hull_mask(shape, measured[plane.name], shrink=SEED_GROWTH))
+            start[plane.name] = "its marks' outline"
         else:
             raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: nothing to start from; give it markers, "
                                 "a chessboard or rough regions")
@@ -149,6 +151,17 @@ def run(args: argparse.Namespace) -> int:
                      f"lines in {region.lines_found} frames"), ""]
         print(f"{region.name}: {int(region.mask.sum())} pixels ({100 * region.mask.mean():.1f} % of the image), "
               f"tolerance {region.tolerance:.2f} frames, lines in {region.lines_found} frames")
+        if region.seed_left_out:
+            area, (u0, v0, u1, v1) = region.seed_pieces[0]
+            print(f"  cut out: {region.seed_left_out} pixels of what it started from ({start[region.name]}) do not "
+                  f"follow the {region.name}'s shadow lines (more than {region.tolerance:.2f} frame off on an edge; "
+                  f"{len(region.seed_pieces)} pieces, the largest {area} px in [{u0}, {v0}, {u1}, {v1}]): an "
+                  "object, its shadow, a mark or another surface")
+        if region.gaps:
+            spans = ", ".join(f"{a}–{b}" for a, b in region.gaps[:6]) + (" …" if len(region.gaps) > 6 else "")
+            print(f"warning: plane {region.name!r}: no line in frames {spans} of its sweep (the shadow there fits "
+                  "no line through its pixels): the stripes it crossed then are missing from the mask; check "
+                  "there for an object or a wrong plane, or draw a rough region across them and run again")
     atomic.write_text(out / "regions.toml", "\n".join(snippet))
     first = tracked.first_color if tracked.first_color is not None else tracked.first_grey
     _png(out / "regions.png", draw_regions(first, [r.mask for r in proposals]))

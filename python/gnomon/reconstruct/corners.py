@@ -14,12 +14,10 @@ import dataclasses
 
 import numpy as np
 
-from gnomon.capture.tracking import TrackedSequence
 from gnomon.config.setup import MAX_PLANE_DEPTH_SHARE, ScanSetup
 from gnomon.errors import GnomonError
 from gnomon.geometry.plane_tie import MIN_TIE_FRAMES, CornerTie, tie_by_corner
 from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines, measure_reference_lines
-from gnomon.reconstruct.edges import edge_time_maps
 
 __all__ = ["apply_ties", "combined_tie", "moved", "tie_camera_planes", "tie_lines", "tie_message", "tie_planes"]
 
@@ -79,16 +77,16 @@ def tie_lines(untied: tuple[tuple[str, str], ...],
     return out
 
 
-def tie_planes(setup: ScanSetup, tracked: TrackedSequence, warnings: list[str]) -> ScanSetup:
+def tie_planes(setup: ScanSetup, maps: list[np.ndarray], n_frames: int, warnings: list[str]) -> ScanSetup:
     """``setup`` with each untied plane (:attr:`ScanSetup.untied`) at the distance the shadow's corner gives
-    it, its report entry saying how (``tie``: distance, σ, frames, corner angle); a plane that cannot be
-    tied is a :class:`GnomonError`. Appends a warning per plane whose tie is uncertain or inconsistent."""
+    it, its report entry saying how (``tie``: distance, σ, frames, corner angle), from the edges' time
+    ``maps`` (:func:`gnomon.reconstruct.edges.edge_time_maps`); a plane that cannot be tied is a
+    :class:`GnomonError`. Appends a warning per plane whose tie is uncertain or inconsistent."""
     if not setup.untied:
         return setup
-    maps = edge_time_maps(tracked, setup.edge)
     refs = {p.name: p for p in setup.planes}
     names = {n for pair in setup.untied for n in pair}
-    lines_of = {n: [measure_reference_lines(t, tracked.n_frames, refs[n], setup.camera) for t in maps]
+    lines_of = {n: [measure_reference_lines(t, n_frames, refs[n], setup.camera) for t in maps]
                 for n in names}
     ties = tie_lines(setup.untied, lines_of)
     return apply_ties(setup, ties, warnings)

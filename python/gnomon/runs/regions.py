@@ -38,13 +38,14 @@ first pass and writes the masks.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
 from gnomon.camera.models import CameraModel
 from gnomon.geometry.plane_tie import CornerTie
+from gnomon.geometry.plane_times import monotone_sweep, off_plane_pieces, predicted_times
 from gnomon.geometry.reference_lines import (
     MIN_POINTS,
     PlaneInCamera,
@@ -52,11 +53,13 @@ from gnomon.geometry.reference_lines import (
     lines_on_plane,
     mask_crossings,
 )
+from gnomon.reconstruct.bare import MIN_PIECE_PX
 from gnomon.reconstruct.corners import tie_camera_planes
 from gnomon.util.fitting import fit_plane_robust
 
-__all__ = ["PlaneRegion", "follow_the_sweep", "hull_mask", "monotone_sweep", "nearest_plane", "pixel_footprint",
-           "predicted_times", "propose_regions", "ransac_shadow_plane", "shadow_lines", "smooth_times", "tie_on_seeds"]
+__all__ = ["PlaneRegion", "follow_the_sweep", "hull_mask", "line_gaps", "monotone_sweep", "nearest_plane",
+           "pixel_footprint", "predicted_times", "propose_regions", "ransac_shadow_plane", "shadow_lines",
+           "smooth_times", "tie_on_seeds"]
 
 # The first lines (over the seed, which may hold objects) are RANSAC lines of this tolerance, in pixels on the plane.
 RANSAC_PIXELS = 2.0
@@ -65,8 +68,6 @@ SMOOTH_STEP = 2.0
 # follow_the_sweep: a short line's crossings within this many RANSAC tolerances of the line its long
 # neighbours predict are the plane's (an object's top, tens of mm higher, lies farther off).
 FOLLOW_WINDOW = 10.0
-# A plane's lines are one sweep where consecutive lines move less than this times their median speed (per frame).
-MAX_SPEED_RATIO = 8.0
 
 
 @dataclass
@@ -77,6 +78,11 @@ class PlaneRegion:
     ``residual`` (H, W) float: measured − predicted shadow time (frames, the
     worse of the two edges; NaN where there is none); ``tolerance`` the
     frames used; ``lines_found`` frames with a line on the final mask.
+    ``seed_left_out`` pixels of the seed that do not follow the plane (an
+    object, its shadow: cut out), in ``seed_pieces`` [(area px, (u0, v0, u1,
+    v1))], the largest first; ``gaps`` [(first, last)] runs of at least
+    ``MIN_GAP_FRAMES`` frames inside the sweep without a line on the plane
+    (the stripes their shadow crossed are missing from the mask).
     """
 
     name: str
@@ -84,6 +90,9 @@ class PlaneRegion:
     residual: np.ndarray
     tolerance: float
     lines_found: int
+    seed_left_out: int = 0
+    seed_pieces: list[tuple[int, tuple[int, int, int, int]]] = field(default_factory=list)
+    gaps: list[tuple[int, int]] = field(default_factory=list)
 
 
 def ransac_shadow_plane(points: np.ndarray, label: np.ndarray, normals: np.ndarray, tolerance: np.ndarray,
@@ -268,105 +277,6 @@ def follow_the_sweep(lines: ReferenceLines, times: np.ndarray, n_frames: int, ma
     return lines
 
 
-def monotone_sweep(frames: np.ndarray, centres: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Which of a plane's lines sweep it monotonically and smoothly: the longest such run (bool mask).
-
-    ``frames`` (N,) increasing frame of each line, ``centres`` (N, 2) a point
-    of it and ``normals`` (N, 2) its unit normal, plane coordinates;
-    ``normals`` is turned in place so that every normal points the way the
-    lines move. Each line's position is its signed distance past the lines'
-    mean centre; the sweep's sense is the sign of the median step between
-    consecutive lines. The lines kept are the longest strictly increasing
-    subsequence of positions, cut where it jumps by more than
-    ``MAX_SPEED_RATIO`` times the median speed (per frame), of which the
-    longest piece. A wrong line (an object's isochrone, a surface off the
-    plane, behind, beyond or far ahead of the sweep) is left out instead of
-    turning the sense or breaking the bracketing of every point.
-    """
-    n = len(centres)
-    keep = np.zeros(n, dtype=bool)
-    if n == 0:
-        return keep
-    normals *= np.where(normals @ normals[n // 2] < 0, -1.0, 1.0)[:, None]
-    pos = np.einsum("ij,ij->i", centres - centres.mean(axis=0), normals)
-    if n > 1 and np.median(np.diff(pos)) < 0:
-        normals *= -1.0
-        pos = -pos
-    # Longest strictly increasing subsequence (patience sorting, O(n log n)).
-    tails: list[int] = []
-    parent = np.full(n, -1)
-    for i in range(n):
-        j = int(np.searchsorted(pos[tails], pos[i], side="left")) if tails else 0
-        if j > 0:
-            parent[i] = tails[j - 1]
-        if j == len(tails):
-            tails.append(i)
-        else:
-            tails[j] = i
-    run = []
-    i = tails[-1]
-    while i >= 0:
-        run.append(i)
-        i = int(parent[i])
-    idx = np.array(run[::-1])
-    if len(idx) > 2:
-        speed = np.diff(pos[idx]) / np.diff(np.asarray(frames, dtype=np.float64)[idx])
-        cut = np.flatnonzero(speed > MAX_SPEED_RATIO * np.median(speed)) + 1
-        pieces = np.split(idx, cut)
-        idx = max(pieces, key=len)
-    keep[idx] = True
-    return keep
-
-
-def predicted_times(lines: ReferenceLines, ray_map: np.ndarray) -> np.ndarray:
-    """(H, W) the frame (sub-frame) at which the plane's shadow line passes each pixel's point.
-
-    Only the lines that sweep the plane monotonically are used (the longest
-    such run, :func:`monotone_sweep`). The pair of consecutive frames with a line whose lines
-    bracket the point is found by bisection, and the point's signed distances
-    to them interpolated linearly; pixels the lines never pass (or whose ray
-    misses the plane) are NaN.
-    """
-    h, w = ray_map.shape[:2]
-    plane = lines.plane
-    found = np.flatnonzero(lines.found)
-    out = np.full(h * w, np.nan)
-    if len(found) < 2:
-        return out.reshape(h, w)
-    pts = plane.intersect(ray_map.reshape(-1, 3).astype(np.float64))
-    ok = np.flatnonzero(np.isfinite(pts[:, 0]))
-    xy = plane.to_plane_coords(pts[ok])
-    centres = plane.to_plane_coords(lines.point[found])
-    d3 = lines.direction[found]
-    d2 = np.stack([d3 @ plane.e1, d3 @ plane.e2], axis=1)
-    normals = np.stack([-d2[:, 1], d2[:, 0]], axis=1)
-    keep = monotone_sweep(found, centres, normals)
-    found, centres, normals = found[keep], centres[keep], normals[keep]
-    if len(found) < 2:
-        return out.reshape(h, w)
-    offsets = np.einsum("ij,ij->i", centres, normals)
-
-    def signed(k: np.ndarray) -> np.ndarray:  # > 0: the point is ahead of line k (not yet reached)
-        return np.einsum("ij,ij->i", xy, normals[k]) - offsets[k]
-
-    s_first, s_last = signed(np.zeros(len(xy), dtype=int)), signed(np.full(len(xy), len(found) - 1))
-    inside = (s_first > 0) & (s_last <= 0)  # ahead of the first line and passed by the last
-    lo = np.zeros(len(xy), dtype=int)
-    hi = np.full(len(xy), len(found) - 1)
-    for _ in range(int(np.ceil(np.log2(len(found)))) + 1):
-        mid = (lo + hi) // 2
-        ahead = signed(mid) > 0
-        lo = np.where(inside & ahead, mid, lo)
-        hi = np.where(inside & ~ahead, mid, hi)
-    s_lo, s_hi = signed(lo), signed(hi)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        frac = s_lo / (s_lo - s_hi)
-    t = found[lo] + (found[hi] - found[lo]) * frac
-    good = inside & (hi == lo + 1) & np.isfinite(t)
-    out[ok[good]] = t[good]
-    return out.reshape(h, w)
-
-
 def pixel_footprint(plane: PlaneInCamera, camera: CameraModel, where: np.ndarray) -> float:
     """Median size of a pixel on the plane (world units) over the pixels of ``where``: the larger of its two sides."""
     v, u = np.nonzero(where)
@@ -467,6 +377,7 @@ def propose_regions(
     current = [s & (nearest == k) for k, s in enumerate(seeds)]
     unreached = [np.zeros_like(s) for s in seeds]
     found = [0] * len(planes)
+    found_frames = [np.zeros(n_frames, dtype=bool) for _ in planes]
     residuals: list[np.ndarray] = []
     tolerances: list[float] = []
     for _ in range(iterations):
@@ -479,6 +390,7 @@ def propose_regions(
                                  [RANSAC_PIXELS * f for f in footprint])
             for k, ln in enumerate(lines):
                 found[k] = int(ln.found.sum())
+                found_frames[k] = ln.found
                 preds[k] = predicted_times(ln, ray_map)
                 r = np.abs(times - preds[k])  # NaN where either is missing
                 w = worst[k]
@@ -500,7 +412,26 @@ def propose_regions(
         with np.errstate(invalid="ignore"):
             current = [_clean(np.isfinite(r) & (r <= tolerances[k]), margin_px, min_area_px, seeds[k])
                        for k, r in enumerate(residuals)]
-    return [PlaneRegion(names[k], current[k], residuals[k], tolerances[k], found[k]) for k in range(len(planes))]
+    out = []
+    for k in range(len(planes)):
+        off, pieces = off_plane_pieces(residuals[k], seeds[k] & (nearest == k), tolerances[k], MIN_PIECE_PX)
+        out.append(PlaneRegion(names[k], current[k], residuals[k], tolerances[k], found[k],
+                               int((off & ~current[k]).sum()), pieces, line_gaps(found_frames[k])))
+    return out
+
+
+#: Fewer frames missing between two lines are no gap worth a word (a stripe a few pixels wide).
+MIN_GAP_FRAMES = 3
+
+
+def line_gaps(found: np.ndarray) -> list[tuple[int, int]]:
+    """Runs (first, last) of at least :data:`MIN_GAP_FRAMES` frames without a line between a plane's first and
+    last lines."""
+    have = np.flatnonzero(found)
+    if len(have) < 2:
+        return []
+    jumps = np.flatnonzero(np.diff(have) > MIN_GAP_FRAMES)
+    return [(int(have[j] + 1), int(have[j + 1] - 1)) for j in jumps]
 
 
 def tie_on_seeds(time_maps: list[np.ndarray], n_frames: int, planes: list[PlaneInCamera], names: list[str],

@@ -49,11 +49,13 @@ from gnomon.outputs.scan_files import (
     writes_texture,
 )
 from gnomon.outputs.writers import Writers
+from gnomon.reconstruct.bare import hold_regions
 from gnomon.reconstruct.corners import tie_planes
 from gnomon.reconstruct.edges import (
     EdgeResult,
     Levels,
     check_contrast,
+    edge_time_maps,
     grazing_warnings,
     min_contrast_dn,
     reconstruct_edges,
@@ -183,9 +185,12 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
                                                      progress=progress, where=f"{setup.inputs.field_log}: [camera]")
         setup = dataclasses.replace(setup, tracker=tracker)  # the dip width tracked with
         warnings += notes
-        setup = tie_planes(setup, tracked, warnings)  # planes that only their orientation placed
         with timed(timings, "ray_map_s"):  # what is left of it after tracking
             ray_map = rays.result()
+    with timed(timings, "regions_s", cpu):  # the regions held to their planes, then planes tied at corners
+        maps = edge_time_maps(tracked, setup.edge)
+        setup = hold_regions(setup, maps, tracked.n_frames, ray_map, warnings)
+        setup = tie_planes(setup, maps, tracked.n_frames, warnings)
     check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
     if tracked.dropped:
         warnings.append(dropped_frames_warning(tracked.dropped))

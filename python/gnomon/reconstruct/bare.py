@@ -1,0 +1,108 @@
+"""The scan's reference regions held to their planes: what does not follow a plane is left out, and said.
+
+A region (``[[planes]] regions`` or ``mask``) is where the field log says a plane is seen bare. A
+hand-drawn rectangle, or a region started from the marks' outline, may hold part of an object, its cast
+shadow or another surface: there the shadow's isochrones are not the plane's lines, and a frame whose
+line is fitted to them gives a wrong shadow plane, a band of wrong depth across the whole image.
+
+:func:`hold_regions` measures each plane's lines on its region with the scan's own fit, predicts every
+region pixel's shadow time from them (:func:`gnomon.geometry.plane_times.predicted_times`), on the
+entering and the leaving edge, and leaves out the pieces whose measured times are off
+(:func:`gnomon.geometry.plane_times.off_plane_pieces`, grown by ``MARGIN_PX``), measuring again without
+them, up to ``ROUNDS`` times. Each plane that loses pixels gets a warning with the numbers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from gnomon.config.setup import ScanSetup
+from gnomon.geometry.plane_times import off_plane_pieces, predicted_times
+from gnomon.geometry.reference_lines import ReferencePlane, measure_reference_lines
+
+__all__ = ["MIN_PIECE_PX", "OffPlane", "hold_regions", "off_plane"]
+
+#: A pixel follows its plane when its time is within this many robust σ of the region's residuals ...
+TOLERANCE_SIGMAS = 3.0
+#: ... and never less than this (frames): the re-timed times of a bare plane scatter by 0.05-0.4 frame.
+MIN_TOLERANCE = 0.5
+#: Smaller pieces of off pixels are noise (a dark texture spot, the marks' black squares' low contrast).
+MIN_PIECE_PX = 50
+#: The pieces left out are grown by this much (px): their borders' blur and penumbra.
+MARGIN_PX = 2
+#: Measure-and-leave-out rounds at most.
+ROUNDS = 3
+
+
+@dataclasses.dataclass(frozen=True)
+class OffPlane:
+    """One plane's region after :func:`off_plane`: ``mask`` what is left, ``left_out`` (px) what was
+    taken out of the ``given`` (px) pixels, ``pieces`` [(area px, (u0, v0, u1, v1))] the largest first,
+    ``tolerance`` (frames) and ``residual_frames`` the median |measured − predicted| time of what is left."""
+
+    mask: np.ndarray
+    given: int
+    left_out: int
+    pieces: list[tuple[int, tuple[int, int, int, int]]]
+    tolerance: float
+    residual_frames: float
+
+
+def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, camera,
+              ray_map: np.ndarray) -> OffPlane:
+    """One plane's region without the pieces that do not follow the plane's own lines (see the module)."""
+    mask = reference.mask.copy()
+    given = int(mask.sum())
+    pieces: list[tuple[int, tuple[int, int, int, int]]] = []
+    tolerance, typical = MIN_TOLERANCE, float("nan")
+    grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * MARGIN_PX + 1, 2 * MARGIN_PX + 1))
+    for _ in range(ROUNDS):
+        v, u = np.nonzero(mask)
+        if u.size == 0:
+            break
+        rays = ray_map[v, u][None]
+        worst = np.full(u.size, -np.inf)
+        for times in maps:
+            lines = measure_reference_lines(times, n_frames, dataclasses.replace(reference, mask=mask), camera)
+            with np.errstate(invalid="ignore"):
+                worst = np.fmax(worst, np.abs(times[v, u] - predicted_times(lines, rays)[0]))
+        worst[~np.isfinite(worst)] = np.nan
+        residual = np.full(mask.shape, np.nan)
+        residual[v, u] = worst
+        judged = worst[np.isfinite(worst)]
+        if judged.size == 0:
+            break
+        typical = float(np.median(judged))
+        tolerance = max(MIN_TOLERANCE, TOLERANCE_SIGMAS * 1.4826 * typical)
+        off, found = off_plane_pieces(residual, mask, tolerance, MIN_PIECE_PX)
+        if not found:
+            break
+        pieces += found
+        mask &= ~cv2.dilate(off.astype(np.uint8), grow).astype(bool)
+    pieces.sort(reverse=True)
+    return OffPlane(mask, given, given - int(mask.sum()), pieces, tolerance, typical)
+
+
+def hold_regions(setup: ScanSetup, maps: list[np.ndarray], n_frames: int, ray_map: np.ndarray,
+                 warnings: list[str]) -> ScanSetup:
+    """``setup`` with each plane's region held to the plane (:func:`off_plane`) on the edges' time ``maps``
+    (:func:`gnomon.reconstruct.edges.edge_time_maps`), a warning per plane that lost pixels: how many,
+    where the largest piece lies, and what to do."""
+    planes = []
+    for reference in setup.planes:
+        held = off_plane(reference, maps, n_frames, setup.camera, ray_map)
+        if held.left_out and held.pieces:
+            area, (u0, v0, u1, v1) = held.pieces[0]
+            warnings.append(
+                f"{setup.inputs.field_log}: [[planes]] {reference.name}: {held.left_out} of its {held.given} region "
+                f"pixels ({100 * held.left_out / held.given:.1f} %) do not follow its shadow lines (shadow times "
+                f"more than {held.tolerance:.2f} frame off the plane's on the entering or leaving edge, in "
+                f"{len(held.pieces)} pieces, the largest {area} px in [{u0}, {v0}, {u1}, {v1}]): an object, its "
+                "shadow, a mark or another surface; left out of the plane's lines. `gnomon regions` proposes regions "
+                "without them")
+            reference = dataclasses.replace(reference, mask=held.mask)
+        planes.append(reference)
+    return dataclasses.replace(setup, planes=tuple(planes))
