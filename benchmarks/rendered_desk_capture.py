@@ -235,16 +235,17 @@ def own_calibration(out: Path, source: Path, camera: Path, R: np.ndarray, t: np.
     toml_io.dump(log, log_path)
     run(["scan", str(log_path), "--out", str(folder / "scan"), "--no-rrd", "--quiet"])
     # the board's plane (z = 0 in its frame) against the renderer's ground: its angle, and its height at
-    # the board's centre (square units 3, 3) above the renderer's ground
+    # the board's first inner corner (its frame's origin: the frame's y runs along or against the board's
+    # columns, whichever puts its z towards the camera) above the renderer's ground
     def to_renderer(points: np.ndarray) -> np.ndarray:  # board frame -> camera -> the renderer's world
         return (pose.world_to_camera(points) - t) @ R
 
-    centre, normal_end = to_renderer(np.array([[3.0 * square, 3.0 * square, 0.0], [3.0 * square, 3.0 * square, -1.0]]))
+    centre, normal_end = to_renderer(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
     n = normal_end - centre
     angle = math.degrees(math.acos(min(1.0, abs(n[2]) / np.linalg.norm(n))))
     print(f"with Gnomon's own calibration (square {square:.2f} mm from the renderer's camera height; the board's "
           f"plane is {angle:.3f}° off the renderer's ground and {centre[2] - ground_z:+.2f} mm above it at the "
-          f"board's centre):")
+          f"board's first inner corner):")
     print("\n".join(score(folder / "scan", sorted(source.glob("0*.jpg"))[0], ground_z,
                           out / "scan_setup" / "regions" / "ground_mask.png", to_renderer=to_renderer)))
 

@@ -101,7 +101,9 @@ def test_a_tsai_camera_file_flows_into_the_scan(tmp_path: Path) -> None:
 
 @pytest.mark.slow
 def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
-    """[[planes]] chessboard = "9x6", image = ...: the board's frame becomes the world frame."""
+    """[[planes]] chessboard = "9x6", image = ...: the board's frame becomes the world frame, its z towards the
+    camera (up from the desk)."""
+    import cv2
     import numpy as np
 
     from conftest import write_tiny_capture
@@ -118,14 +120,18 @@ def test_a_chessboard_on_the_plane_sets_the_pose(tmp_path: Path) -> None:
     # them); the board's photo is at the camera's own 640x480.
     data["planes"] = [{"name": "desk", "point": [0, 0, 0], "normal": [0, 0, 1], "regions": [[0, 0, 48, 2]],
                        "chessboard": "9x6", "square": 25.0, "image": "../cb/view_00.png"}]
-    data["light"]["position"] = [0.0, 0.0, -400.0]  # the board's z points away from the camera
+    data["light"]["position"] = [0.0, 0.0, 400.0]  # the board's z points to the camera (up from the desk)
     toml_io.dump(data, log_path)
     log = load_field_log(log_path)
     assert log.pose is None
     log, report = resolve_reference_planes(log, FrameSource(log.capture.image_files))
     view = truth["views"][0]
+    # the rendered board's frame (OpenCV's: z away from the camera) turned a half-turn about its x axis
+    R_view = cv2.Rodrigues(np.array(view["rvec"]))[0]
+    assert R_view[:, 2] @ np.array(view["tvec"]) > 0
     np.testing.assert_allclose(log.pose.t, view["tvec"], atol=0.002 * np.linalg.norm(view["tvec"]))
-    np.testing.assert_allclose(log.pose.rvec, view["rvec"], atol=np.radians(0.1))
+    np.testing.assert_allclose(log.pose.R, R_view @ np.diag([1.0, -1.0, -1.0]), atol=np.radians(0.1))
+    assert log.pose.camera_centre_world[2] > 0
     assert report[0]["method"] == "chessboard" and report[0]["rms_px"] < 0.3
 
 

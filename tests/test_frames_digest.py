@@ -56,7 +56,7 @@ def test_a_chessboard_scan_reports_the_digest_of_its_frames(tmp_path: Path) -> N
         "camera": {**truth["camera"]},
         "planes": [{"name": "desk", "point": [0, 0, 0], "normal": [0, 0, 1], "regions": [[0, 0, 640, 40]],
                     "chessboard": "9x6", "square": 25.0}],
-        "light": {"kind": "lamp", "position": [0.0, 0.0, -400.0]},
+        "light": {"kind": "lamp", "position": [0.0, 0.0, 400.0]},  # the board's z: up, towards the camera
         "scan": {"min_contrast": 10},
     }, tmp_path / "cap" / "field_log.toml")
     assert view  # the board's pose is measured from frame 0, not declared

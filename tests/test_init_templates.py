@@ -115,6 +115,22 @@ def test_the_lamp_template_filled_in_calibrates_the_lamp_and_scans(tmp_path: Pat
     print(acc.table("desk_lamp_small from the lamp template"))
     assert acc.rms_pct <= 0.1 * 800 / 320
     assert acc.coverage >= 0.95
+    # the world frame as the template says: z up from the desk. The board's origin and in-plane axes are its
+    # own, so compare what they do not change: each point's height above the desk (the truth's world z), the
+    # lamp's and the camera's
+    R_world = cv2.Rodrigues(np.array(report["camera"]["pose"]["rvec"]))[0]
+    t_world = np.array(report["camera"]["pose"]["tvec"])
+    assert (-R_world.T @ t_world)[2] == pytest.approx((-truth["R"].T @ truth["t"].ravel())[2], rel=0.01)
+    assert lamp[2] == pytest.approx(truth["lamp"][2], rel=0.01)
+    depth = np.load(work / "scan" / "depth.npy")
+    objects = np.isfinite(depth) & truth["swept"] & (truth["object_id"] > 0)
+    from gnomon.camera.calibration import load_camera_file
+
+    v, u = np.nonzero(objects)
+    rays = load_camera_file(work / "camera.toml").rays(np.stack([u, v], axis=1).astype(np.float64))
+    points = rays / rays[:, 2:3] * depth[objects][:, None]
+    height = ((points - t_world) @ R_world)[:, 2]
+    assert np.median(np.abs(height - truth["points_world"][objects][:, 2])) < 0.5  # mm
 
 
 def test_the_sun_template_filled_in_gives_the_captures_times(tmp_path: Path, capsys) -> None:

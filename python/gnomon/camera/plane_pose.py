@@ -593,7 +593,11 @@ def plane_pose_from_chessboard(
 
     ``board``: inner corners (cols, rows); ``square`` in world units. The
     plane's frame is the board's: origin at the first inner corner OpenCV
-    reports, x along the rows, z = 0 on the board. A board with cols and rows
+    reports, x along its row of corners, z = 0 on the board and **z towards
+    the camera** (up from a desk the board lies on), y = z × x. OpenCV's own
+    board frame (y along the columns, in the order it reports the rows)
+    mostly has its z away from the camera, into the desk: it is then turned
+    a half-turn about x (y and z reversed). A board with cols and rows
     of the same parity looks the same turned by 180°, so its origin may land
     on either end: the result then carries a warning.
     """
@@ -605,6 +609,8 @@ def plane_pose_from_chessboard(
     obj = board_points(board[0], board[1], square)[:, :2]
     names = [f"corner {i}" for i in range(len(obj))]
     res = fit_plane_pose(camera, obj, corners, names=names, method="chessboard", source=source)
+    if res.pose.R[:, 2] @ res.pose.t > 0:  # z away from the camera: the half-turn about x
+        res = fit_plane_pose(camera, obj * [1.0, -1.0], corners, names=names, method="chessboard", source=source)
     if (board[0] - board[1]) % 2 == 0:
         w = (f"{source}: a {board[0]}x{board[1]} board is symmetric under a half-turn: "
              "its origin corner is ambiguous (use e.g. 9x6)")

@@ -100,7 +100,8 @@ REGIONS_MASK = '''\
 
 LAMP_DESK = '''\
 [[planes]]
-# The desk, the world frame (x along the board's columns, z up from the desk).
+# The desk, the world frame: origin at the board's first inner corner, x along its row of corners,
+# z up from the desk (towards the camera), y = z × x.
 # Its pose from a chessboard lying flat on it (COLSxROWS inner corners, `square` in {units}),
 # photographed from the scan's own place (`image`; by default the capture's first frame). The board
 # may be taken away before the sweep; the camera may not move. Or give markers instead, as

@@ -77,8 +77,14 @@ def run(args: argparse.Namespace) -> int:
             marks = [MarkerMark("", p, None, float(np.hypot(*r))) for p, r in
                      zip(pix[[0, -1]], np.array(list(entry["residuals_px"].values()))[[0, -1]], strict=True)]
             if plane.chessboard is not None and plane.square is not None:  # the grid over the board's squares
-                (cols, rows), sq = plane.chessboard, plane.square
-                extent = (-sq, cols * sq, -sq, rows * sq)
+                # its corners where their rays meet the plane, in the plane's axes (whichever way they run)
+                normal_cam = log.pose.R @ plane.normal
+                rays = camera.rays(np.array(entry["pixels"], dtype=np.float64))
+                on = rays * ((normal_cam @ log.pose.world_to_camera(plane.point)) / (rays @ normal_cam))[:, None]
+                rel = log.pose.camera_to_world(on) - plane.point
+                a, b = rel @ x_axis, rel @ np.cross(plane.normal, x_axis)
+                sq = plane.square
+                extent = (float(a.min()) - sq, float(a.max()) + sq, float(b.min()) - sq, float(b.max()) + sq)
         mask = plane_region_mask(plane, shape) if plane.has_regions else None
         drawings.append(PlaneDrawing(plane.name, plane.point, x_axis, np.cross(plane.normal, x_axis), plane.normal,
                                      mask, marks, extent))

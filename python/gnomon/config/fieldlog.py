@@ -512,7 +512,10 @@ def check_geometry(log: FieldLog, pose: Pose) -> None:
     if log.light.kind == "lamp" and log.light.position is not None:
         lamp_side = float(np.dot(log.light.position - plane.point, plane.normal))
         if lamp_side * cam_side <= 0:
+            board = (f"; a chessboard's z points towards the camera (up from the {plane.name}): a lamp.toml "
+                     "written when it pointed into the desk needs `gnomon calibrate lamp` again"
+                     if plane.chessboard is not None else "")
             raise FieldLogError(
                 f"{log.path}: [light] position {log.light.position.tolist()} is below the plane "
-                f"'{plane.name}' (not on the camera's side): the surface the camera sees would be unlit"
+                f"'{plane.name}' (not on the camera's side): the surface the camera sees would be unlit{board}"
             )
