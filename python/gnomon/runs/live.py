@@ -904,6 +904,11 @@ def run_live(field_log: str | Path, out_dir: str | Path, options: LiveOptions | 
     setup = resolve_scan(log, base)
     if setup.dip_width == "auto":
         setup = replace(setup, dip_width="live")
+    if setup.untied:  # measured where its shadow meets the first plane's once the pass is over
+        names = ", ".join(name for name, _ in setup.untied)
+        setup = replace(setup, warnings=(*setup.warnings, f"live points: plane(s) {names} at a first-guess distance "
+                                         "(marks without plane_xy) until the sweep ends; the final points use the "
+                                         "distance their shadow lines measure"))
     if isinstance(source, CaptureSource):
         stop_when_complete = True if opts.stop_when_complete is None else opts.stop_when_complete
     else:
