@@ -362,7 +362,9 @@ def test_a_capture_whose_marks_nobody_measured_scans_to_a_tenth_of_a_percent(unm
     R_true = truth["R"]
     limits = found_normal_tolerance(truth, report)
     for entry, world in zip(report, (NORMALS["desk"], NORMALS["wall"]), strict=True):
-        assert angle_deg(np.array(entry["normal_cam"]), R_true @ world) <= max(limits[entry["plane"]], 0.02), entry
+        error = angle_deg(np.array(entry["normal_cam"]), R_true @ world)
+        print(f"{entry['plane']}: normal {error:.4f}° off, bound {limits[entry['plane']]:.4f}°")
+        assert error <= limits[entry["plane"]], entry
     assert report[1]["distance"] == "tied to desk" and report[1]["tie"]["frames"] > 50
     assert result.report["units"] == "relative"
     assert not [w for w in result.warnings if "[[planes]]" in w], result.warnings

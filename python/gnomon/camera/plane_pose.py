@@ -374,6 +374,7 @@ class PlanePose:
             "offset_cam": float(self.offset_cam),
             "std_normal_deg": float(self.std_normal_deg),
             "std_offset": float(self.std_offset),
+            "std_offset_relative": float(self.std_offset / self.offset_cam) if self.offset_cam > 0 else float("nan"),
             "rvec": [float(x) for x in self.pose.rvec],
             "tvec": [float(x) for x in self.pose.t],
             "warnings": list(self.warnings),

@@ -104,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{e['plane']}: {e['n_points']} marks, reprojection RMS {e['rms_px']:.3f} px (max {e['max_px']:.3f})"
               + (f", {e['angle_to_first_deg']:.2f}° to the first plane" if "angle_to_first_deg" in e else "")
               + (f", normal ± {e['std_normal_deg']:.2f}° (1 σ)" if "marks_xy" in e else "")
+              + (f", distance ± {100 * e['std_offset_relative']:.2f} %" if e.get("std_offset_relative", 0) > 0 else "")
               + ("; its distance is a first guess (its marks have no plane_xy): the scan measures it where its "
                  "shadow lines meet the first plane's" if e.get("distance") == "provisional" else ""))
         for w in e["warnings"]:

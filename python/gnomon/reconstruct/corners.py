@@ -112,7 +112,8 @@ def apply_ties(setup: ScanSetup, ties: dict[str, CornerTie | None], warnings: li
         plane = moved(planes[k].plane, tie.offset)
         planes[k] = dataclasses.replace(planes[k], plane=plane)
         entry = by_name[name]
-        entry.update(offset_cam=abs(tie.offset), std_offset=tie.sigma, distance=f"tied to {anchor}",
+        entry.update(offset_cam=abs(tie.offset), std_offset=tie.sigma, std_offset_relative=tie.sigma / abs(tie.offset),
+                     distance=f"tied to {anchor}",
                      world_point=setup.pose.camera_to_world(plane.origin).tolist(),
                      tie={"anchor": anchor, "offset_cam": abs(tie.offset), "sigma": tie.sigma, "frames": tie.frames,
                           "sigma_relative": tie.sigma / abs(tie.offset), "corner_angle_deg": tie.corner_angle_deg})
