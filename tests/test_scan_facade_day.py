@@ -60,7 +60,7 @@ def test_refusals_are_never_silent(day) -> None:
     # refused, and warnings say so with numbers
     assert any("levelled pixel by pixel" in n for n in result.notes), result.notes  # a fact: a note
     assert sum(rejected.values()) > 0
-    assert any("refused" in n and "%" in n for n in result.notes), result.notes
+    assert any("refused" in w and "%" in w for w in result.warnings + result.notes), (result.warnings, result.notes)
 
 
 @pytest.mark.slow
