@@ -5,6 +5,7 @@ where the ground truth says."""
 
 from __future__ import annotations
 
+import dataclasses
 import glob
 import json
 import math
@@ -19,6 +20,7 @@ from PIL import Image
 from gnomon.camera.models import undistort_points
 from gnomon.errors import GnomonError
 from gnomon.light.timestamps import frame_times
+from gnomon.simulate import sensor
 from gnomon.simulate.facade_sun import (
     GROUND,
     POLE,
@@ -456,8 +458,62 @@ def test_determinism_png_and_rerun(tmp_path):
     (dict(duration_s=60.0), "duration_s 60"),
     (dict(clouds=11), "clouds"),
     (dict(frames=20000, duration_s=3600), "--frames 20000 over duration_s 3600 s: .* at least 1 s apart"),
+    (dict(drift_px=-1.0), "--drift -1.0"),
+    (dict(bump_px=2.0, bump_frame=12), "bump_frame 12: must be 1 to 11"),
+    (dict(drift_px=2.0, blur=0.0), "--blur 0.0: a moving camera needs the optical blur"),
 ])
 def test_bad_configurations_are_user_errors(tmp_path, kwargs, message):
     with pytest.raises(GnomonError, match=message):
         simulate_facade_sun(tmp_path / "x", FacadeSunConfig(**{**dict(width=160, height=120, frames=12), **kwargs}))
     assert not (tmp_path / "x" / "field_log.toml").exists()
+
+
+# ------------------------------------------------------------------ the camera's motion
+
+def test_camera_motion_is_a_slow_drift_and_one_bump():
+    """x grows linearly and y quadratically to (0.8, −0.6)·drift by the last frame; the bump adds
+    (0.6, 0.8)·bump from 60 % of the way on; frame 0 is still."""
+    n = 101
+    m = sensor.camera_motion(n, 2.0, 1.0, None)
+    s = np.arange(n) / (n - 1)
+    bump = np.where(np.arange(n) >= 60, 1.0, 0.0)[:, None] * np.array([0.6, 0.8])
+    np.testing.assert_allclose(m, np.stack([1.6 * s, -1.2 * s * s], axis=1) + bump, atol=1e-12)
+    assert np.array_equal(m[0], [0.0, 0.0]) and math.isclose(np.hypot(*(m[-1] - bump[-1])), 2.0)
+    assert not sensor.camera_motion(n, 0.0, 0.0, None).any()
+
+
+@pytest.mark.parametrize("shift", [(1.0, 0.0), (0.0, -2.0), (0.37, -0.81), (-1.6, 0.25)])
+def test_a_moved_frame_samples_the_same_blurred_image(shift):
+    """blur_and_crop with a shift is I(x − shift) for I(x) = Σ G(x − p) R(p) / Σ G(x − p), evaluated here
+    pixel by pixel; a whole-pixel shift is the still frame moved by whole pixels."""
+    rng = np.random.default_rng(3)
+    sigma, pad, h, w = 0.7, 8, 12, 16
+    radiance = rng.uniform(0.1, 0.9, (h + 2 * pad, w + 2 * pad))
+    crop = (slice(pad, pad + h), slice(pad, pad + w))
+    moved = sensor.blur_and_crop(radiance, sigma, crop, np.array(shift))
+    py, px = np.mgrid[0:h + 2 * pad, 0:w + 2 * pad]
+    for v, u in ((0, 0), (5, 7), (h - 1, w - 1), (3, 12)):
+        x, y = u + pad - shift[0], v + pad - shift[1]             # I at x − shift, padded coordinates
+        g = np.exp(-((px - x) ** 2 + (py - y) ** 2) / (2 * sigma**2))
+        assert moved[v, u] == pytest.approx(float((g * radiance).sum() / g.sum()), abs=2e-6)
+    if float(shift[0]).is_integer() and float(shift[1]).is_integer():
+        still = sensor.blur_and_crop(radiance, sigma, (slice(pad - int(shift[1]), pad - int(shift[1]) + h),
+                                                       slice(pad - int(shift[0]), pad - int(shift[0]) + w)))
+        np.testing.assert_allclose(moved, still, atol=2e-6)
+
+
+@pytest.mark.slow
+def test_a_drifting_camera_keeps_the_truth_and_moves_the_gnomon_pixels():
+    """Drift changes the frames, not the ground truth (frame 0's grid); the motion per frame is in it;
+    the gnomon's pixels are those of its frame, moved; the padding holds the moved frames."""
+    still = FacadeSunScene(TINY)
+    moving = FacadeSunScene(dataclasses.replace(TINY, drift_px=3.0, bump_px=1.0))
+    np.testing.assert_array_equal(moving.depth, still.depth)
+    np.testing.assert_array_equal(moving.swept, still.swept)
+    m = moving.ground_truth_arrays()["camera_motion_px"]
+    np.testing.assert_allclose(m, sensor.camera_motion(TINY.frames, 3.0, 1.0, None))
+    k = still.gnomon_obs["k"]
+    np.testing.assert_allclose(np.subtract(moving.gnomon_obs["base_px"], still.gnomon_obs["base_px"]), m[k])
+    np.testing.assert_array_equal(moving.linear_image(0), still.linear_image(0))
+    last = len(m) - 1
+    assert not np.array_equal(moving.linear_image(last), still.linear_image(last))

@@ -293,6 +293,9 @@ class FacadeSunConfig:
     soft_shadows: bool = True            # building shadows with the sun's disc (False: hard, from its centre)
     full_day: bool = False               # sunrise to sunset and night at both ends (facade_day)
     post: bool = False                   # a street-lamp post casting another moving shadow (facade_day)
+    drift_px: float = 0.0                # the camera's slow drift by the last frame, px (sensor.camera_motion)
+    bump_px: float = 0.0                 # a sudden shift of the camera, px, from bump_frame on
+    bump_frame: int | None = None        # None: 60 % of the way
 
     @classmethod
     def day(cls, **overrides) -> FacadeSunConfig:
@@ -318,6 +321,7 @@ class FacadeSunConfig:
             raise bad(f"--frames {self.frames} over duration_s {self.duration_s:g} s: "
                       "frames must be at least 1 s apart")
         sensor.check_sensor_options(self.noise, self.jpeg_quality, self.blur, bad)
+        sensor.check_motion_options(self.drift_px, self.bump_px, self.bump_frame, self.frames, self.blur, bad)
         if not (math.isfinite(self.pole_radius) and 0.005 <= self.pole_radius <= 0.5):
             raise bad(f"--pole-radius {self.pole_radius}: must be 0.005 to 0.5 m")
         if not (math.isfinite(self.gamma) and 0.2 <= self.gamma <= 5):
@@ -547,6 +551,10 @@ class FacadeSunScene:
         self.W, self.H, self.N = config.width, config.height, config.frames
         self.footprint_radius = max(2, int(round(3.0 * config.blur)))
         self.pad = max(int(math.ceil(4.0 * config.blur)), self.footprint_radius) + 3
+        # The camera's motion per frame (px; zero unless it drifts): the padding holds the moved frames.
+        self.motion = sensor.camera_motion(self.N, config.drift_px, config.bump_px, config.bump_frame)
+        if self.motion.any():
+            self.pad = max(self.pad, sensor.shift_margin(config.blur, self.motion))
         p = self.pad
         self.crop = (slice(p, p + self.H), slice(p, p + self.W))
         self.building = _Building()
@@ -1043,13 +1051,14 @@ class FacadeSunScene:
         if best is None:
             raise GnomonError("simulate facade_sun: the pole's ground shadow is never in view")
         _, k, X = best
-        uv = self.project(np.stack([self.Q, self.Qtop, X]))
+        uv = self.project(np.stack([self.Q, self.Qtop, X])) + self.motion[k]   # as seen in that frame
         return {"k": k, "base_px": uv[0].tolist(), "top_px": uv[1].tolist(), "shadow_px": uv[2].tolist(),
                 "shadow_world": X.tolist()}
 
     # ------------------------------------------------------------- images
     def linear_image(self, k: int, *, blur: bool = True, pole: bool = True) -> np.ndarray:
-        """Linear radiance (H, W) at frame k."""
+        """Linear radiance (H, W) at frame k, as the camera saw it (moved by ``motion[k]``; without the
+        blur, on the still camera's grid)."""
         d = self.sun_world[k]
         cos_i = np.maximum(_dot(self._n0, d), 0.0)
         vis = self.building_visibility(k)
@@ -1059,11 +1068,12 @@ class FacadeSunScene:
         L = self.albedo_f * (self.sky[k] * self.ambient_coef_f + direct) * self.scale
         sky_level = SKY_RADIANCE * (self.sky[k] / self.sky.max())
         L = np.where(self.hit_f, L, sky_level / (self.gain.max()))
-        return self._finish(L * self.gain[k], blur)
+        return self._finish(L * self.gain[k], blur, self.motion[k] if blur else None)
 
-    def _finish(self, L_full: np.ndarray, blur: bool) -> np.ndarray:
-        """Blur the padded linear image (the padding holds the real scene) and crop it."""
-        return sensor.blur_and_crop(L_full, self.config.blur if blur else 0.0, self.crop)
+    def _finish(self, L_full: np.ndarray, blur: bool, shift: np.ndarray | None = None) -> np.ndarray:
+        """Blur the padded linear image (the padding holds the real scene) and crop it; ``shift``: the
+        camera's motion (px) in that frame (without the blur: the still camera's frame)."""
+        return sensor.blur_and_crop(L_full, self.config.blur if blur else 0.0, self.crop, shift)
 
     def encode(self, L_blurred: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Gamma-encode, add sensor noise, quantise: linear (blurred) radiance → u8."""
@@ -1141,6 +1151,7 @@ class FacadeSunScene:
             "pole_base": self.Q.copy(),
             "pole_top": self.Qtop.copy(),
             "pole_radius": np.float64(self.config.pole_radius),
+            "camera_motion_px": self.motion.copy(),
         }
 
     def field_log(self) -> dict:
@@ -1199,6 +1210,9 @@ class FacadeSunScene:
             "pole": {"base": self.Q.tolist(), "top": self.Qtop.tolist(), "radius": c.pole_radius},
             "gnomon_observation": {"frame": self.frame_name(self.gnomon_obs["k"]), **self.gnomon_obs},
             "cloud_frames": [int(k) for k in np.nonzero(self.cloud)[0]],
+            "camera_motion": {"drift_px": c.drift_px, "bump_px": c.bump_px,
+                              "bump_frame": sensor.bump_index(self.N, c.bump_frame) if c.bump_px else None,
+                              "last_frame_px": self.motion[-1].tolist()},
             "gain_range": [float(self.gain.min()), float(self.gain.max())],
             "radiance_scale": self.scale,
             "regions": self.regions,
