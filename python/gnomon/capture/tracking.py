@@ -62,6 +62,7 @@ from gnomon import _kernel
 from gnomon.capture.cloud_levels import HeldFrame, cloud_levels
 from gnomon.capture.frames import DroppedFrame, Frame, FrameSource, frame_pass
 from gnomon.capture.noise import image_noise_dn
+from gnomon.capture.registration import FrameRegistrar, Registration
 from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, KernelLutError, KernelParameterError
 from gnomon.util.progress import Progress
 from gnomon.util.validate import MAX_DIP_FRAMES
@@ -111,6 +112,15 @@ class ShadowTimes:
     def shape(self) -> tuple[int, int]:
         return self.enter.shape
 
+    def drop(self, pixels: np.ndarray) -> None:
+        """Forget the dips of ``pixels`` ((H, W) bool), in place: no contrast, no times, not valid."""
+        for name in ("contrast", "rival"):
+            getattr(self, name)[pixels] = 0.0
+        for name in ("enter", "leave", "enter_slope", "leave_slope"):
+            getattr(self, name)[pixels] = np.nan
+        for name in ("valid", "ambiguous", "clipped"):
+            getattr(self, name)[pixels] = False
+
 
 @dataclass
 class SecondDips:
@@ -142,6 +152,13 @@ class SecondDips:
     @classmethod
     def from_kernel(cls, result: _kernel.SecondDips) -> SecondDips:
         return cls(**{f.name: np.asarray(getattr(result, f.name)) for f in fields(cls)})
+
+    def drop(self, pixels: np.ndarray) -> None:
+        """Forget both dips of ``pixels`` ((H, W) bool), in place (as :meth:`ShadowTimes.drop`)."""
+        self.contrast[pixels] = 0.0
+        for f in fields(self):
+            if f.name.endswith(("enter", "leave", "slope")):
+                getattr(self, f.name)[pixels] = np.nan
 
 
 def _check_dtype(dtype) -> np.dtype:
@@ -338,7 +355,9 @@ class TrackerSettings:
     a pixel is ambiguous; ``second_dips``: also report every pixel's second
     candidate dip (:class:`SecondDips`, for a light model that chooses between
     the two; the kernel keeps them only then: its block pass is about a third
-    cheaper per frame without, and :meth:`ShadowTracker.second_dips` needs it).
+    cheaper per frame without, and :meth:`ShadowTracker.second_dips` needs it); ``register``: measure
+    every tracked frame's motion against the first and resample the frames that moved onto its grid
+    (:mod:`gnomon.capture.registration`).
     """
 
     gamma: float | str = "srgb"
@@ -348,6 +367,7 @@ class TrackerSettings:
     max_width: int = 32
     ambiguity: float = 0.6
     second_dips: bool = False
+    register: bool = False
 
 
 class ShadowTracker:
@@ -470,6 +490,9 @@ class TrackedSequence:
     linear, :func:`linear` for the times' levels); ``info``: how the pass ran
     when that is worth reporting (a tiled pass: tiles, workers, memory);
     ``dropped``: the corrupt frames the source left out (``[capture] on_corrupt_frame = "drop"``).
+    ``registration``: each frame's motion against the first, when the pass
+    registered the frames (:class:`~gnomon.capture.registration.Registration`;
+    its border pixels have no dip).
     """
 
     times: ShadowTimes
@@ -483,6 +506,7 @@ class TrackedSequence:
     second: SecondDips | None = None  # the second candidate dips, when the pass kept them
     levelled: list[int] = field(default_factory=list)  # capture frames of illumination dips levelled per pixel
     dropped: list[DroppedFrame] = field(default_factory=list)
+    registration: Registration | None = None
 
     @property
     def n_frames(self) -> int:
@@ -517,10 +541,16 @@ def track_source(
     ``on_frame(frame)`` is called for every frame (skipped ones too), e.g. to
     record it; ``on_update(frame, tracker)`` after each frame the tracker took
     (a live view reads the tracker's watch there, :mod:`gnomon.runs.live`).
+    With ``settings.register`` every frame the tracker takes is first registered against the first
+    (:class:`~gnomon.capture.registration.FrameRegistrar`): ``on_frame``, ``on_update`` and the tracker
+    see it on the first frame's grid, a frame whose motion cannot be measured is left out, and the
+    pixels at the border the moved frames do not see get no dip.
     Raises :class:`FrameError` for a frame of another size, a
-    source with fewer frames than expected, or fewer than two usable frames.
+    source with fewer frames than expected, fewer than two usable frames, or a camera that moved more
+    than the registration follows.
     """
     tracker: ShadowTracker | None = None
+    registrar = FrameRegistrar(shape, source.count) if settings.register else None
     first: Frame | None = None
     previous: np.ndarray | None = None
     noise: list[Future[float]] = []
@@ -533,7 +563,12 @@ def track_source(
             if first is None:
                 _check_first(frame, shape, where)
                 first, tracker = frame, ShadowTracker(settings, shape, frame.grey.dtype, crop)
-            if skip is None or not skip[frame.index]:
+            skipped = skip is not None and bool(skip[frame.index])
+            if registrar is not None and not skipped:
+                registered = registrar.register(frame)
+                skipped = registered is None
+                frame = frame if registered is None else registered
+            if not skipped:
                 if previous is not None and len(noise) < NOISE_PAIRS:
                     # the first frames the tracker sees (not the night's, clipped at black), before any
                     # illumination drift has accumulated
@@ -542,7 +577,7 @@ def track_source(
             if on_frame is not None:
                 on_frame(frame)
             bar.update(frame.index + 1)
-            if skip is not None and skip[frame.index]:
+            if skipped:
                 continue
             assert tracker is not None
             if tracker.update(frame.grey, frame.index) and on_update is not None:
@@ -558,9 +593,16 @@ def track_source(
         raise FrameError(f"{source.name}: fewer than two usable frames (sun below the horizon or clouds)")
     noise_dn = float(np.median([n.result() for n in noise])) if noise else 1.0
     times = tracker.finish(noise_dn)
+    second = tracker.second_dips() if settings.second_dips else None
+    registration = None if registrar is None else registrar.result(source.name)
+    if registration is not None and registration.border.any():
+        border = registration.border if crop is None else registration.border[crop]
+        times.drop(border)
+        if second is not None:
+            second.drop(border)
     return TrackedSequence(times, np.asarray(used), dips, first.grey, first.color, noise_dn, tracker.lut,
-                           second=tracker.second_dips() if settings.second_dips else None,
-                           levelled=list(tracker.levelled), dropped=dropped)
+                           second=second, levelled=list(tracker.levelled), dropped=dropped,
+                           registration=registration)
 
 
 # The width (TrackerSettings.max_width, frames) a scan starts from; the kernel's widest is MAX_DIP_FRAMES.

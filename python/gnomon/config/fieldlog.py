@@ -16,6 +16,7 @@ import numpy as np
 
 from gnomon.camera.models import CalibratedCamera, Pose
 from gnomon.capture.frames import ON_CORRUPT, VIDEO_SUFFIXES, glob_frames, image_size, video_size
+from gnomon.capture.registration import REGISTER_MODES
 from gnomon.config.lights import LightSections, light_kind
 from gnomon.config.plausibility import check_field_log
 from gnomon.config.specs import (
@@ -60,6 +61,7 @@ def _parse_capture(t: Table, base: Path) -> CaptureSpec:
     start = t.string("start") if "start" in t.data else None
     fps = t.number("fps", positive=True) if "fps" in t.data else None
     on_corrupt = t.string("on_corrupt_frame", "error", ON_CORRUPT)
+    register = t.string("register", "auto", REGISTER_MODES)
     if timestamps == "filename" and time_pattern is None:
         raise FieldLogError(f"{t.path}: [capture] timestamps = 'filename' needs 'time_pattern'")
     if timestamps == "start+fps" and (start is None or fps is None):
@@ -68,7 +70,8 @@ def _parse_capture(t: Table, base: Path) -> CaptureSpec:
 
     def spec(files: tuple[Path, ...], video: Path | None) -> CaptureSpec:
         return CaptureSpec(pattern, files, video, units, gamma, frame_count, timestamps=timestamps,
-                           time_pattern=time_pattern, start=start, fps=fps, on_corrupt_frame=on_corrupt)
+                           time_pattern=time_pattern, start=start, fps=fps, on_corrupt_frame=on_corrupt,
+                           register=register)
 
     if not pattern.strip():
         raise t.error("frames", "is empty; give a glob such as 'frames/*.png' or a video file")

@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gnomon.camera.models import Pose
+from gnomon.capture.frames import decode_frame_file
+from gnomon.capture.registration import MOTION_TOLERANCE_PX, motion_between
 from gnomon.config.specs import CaptureSpec, FieldLog, GnomonSpec, LightSpec, PlaneSpec, SiteSpec
 from gnomon.config.tables import Table
 from gnomon.errors import FieldLogError, FrameError, GnomonError
@@ -31,7 +33,7 @@ if TYPE_CHECKING:
     from gnomon.light.ephemeris import Site
     from gnomon.light.sun import HeadingEstimate, SunClock
 
-__all__ = ["LIGHTS", "LightKind", "LightSections", "light_kind", "light_model"]
+__all__ = ["LIGHTS", "LightKind", "LightSections", "light_kind", "light_model", "registers"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,9 @@ class LightKind:
     check: Callable[[LightSections], None]  # what else the field log must give (a FieldLogError if not)
     build: Callable[[FieldLog, Pose, int, list[str]], LightModel]  # (log, world → camera pose, frames, warnings)
     dip_width: str = "auto"  # the tracker's dip width: "auto" (widened as the shadows need) or "sun" (kept)
+    # [capture] register = "auto" registers the frames (gnomon.capture.registration): a capture of hours
+    # (the sun's) on a tripod that settles and warms; a sweep of minutes is left as read.
+    register: bool = False
 
 
 # ------------------------------------------------------------------------ the lamp
@@ -161,7 +166,15 @@ def _gnomon_heading(log: FieldLog, g: GnomonSpec, pose: Pose, times: pd.Datetime
     if ground is None:
         raise GnomonError(f"{log.path}: [gnomon] needs a horizontal [[planes]] entry (the ground)")
     plane = PlaneInCamera.from_world(ground.point, ground.normal, pose)
-    return heading_from_gnomon(log.camera, pose, plane, g.base_px, g.shadow_px, times[k:k + 1], site, g.frame,
+    base, shadow = g.base_px, g.shadow_px
+    if k > 0 and registers(log):
+        # The pixels are the gnomon frame's; the scan's grid is the first frame's (gnomon.capture.registration).
+        first, _, _ = decode_frame_file(log.capture.image_files[0])
+        grey, _, _ = decode_frame_file(log.capture.image_files[k])
+        motion = motion_between(first, grey)
+        if motion is not None and np.hypot(*motion) >= MOTION_TOLERANCE_PX:  # as the scan's frames are moved
+            base, shadow = base - motion, shadow - motion
+    return heading_from_gnomon(log.camera, pose, plane, base, shadow, times[k:k + 1], site, g.frame,
                                where=f"{log.path}: [gnomon]")
 
 
@@ -200,7 +213,7 @@ LIGHTS: dict[str, LightKind] = {
     "two-plane": LightKind("two-plane", "any point light; the shadow planes from two reference planes",
                            _parse_kind_only("two-plane"), _check_two_planes, _two_plane),
     "sun": LightKind("sun", "the sun, from the site and each frame's time", _parse_kind_only("sun"), _check_sun, _sun,
-                     dip_width="sun"),
+                     dip_width="sun", register=True),
 }
 
 
@@ -210,6 +223,16 @@ def light_kind(t: Table) -> LightKind:
     if kind not in LIGHTS:
         raise t.error("kind", f"expected one of {', '.join(map(repr, LIGHTS))}, got {kind!r}")
     return LIGHTS[kind]
+
+
+def registers(log: FieldLog) -> bool:
+    """Whether a scan of ``log`` registers its frames (:mod:`gnomon.capture.registration`): ``[capture]
+    register`` ``"on"`` or ``"off"``, or with ``"auto"`` (the default) its light's kind (on for the sun)."""
+    mode = log.capture.register
+    if mode != "auto":
+        return mode == "on"
+    kind = LIGHTS.get(log.light.kind)
+    return kind is not None and kind.register
 
 
 def light_model(log: FieldLog, pose: Pose, n_frames: int, warnings: list[str]) -> LightModel:

@@ -33,7 +33,7 @@ from gnomon.camera.plane_pose import (
 from gnomon.capture.frames import FrameSource, to_grey
 from gnomon.capture.tracking import DEFAULT_DIP_FRAMES, TrackerSettings, decoding_lut
 from gnomon.config.fieldlog import check_geometry
-from gnomon.config.lights import LIGHTS, light_model
+from gnomon.config.lights import LIGHTS, light_model, registers
 from gnomon.config.specs import FieldLog, PlaneSpec
 from gnomon.errors import FieldLogError, GnomonError
 from gnomon.geometry.crop import Crop
@@ -179,7 +179,8 @@ def tracker_settings(log: FieldLog) -> TrackerSettings:
     """How the field log's frames become shadow times."""
     s = log.scan
     return TrackerSettings(log.capture.gamma, s.min_contrast, s.window, s.normalize_illumination,
-                           DEFAULT_DIP_FRAMES if s.max_dip_frames is None else s.max_dip_frames)
+                           DEFAULT_DIP_FRAMES if s.max_dip_frames is None else s.max_dip_frames,
+                           register=registers(log))
 
 
 def first_frame(source: FrameSource) -> np.ndarray:

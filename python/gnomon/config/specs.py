@@ -39,6 +39,7 @@ class CaptureSpec:
     start: str | None = None
     fps: float | None = None
     on_corrupt_frame: str = "error"  # "error" | "drop": gnomon.capture.frames.ON_CORRUPT
+    register: str = "auto"  # "auto" | "on" | "off": frame registration (gnomon.capture.registration)
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,7 @@ def scan_report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence,
                                   and tr.min_contrast >= MIN_CONTRAST_SIGMAS * tracked.noise_dn else "image noise"),
             "window": tr.window, "max_dip_frames": tr.max_width,
             "max_dip_frames_from": setup.dip_width, "edge": setup.edge,
-            "max_depth_jump": setup.max_depth_jump, "gamma": tr.gamma,
+            "max_depth_jump": setup.max_depth_jump, "gamma": tr.gamma, "register": tr.register,
         },
         "noise": {"image_noise_dn": tracked.noise_dn,
                   "median_sigma_z": float(np.nanmedian(sigma)) if np.isfinite(sigma).any() else None},
@@ -76,6 +76,8 @@ def scan_report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence,
         "timings_s": timings,
         "reference_planes": inputs.reference_planes,
         **({"tracking": tracked.info} if tracked.info else {}),
+        # each frame's motion against the reference frame (gnomon.capture.registration)
+        **({"registration": tracked.registration.report()} if tracked.registration is not None else {}),
     }
 
 

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from gnomon.capture.frames import Frame, FrameSource
+from gnomon.capture.registration import Registration
 from gnomon.config.setup import ScanSetup
 from gnomon.errors import Remark
 from gnomon.geometry.surface import Surface, SurfacePoints
@@ -40,6 +41,16 @@ def frame_logger(recorder: Recorder, setup: ScanSetup, stride: int) -> Any:
         image = frame.grey if index % stride == 0 else None
         recorder.submit(lambda rec: rec.log_frame(index, image, when))
     return log
+
+
+def record_registration(recorder: ScanRecording, registration: Registration) -> None:
+    """Each measured frame's motion against the reference frame, on the frame timeline:
+    ``metrics/registration/{dx_px, dy_px, sigma_px, non_translation_px}``."""
+    r = registration
+    for i in map(int, np.flatnonzero(r.measured)):
+        recorder.log_metrics({"registration": {"dx_px": float(r.motion_px[i, 0]), "dy_px": float(r.motion_px[i, 1]),
+                                               "sigma_px": float(r.sigma_px[i]),
+                                               "non_translation_px": float(r.non_translation_px[i])}}, index=i)
 
 
 def points_part_recorder(timings: dict[str, float], setup: ScanSetup, edges: list[EdgeResult], points: SurfacePoints,

@@ -63,7 +63,14 @@ from gnomon.reconstruct.edges import (
 from gnomon.reconstruct.fused import crop_fused, fuse_edges, fusion_warnings
 from gnomon.reconstruct.report import camera_report, report_outputs, scan_report
 from gnomon.recording.recorder import ScanRecording, playable_video, warm_rerun_import
-from gnomon.recording.scan_log import frame_logger, points_part_recorder, record_mesh_part, record_scan, record_setup
+from gnomon.recording.scan_log import (
+    frame_logger,
+    points_part_recorder,
+    record_mesh_part,
+    record_registration,
+    record_scan,
+    record_setup,
+)
 from gnomon.recording.worker import Recorder, RecordingWorker, recording
 from gnomon.util.progress import Stages
 from gnomon.util.timing import timed
@@ -187,6 +194,11 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
         warnings += notes
         with timed(timings, "ray_map_s"):  # what is left of it after tracking
             ray_map = rays.result()
+    if tracked.registration is not None:
+        registration = tracked.registration
+        warnings += registration.warnings()
+        if recorder is not None:
+            recorder.submit(lambda rec: record_registration(rec, registration))
     with timed(timings, "regions_s", cpu):  # the regions held to their planes, then planes tied at corners
         maps = edge_time_maps(tracked, setup.edge)
         setup = hold_regions(setup, maps, tracked.n_frames, ray_map, warnings)
