@@ -654,3 +654,23 @@ def test_command_line_right_and_two_plane(tmp_path, capsys):
     assert "2 pencil photos" in out and out.count("wrote 16 frames") == 2
     assert len(list((tmp_path / "desk_lamp_right" / "pencil").glob("*.jpg"))) == 2
     assert not (tmp_path / "two_plane" / "pencil").exists()
+
+
+@pytest.mark.slow
+def test_a_drifting_camera_moves_the_frames_not_the_truth():
+    """The desk scenes take the facade's camera motion (gnomon.simulate.sensor.camera_motion): the truth is
+    frame 0's grid, frame 0 is the still camera's, a later frame samples the same blurred image moved."""
+    import dataclasses
+
+    from gnomon.simulate import sensor
+
+    still = DeskLampScene(TINY)
+    moving = DeskLampScene(dataclasses.replace(TINY, drift_px=2.0, bump_px=1.0))
+    np.testing.assert_array_equal(moving.depth, still.depth)
+    np.testing.assert_array_equal(moving.swept, still.swept)
+    np.testing.assert_allclose(moving.ground_truth_arrays()["camera_motion_px"],
+                               sensor.camera_motion(TINY.frames, 2.0, 1.0, None))
+    rng = np.random.default_rng(0)
+    np.testing.assert_array_equal(moving.frame(0, np.random.default_rng(0)), still.frame(0, rng))
+    k = TINY.frames - 1
+    assert not np.array_equal(moving.linear_image(k, shift=moving.camera_motion[k]), still.linear_image(k))

@@ -53,6 +53,11 @@ def register(subparsers) -> None:
     p.add_argument("--pole-radius", type=float, default=0.05, metavar="M", help="facade_sun: pole radius, m")
     p.add_argument("--clouds", type=int, default=None, help="facade_sun/facade_day: number of cloud dips (0-10); "
                    "default 3, facade_day 6")
+    p.add_argument("--drift", type=float, default=0.0, metavar="PX",
+                   help="the camera drifts by this much by the last frame (x linear, y quadratic in time; "
+                        "ground_truth.npz camera_motion_px)")
+    p.add_argument("--bump", type=float, default=0.0, metavar="PX",
+                   help="the camera is knocked by this much 60 %% of the way")
     p.add_argument("--markers", choices=("checker", "aruco"), default="checker",
                    help="two_plane: printed 2x2 checkers (pixel hints in the field log) or ArUco markers (ids only)")
     p.add_argument("--stick", choices=("rocked", "translated"), default="rocked",
@@ -76,7 +81,8 @@ def _options(args: argparse.Namespace) -> dict:
         return {"seed": args.seed, **({"width": args.width} if args.width != 800 else {}),
                 **({"height": args.height} if args.height != 600 else {})}
     opts = {"width": args.width, "height": args.height, "noise": args.noise, "jpeg_quality": args.jpeg_quality,
-            "seed": args.seed, "distortion": not args.no_distortion, "blur": args.blur, "gamma": args.gamma}
+            "seed": args.seed, "distortion": not args.no_distortion, "blur": args.blur, "gamma": args.gamma,
+            "drift_px": args.drift, "bump_px": args.bump}
     if args.frames is not None:
         opts["frames"] = args.frames
     if args.scene in ("facade_sun", "facade_day"):
@@ -101,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
 
     # finite numbers here; their ranges are the scene configuration's to check
     from gnomon.util import validate
-    for name in ("noise", "blur", "gamma", "lamp_radius", "stick_radius", "pole_radius", "marks_off_px"):
+    for name in ("noise", "blur", "gamma", "lamp_radius", "stick_radius", "pole_radius", "marks_off_px", "drift",
+                 "bump"):
         validate.number(getattr(args, name), "--" + name.replace("_", "-"))
     t0 = time.perf_counter()
     field_log = api.simulate(args.scene, args.out, progress=not args.quiet, **_options(args))

@@ -210,6 +210,9 @@ class SweepConfig:
     lamp_radius: float = 3.0      # mm
     stick_radius: float = 2.0     # mm
     gamma: float = 2.2
+    drift_px: float = 0.0         # the camera's slow drift by the last frame, px (sensor.camera_motion)
+    bump_px: float = 0.0          # a sudden shift of the camera, px, from bump_frame on
+    bump_frame: int | None = None  # None: 60 % of the way
 
     @property
     def scene_name(self) -> str:
@@ -231,6 +234,7 @@ class SweepConfig:
             raise bad(f"--stick-radius {self.stick_radius}: must be > 0 and <= 50 mm")
         if not (math.isfinite(self.gamma) and 0.2 <= self.gamma <= 5):
             raise bad(f"--gamma {self.gamma}: must be 0.2 to 5")
+        sensor.check_motion_options(self.drift_px, self.bump_px, self.bump_frame, self.frames, self.blur, bad)
 
     @property
     def extension(self) -> str:
@@ -340,6 +344,10 @@ class DeskLampScene:
         # σ = 0.7 px), 3σ for stronger blurs.
         self.footprint_radius = max(2, int(round(3.0 * config.blur)))
         self.pad = max(int(math.ceil(4.0 * config.blur)), self.footprint_radius) + 3
+        # The camera's motion per frame (px; zero unless it drifts): the padding holds the moved frames.
+        self.camera_motion = sensor.camera_motion(self.N, config.drift_px, config.bump_px, config.bump_frame)
+        if self.camera_motion.any():
+            self.pad = max(self.pad, sensor.shift_margin(config.blur, self.camera_motion))
         p = self.pad
         self.crop = (slice(p, p + self.H), slice(p, p + self.W))
         self._cast_primary_rays()
@@ -719,10 +727,11 @@ class DeskLampScene:
         return regions
 
     # ------------------------------------------------------------- images
-    def linear_image(self, t: float, *, blur: bool = True) -> np.ndarray:
-        """Linear radiance (H, W) at (fractional) time t, optionally with the optical blur."""
+    def linear_image(self, t: float, *, blur: bool = True, shift: np.ndarray | None = None) -> np.ndarray:
+        """Linear radiance (H, W) at (fractional) time t, optionally with the optical blur; ``shift``: the
+        camera's motion (px; with the blur)."""
         f = self._occlusion_full(t)
-        return self._finish(self.ambient_f + self.direct_f * (1.0 - f), blur)
+        return self._finish(self.ambient_f + self.direct_f * (1.0 - f), blur, shift)
 
     def lit_image(self, *, blur: bool = True) -> np.ndarray:
         """The image with the lamp unobstructed by the stick."""
@@ -732,16 +741,18 @@ class DeskLampScene:
         """The image with the whole lamp hidden (ambient only)."""
         return self._finish(self.ambient_f, blur)
 
-    def _finish(self, L_full: np.ndarray, blur: bool) -> np.ndarray:
-        """Blur the padded linear image (the padding holds the real scene) and crop it."""
-        return sensor.blur_and_crop(L_full, self.config.blur if blur else 0.0, self.crop)
+    def _finish(self, L_full: np.ndarray, blur: bool, shift: np.ndarray | None = None) -> np.ndarray:
+        """Blur the padded linear image (the padding holds the real scene) and crop it; ``shift``: the
+        camera's motion (px) in that frame."""
+        return sensor.blur_and_crop(L_full, self.config.blur if blur else 0.0, self.crop, shift)
 
     def encode(self, L_blurred: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Gamma-encode, add sensor noise, quantise: linear (blurred) radiance → u8."""
         return sensor.encode_dn(L_blurred, self.config.gamma, self.config.noise, rng)
 
     def frame(self, k: int, rng: np.random.Generator) -> np.ndarray:
-        return self.encode(self.linear_image(float(k)), rng)
+        """Frame k as the (possibly moving, ``camera_motion[k]``) camera saw it."""
+        return self.encode(self.linear_image(float(k), shift=self.camera_motion[k]), rng)
 
     # ------------------------------------------------------------- summaries
     def ground_truth_arrays(self) -> dict[str, np.ndarray]:
@@ -766,6 +777,7 @@ class DeskLampScene:
             "camera_distance_mm": np.float64(self.camera_distance),
             "stick_axis": np.stack([self.QA, self.QB], axis=1),
             "stick_radius": np.float64(self.config.stick_radius),
+            "camera_motion_px": self.camera_motion.copy(),
         }
 
     def capture_table(self) -> dict:
