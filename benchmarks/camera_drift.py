@@ -90,7 +90,7 @@ def main() -> int:
                for f in ("depth.npy", "sigma.npy", "shadow_time.npy", "points.ply", "mesh.ply"))
     print(f"facade_sun {tag} (seed {args.seed}), drift {args.drift:g} px + bump {args.bump:g} px")
     print(f"{'scan':24s} {'RMS %':>7s} {'median %':>8s} {'gross %':>7s} {'false %':>7s} {'cover %':>7s} "
-          f"{'track s':>7s}  motion error max / RMS px   registration ms/frame (measure, resample)")
+          f"{'track s':>7s}  motion error max / RMS px   registration CPU ms/frame (measure, resample)")
     for r in rows:
         line = (f"{r['scan']:24s} {r['rms_pct']:7.3f} {r['median_pct']:8.3f} {r['gross_pct']:7.2f} "
                 f"{r['false_pct']:7.2f} {r['coverage_pct']:7.1f} {r['tracking_s']:7.2f}")

@@ -402,6 +402,16 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
     sun_case("horizontal [pole]", lambda dd: dd["pole"].update(top=[dd["pole"]["base"][0] + 3.0,
                                                                    dd["pole"]["base"][1], dd["pole"]["base"][2]]),
              "pole")
+    sun_case("[capture] register = 'maybe'", lambda dd: dd["capture"].update(register="maybe"), "register")
+
+    def knocked(c: Path) -> None:  # the camera knocked by 24 px from frame 20 on: more than a scan follows
+        import cv2
+        for f in sorted((c / "frames").glob("*.jpg"))[20:]:
+            img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+            cv2.imwrite(str(f), cv2.warpAffine(img, np.float32([[1, 0, 24], [0, 1, 0]]), img.shape[::-1],
+                                               borderMode=cv2.BORDER_REPLICATE))
+    scan_case(geo, "sun capture whose camera was knocked 24 px", prepare_files=knocked, needle="camera",
+              source=fx["sun"])
 
     def fps_edit(dd: dict) -> None:
         dd["capture"].update(timestamps="start+fps", start="2026-11-12T11:40:00", fps=1e300)

@@ -118,3 +118,18 @@ def test_the_gnomon_s_pixels_are_moved_onto_the_first_frame(scans) -> None:
         toml_io.dump(log, capture / "gnomon_heading.toml")
         headings.append(prepare_scan(capture / "gnomon_heading.toml")[0].light.clock.heading_deg)
     assert abs(headings[1] - headings[0]) < 0.005
+
+
+@pytest.mark.slow
+def test_a_camera_knocked_further_than_a_scan_follows_is_refused(tmp_path, capsys) -> None:
+    """Knocked by 18 px at frame 20 (of 40, 160×120): one line naming the frame, exit code 2, nothing
+    written; the flat wall's patches agree with a wrong motion after such a jump, the phase correlation
+    finds the right one."""
+    from gnomon.cli import main
+
+    simulate_facade_sun(tmp_path / "cap", FacadeSunConfig(width=160, height=120, frames=40, seed=1, bump_px=18.0,
+                                                          bump_frame=20))
+    code = main(["scan", str(tmp_path / "cap" / "field_log.toml"), "--out", str(tmp_path / "out"), "--quiet"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and not (tmp_path / "out").exists()
+    assert "frame 20 (" in err[0] and "the camera moved by 18.0 px since frame 0" in err[0]
