@@ -103,7 +103,7 @@ def test_a_turned_camera_is_measured_and_refused_beyond_half_a_pixel():
     """What a translation leaves of a turn by 0.3 px at the corners is 0.3 px; a 1 px turn is refused."""
     result, _ = register_all([render(seed=1), render((0.4, 0.2), turn_px=0.3, seed=2)])
     assert result.non_translation_px[1] == pytest.approx(0.3, abs=MOTION_TOLERANCE_PX)
-    assert any("moved by more than a translation" in w for w in result.warnings())
+    assert any("not a translation alone (up to 0.3" in w for w in result.warnings())
     with pytest.raises(FrameError, match="turned or zoomed"):
         register_all([render(seed=1), render((0.4, 0.2), turn_px=1.0, seed=2)])
 
@@ -172,3 +172,24 @@ def test_the_field_log_key(tmp_path):
     assert tracker_settings(on).register
     with pytest.raises(FieldLogError, match=r"\[capture\] register: expected one of 'auto', 'on', 'off'"):
         load_field_log(write_tiny_capture(tmp_path / "c", extra={"capture": {"register": "yes"}}))
+
+
+def test_the_reference_is_the_first_frame_lit_like_the_capture_and_dim_frames_keep_the_last_motion(tmp_path):
+    """Dawn (a fifth of the day's light) before the day: the reference is the first day frame; a dusk frame
+    after a knock is not measured and keeps the last measured motion."""
+    from gnomon.capture.registration import reference_frame
+
+    gains = [0.2, 0.2, 1.0, 1.0, 1.0, 1.0, 0.25]
+    motion = [(0.0, 0.0)] * 4 + [(0.7, 0.5)] * 3
+    source = write_frames(tmp_path / "day", [render(motion[k], gain=g, seed=k) for k, g in enumerate(gains)])
+    reference = reference_frame(source)
+    assert reference is not None and reference.index == 2
+    registrar = FrameRegistrar((H, W), len(gains))
+    registrar.set_reference(reference)
+    for frame in source:
+        registrar.register(frame)
+    result = registrar.result(source.name)
+    assert result.reference_frame == 2 and result.dim == [0, 1, 6]
+    assert np.hypot(*(result.motion_px[5] - (0.7, 0.5))) <= MOTION_TOLERANCE_PX
+    assert result.compensated[6] and not np.isfinite(result.motion_px[6]).any()   # moved as frame 5
+    assert not result.compensated[:2].any()                                        # before any: as read

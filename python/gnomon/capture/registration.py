@@ -2,8 +2,9 @@
 
 A camera on a tripod for hours moves by a pixel or two (the tripod settles, warms up, is touched),
 and a pixel then no longer sees one point: its shadow time mixes its neighbours'. With
-``[capture] register`` a scan registers every frame it tracks against its reference frame, the first
-one it tracks (the first with texture enough):
+``[capture] register`` a scan registers every frame it tracks against its reference frame
+(:func:`reference_frame`: the first frame lit like most of the capture, so not dawn's; the scan's
+pixel grid is its grid):
 
 * **Where.** Small patches (``PATCH_PX`` square) of the reference where the image is textured in
   both directions (the smaller eigenvalue of the structure tensor over the patch, the best
@@ -36,12 +37,20 @@ Measured on the simulated facade (``benchmarks/camera_drift.py``; 2 px of drift 
 the motion per frame within 0.026 px of the truth at 800×600 and 0.021 px at 400×300; with a still
 camera it reads at most 0.036 px.
 
-A frame that moved by ``MOTION_TOLERANCE_PX`` or more is resampled onto the reference grid before
-tracking (Keys' cubic, separable, at the exact fraction; its colour image too), and the pixels at
-the image border that the moved frames do not see whole get no dip; a frame that moved less is
-tracked as it was read, so a still camera's scan is the same with or without registration. The
-motion is a translation: a turn or zoom is measured, warned about beyond ``NON_TRANSLATION_WARN_PX``
-and refused beyond ``MAX_NON_TRANSLATION_PX``, not undone.
+A frame that moved by ``MOTION_TOLERANCE_PX`` or more, and by more than what a translation leaves
+(the last reading: a smaller motion cannot be told from the scene's own changes), is resampled onto
+the reference grid before tracking (Keys' cubic, separable, at the exact fraction; its colour image
+too), and the pixels at the image border that the moved frames do not see whole get no dip; a frame
+that moved less is tracked as it was read, so a still camera's scan is the same with or without
+registration. The motion is a translation: a turn or zoom is measured, warned about beyond
+``NON_TRANSLATION_WARN_PX`` and refused beyond ``MAX_NON_TRANSLATION_PX``, not undone.
+
+Over a whole day the sun turns so far that the shadows in the window recesses no longer resemble the
+reference's (a translation then leaves more than ``NON_TRANSLATION_WARN_PX`` unexplained, and the
+translation itself drifts by tenths of a pixel): the frames are then measured against the last frame
+a translation explained (its motion known: an anchor, in ``Registration.anchors``), and the frames
+measured before a reading says a translation explains them again keep the last credible motion. A
+frame much dimmer than the reference (``DIM``: dawn, dusk) is not measured and keeps the last motion.
 
 Refused (:class:`~gnomon.errors.FrameError`, naming the frame): a camera that moved by more than
 ``MAX_MOTION_PX``, or whose motion departs from a translation by more than
@@ -60,11 +69,12 @@ from statistics import NormalDist
 import cv2
 import numpy as np
 
-from gnomon.capture.frames import Frame
+from gnomon.capture.frames import Frame, FrameSource, decode_frame_file
 from gnomon.errors import FrameError
 
 __all__ = ["MAX_MOTION_PX", "MAX_NON_TRANSLATION_PX", "MOTION_TOLERANCE_PX", "NON_TRANSLATION_WARN_PX",
-           "REGISTER_MODES", "FrameRegistrar", "Registration", "border_band", "motion_between", "shift_image"]
+           "REGISTER_MODES", "FrameRegistrar", "Registration", "border_band", "motion_between", "reference_frame",
+           "shift_image"]
 
 REGISTER_MODES = ("auto", "on", "off")
 """``[capture] register``: ``"auto"`` (on for a light whose capture lasts hours, the sun), ``"on"``, ``"off"``."""
@@ -80,6 +90,14 @@ facade and 0.19 px on the desk, whose stick sweeps one side of the image after t
 three measurements; single ones up to 0.12 and 0.36 px); a turn of 0.3 px at the corners reads 0.31 px."""
 MAX_NON_TRANSLATION_PX = 0.5
 """Pixels. A motion that departs from a translation by more (the camera turned or zoomed) is refused."""
+DIM = 0.4
+"""A frame whose mean level (DN, over the patches) is below this × the reference's is not measured (dawn,
+dusk, night: the flat patches of a dark frame agree with any motion, and sky light alone casts other
+shadows): it is moved as the last measured frame was."""
+REFERENCE_LEVEL = 0.5
+"""The reference is the first frame at least this × as bright as the capture's brightest (sampled) …"""
+REFERENCE_SAMPLES = 40
+"""… of this many frames spread over the capture."""
 MAX_UNREGISTERED_SHARE = 0.1
 """A capture with more of its tracked frames unregistrable is refused; fewer are left out."""
 
@@ -99,7 +117,7 @@ RELINEARISE_PX = 0.05  # the reference is interpolated again once the motion mov
 PHASE_CHECK_PX = 3.0  # a frame's motion is measured again from the phase correlation's when they differ by more
 COARSE_SIDE = 256  # the phase correlation's frames (4× smaller, or as many times as bring them to this wide)
 FIELD_EVERY = 10  # frames between measurements of what a translation leaves …
-FIELD_MOVE_PX = 0.25  # … or once the motion moved on by this much; what is reported is the median …
+FIELD_MOVE_PX = 0.1  # … or once the motion moved on by this much; what is reported is the median …
 FIELD_RUNS = 3  # … of the last this many
 _SMOOTH_RADIUS = 3
 _GAUSS = np.exp(-0.5 * (np.arange(-_SMOOTH_RADIUS, _SMOOTH_RADIUS + 1) / SMOOTH_PX) ** 2)
@@ -213,6 +231,7 @@ class _Solution:
     patches: int  # patches that agreed
     converged: bool
     texture: float  # the share of the reference's texture in the patches that agreed
+    halves: float  # px, how far apart the image's halves' motions are
 
 
 @dataclass(frozen=True)
@@ -234,7 +253,10 @@ class Registration:
     ``non_translation_px``: what a translation leaves of the frame's motion (px, across the image);
     ``patches``: the patches that agreed; ``compensated``: the frame was resampled onto the
     reference grid (it moved by ``MOTION_TOLERANCE_PX`` or more); ``unregistered``: capture frames
-    whose motion could not be measured (left out of the tracking); ``border``: the (H, W) pixels
+    whose motion could not be measured (left out of the tracking); ``dim``: capture frames too dim to
+    measure (``DIM``), moved as the last measured frame was; ``doubtful``: capture frames measured while
+    the last reading of what a translation leaves exceeded ``NON_TRANSLATION_WARN_PX``, moved as the
+    last frame before them; ``border``: the (H, W) pixels
     the resampled frames do not see (left out of the scan); ``patch_count``: the reference's
     patches; ``measure_s``, ``resample_s``: the CPU time spent measuring and resampling (the
     tracking thread's, which does both).
@@ -248,6 +270,9 @@ class Registration:
     patches: np.ndarray
     compensated: np.ndarray
     unregistered: list[int]
+    dim: list[int]
+    doubtful: list[int]
+    anchors: list[tuple[int, list[float]]]
     border: np.ndarray
     patch_count: int
     measure_s: float = 0.0
@@ -273,6 +298,10 @@ class Registration:
             "frames_measured": n,
             "frames_compensated": int(self.compensated.sum()),
             "unregistered_frames": list(self.unregistered),
+            # the frames measured against in turn (the reference first) and their motion against it
+            "anchors": [{"frame": i, "motion_px": m} for i, m in self.anchors],
+            "dim_frames": list(self.dim),  # too dim to measure: moved as the last measured frame
+            "doubtful_frames": list(self.doubtful),  # not a translation: moved as the last frame that was
             "max_motion_px": None if worst is None else float(round(size[worst], 4)),
             "max_motion_frame": worst,
             "max_sigma_px": float(round(np.nanmax(self.sigma_px), 4)) if n else None,
@@ -308,17 +337,51 @@ class Registration:
                        "texture that stays unchanged; their shadow times may be off by that much of a pixel's "
                        "sweep; a capture with more fixed texture in view (or a steadier mount) avoids it")
         bent = np.flatnonzero(m & (self.non_translation_px > NON_TRANSLATION_WARN_PX))
-        if len(bent):
-            k = int(bent[np.argmax(self.non_translation_px[bent])])
-            out.append(f"{len(bent)} frames moved by more than a translation (up to {self.non_translation_px[k]:.2f} "
-                       f"px across the image, frame {k}, {self.names[k]}; {_frames(bent)}): the camera turned or "
-                       "zoomed; the compensation, a translation, leaves that much; fix the camera's mount")
+        if len(bent) or self.doubtful:
+            most = float(np.nanmax(self.non_translation_px))
+            out.append(f"the frames' motion is not a translation alone (up to {most:.2f} px across the image "
+                       f"beyond one, {_frames(bent)}): the camera turned or zoomed, or the scene's shadows "
+                       f"changed too much to tell; {len(self.doubtful)} frames measured meanwhile were moved "
+                       f"as the last frame a translation explained ({_frames(np.asarray(self.doubtful))}); "
+                       "if the camera turned, fix its mount")
+        if len(self.anchors) > 1:
+            out.append(f"the scene's shadows changed too much to measure every frame against frame "
+                       f"{self.reference_frame}: measured against frames "
+                       f"{', '.join(str(i) for i, _ in self.anchors[1:])} in turn from where a translation no "
+                       "longer explained the motion (each adds its own error, a few hundredths of a pixel)")
+        held = [i for i in self.dim if self.compensated[i]]
+        if held:
+            out.append(f"{len(held)} frames too dim to register against frame {self.reference_frame} (dawn, dusk, "
+                       f"under a cloud; {_frames(np.asarray(held))}) were moved as the last registered frame was")
         if self.unregistered:
             out.append(f"{len(self.unregistered)} frames whose motion could not be measured left out of the scan "
                        f"({_frames(np.asarray(self.unregistered))}): too few parts of the image matched the "
                        f"reference frame {self.reference_frame} (fog, something in front of the camera, a large "
                        "jump of the camera)")
         return out
+
+
+def reference_frame(source: FrameSource, skip: np.ndarray | None = None) -> Frame | None:
+    """The frame a capture is registered against: the first (not in ``skip``) at least ``REFERENCE_LEVEL``
+    × as bright as the brightest of ``REFERENCE_SAMPLES`` frames spread over the capture (their mean
+    level, decoded 4× smaller), decoded as a scan decodes it: a day's first frames are dawn's, lit by
+    the sky alone, which shadow the scene otherwise than the sun (registered against one, the facade
+    lit by the sun reads motions of up to 0.8 px). None for a video (its first frame tracked is the
+    reference) and when there is no frame to sample."""
+    if source.video is not None or not source.image_files:
+        return None
+    usable = [i for i in range(len(source.image_files)) if skip is None or not skip[i]]
+    if not usable:
+        return None
+    sample = usable[::max(1, len(usable) // REFERENCE_SAMPLES)]
+    levels = []
+    for i in sample:
+        small = cv2.imread(str(source.image_files[i]), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+        levels.append(float(small.mean()) if small is not None else 0.0)
+    top = max(levels)
+    first = next(i for i, level in zip(sample, levels, strict=True) if level >= REFERENCE_LEVEL * top)
+    grey, _, _ = decode_frame_file(source.image_files[first])
+    return Frame(first, grey, None, source.image_files[first].name)
 
 
 def motion_between(reference: np.ndarray, grey: np.ndarray) -> np.ndarray | None:
@@ -355,7 +418,15 @@ class FrameRegistrar:
     _reference_index: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # the reference's, at m = 0
     _centres: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))  # patches' x, y (centred, / half the size)
     _corner_xy: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))  # the image corners', likewise
-    _last: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    _last: np.ndarray = field(default_factory=lambda: np.zeros(2))  # the last motion the frames were moved by
+    _start: np.ndarray = field(default_factory=lambda: np.zeros(2))  # the last motion measured (the next start)
+    _credible: bool = True  # the last reading of what a translation leaves was within NON_TRANSLATION_WARN_PX
+    _unexplained: float = 0.0  # what a translation leaves (the median of the last readings): a smaller motion
+    # cannot be told from the scene's own changes, and the frame is tracked as read
+    _offset: np.ndarray = field(default_factory=lambda: np.zeros(2))  # the frame measured against: its motion
+    _anchors: list[tuple[int, list[float]]] = field(default_factory=list)  # the frames measured against, in turn
+    _kept: tuple[Frame, np.ndarray] | None = None  # the last frame a translation explained, and its motion
+    _doubtful: list[int] = field(default_factory=list)  # frames measured while it was not
     _linear: tuple | None = None  # (m0, the reference about m0: values, gradients, patches inside)
     _field_at: np.ndarray | None = None  # the motion where the non-translation was last measured
     _coarse_scale: int = 4  # the phase correlation's frames are this many times smaller
@@ -368,6 +439,10 @@ class FrameRegistrar:
     _patches: np.ndarray | None = None
     _compensated: np.ndarray | None = None
     _unregistered: list[int] = field(default_factory=list)
+    _dim: list[int] = field(default_factory=list)  # frames too dim to measure
+    _held_motion: dict[int, np.ndarray] = field(default_factory=dict)  # their motion, the last measured one's
+    _ref_level: float = 0.0  # the reference's mean level over the patches' windows (DN of 8 bits)
+    _level_scale: float = 1.0
     _tracked: int = 0
     _measure_s: float = 0.0
     _resample_s: float = 0.0
@@ -384,24 +459,42 @@ class FrameRegistrar:
     # ------------------------------------------------------------------ per frame
     def register(self, frame: Frame) -> Frame | None:
         """``frame`` on the reference grid (itself when it moved less than ``MOTION_TOLERANCE_PX``), or
-        None when its motion cannot be measured (leave it out). The first frame with enough texture
-        is the reference; frames before it pass as read. Raises :class:`FrameError` naming the frame
-        when the camera moved more than Gnomon follows."""
+        None when its motion cannot be measured (leave it out). Without a reference (:meth:`set_reference`)
+        the first frame with enough texture becomes it; frames before it pass as read. A frame much
+        dimmer than the reference (``DIM``: dawn, dusk, night) is not measured: it is moved as the last
+        measured frame was (as read before any). Raises :class:`FrameError` naming the frame when the
+        camera moved more than Gnomon follows."""
         assert self._motion is not None and self._compensated is not None
         i = frame.index
         self._names[i] = frame.name
         self._tracked += 1
         t0 = time.thread_time()
         if self._ref is None:
-            self._start(frame)
+            self.set_reference(frame)
             self._measure_s += time.thread_time() - t0
             return frame
+        if i == self.reference_frame:
+            return frame
+        level = float(frame.grey.ravel().take(self._window_index).mean()) / self._level_scale
+        if level < DIM * self._ref_level:
+            self._dim.append(i)
+            self._measure_s += time.thread_time() - t0
+            return self._moved(frame, self._last, held=True)
         estimate = self._measure(frame.grey)
+        if estimate is not None and not self._credible and self._kept is not None \
+                and self._kept[0].index != self._anchors[-1][0]:
+            # What a translation leaves grew beyond the tolerable: the scene's shadows changed too much
+            # since the frame measured against (a day's sun turning); measure against the last frame a
+            # translation explained, whose motion is known, from now on.
+            kept, offset = self._kept
+            if self._anchor(kept, offset):
+                estimate = self._measure(frame.grey)
         self._measure_s += time.thread_time() - t0
         if estimate is None:
             self._unregistered.append(i)
             return None
-        m = estimate.motion
+        self._start = estimate.motion
+        m = estimate.motion + self._offset
         size = float(np.hypot(*m))
         if size > MAX_MOTION_PX:
             raise FrameError(f"frame {i} ({frame.name}): the camera moved by {size:.1f} px since frame "
@@ -412,30 +505,56 @@ class FrameRegistrar:
                              f"{self.reference_frame} (its motion departs from a translation by "
                              f"{estimate.non_translation:.2f} px across the image, more than the "
                              f"{MAX_NON_TRANSLATION_PX:g} px a scan accepts); fix the camera's mount")
-        self._last = m
         self._motion[i] = m
         assert self._sigma is not None and self._bent is not None and self._patches is not None
         self._sigma[i] = estimate.sigma
         self._bent[i] = estimate.non_translation
         self._patches[i] = estimate.patches
-        if size < MOTION_TOLERANCE_PX:
+        if not self._credible:
+            self._doubtful.append(i)
+            return self._moved(frame, self._last, held=True)
+        self._last, self._kept = m, (frame, m)
+        return self._moved(frame, m)
+
+    def _moved(self, frame: Frame, m: np.ndarray, held: bool = False) -> Frame:
+        """``frame`` resampled onto the reference grid for the motion ``m`` (itself below the tolerance)."""
+        if float(np.hypot(*m)) < max(MOTION_TOLERANCE_PX, self._unexplained):
             return frame
+        assert self._compensated is not None
         t1 = time.thread_time()
-        self._compensated[i] = True
+        self._compensated[frame.index] = True
         moved = replace(frame, grey=shift_image(frame.grey, (m[0], m[1])),
                         color=None if frame.color is None else shift_image(frame.color, (m[0], m[1])))
         self._resample_s += time.thread_time() - t1
+        if held:
+            self._held_motion[frame.index] = m
         return moved
 
-    def _start(self, frame: Frame) -> None:
-        """Take ``frame`` as the reference when it has texture enough (its motion is 0 by definition)."""
+    def set_reference(self, frame: Frame) -> None:
+        """Take ``frame`` as the reference when it has texture enough (its motion is 0 by definition); a
+        scan gives the first frame lit like most of the capture (:func:`reference_frame`) before its pass."""
         assert self._motion is not None and self._sigma is not None and self._bent is not None
+        if not self._anchor(frame, np.zeros(2)):
+            return
+        self.reference_frame = frame.index
+        self._motion[frame.index] = 0.0
+        self._sigma[frame.index] = 0.0
+        self._bent[frame.index] = 0.0
+        assert self._patches is not None
+        self._patches[frame.index] = len(self._corners)
+
+    def _anchor(self, frame: Frame, offset: np.ndarray) -> bool:
+        """Measure the frames against ``frame`` from now on, whose motion against the reference is
+        ``offset`` (px); False (nothing changed) when it has too little texture."""
         ref = _smooth(_as_8bit(frame.grey))
         margin = _SMOOTH_RADIUS + 8
-        corners, self._texture = _select_patches(ref, margin)
+        corners, texture = _select_patches(ref, margin)
         if len(corners) < MIN_PATCHES:
-            return
-        self._ref, self._corners, self.reference_frame = ref, corners, frame.index
+            return False
+        self._ref, self._corners, self._texture = ref, corners, texture
+        self._offset, self._start, self._linear = np.array(offset, dtype=np.float64), np.zeros(2), None
+        self._field_at, self._fields, self._since_field, self._credible = None, [], 0, True
+        self._anchors.append((frame.index, [float(x) for x in offset]))
         h, w = self.shape
         r = np.arange(-_SMOOTH_RADIUS, PATCH_PX + _SMOOTH_RADIUS)
         self._window_index = ((corners[:, 0][:, None, None] + r[None, :, None]) * w
@@ -450,11 +569,9 @@ class FrameRegistrar:
                            np.array([-1.0, -1.0, 1.0, 1.0]) * (h - 1) / 2 / half)
         self._coarse_scale = max(4, math.ceil(max(w, h) / COARSE_SIDE))
         self._coarse_ref = _coarse(frame.grey, self._coarse_scale)
-        self._motion[frame.index] = 0.0
-        self._sigma[frame.index] = 0.0
-        self._bent[frame.index] = 0.0
-        assert self._patches is not None
-        self._patches[frame.index] = len(corners)
+        self._level_scale = 257.0 if frame.grey.dtype == np.uint16 else 1.0
+        self._ref_level = float(frame.grey.ravel().take(self._window_index).mean()) / self._level_scale
+        return True
 
     def _frame_patches(self, grey: np.ndarray) -> np.ndarray:
         """The frame's patches (K, P·P), smoothed as the reference, read at whole pixels."""
@@ -497,10 +614,10 @@ class FrameRegistrar:
             return e is not None and e.converged and e.patches >= enough
 
         # From the previous frame's motion (the camera moves slowly: a few iterations).
-        best = self._translation(frame, self._last, anneal=False)
+        best = self._translation(frame, self._start, anneal=False)
         if not fine(best):
             # A wrong start, or the light changed (a cloud): the weights annealed from 4× the cut.
-            best = self._translation(frame, self._last, anneal=True)
+            best = self._translation(frame, self._start, anneal=True)
         # A jump beyond the iterations' reach can leave the flat patches agreeing with a wrong motion: the
         # whole frame's phase correlation (coarse, a few px) is a second opinion; where it differs, the
         # iterations start again from it, and the motion whose agreeing patches hold more of the
@@ -521,8 +638,14 @@ class FrameRegistrar:
             self._field_at, self._since_field = best.motion, 0
             # The scene's own changes (a shadow over one side of the image) read as a small turn now and
             # then; a turned camera stays turned: the median of the last FIELD_RUNS measurements.
-            self._fields.append(self._non_translation(frame, best.motion))
+            reading = self._non_translation(frame, best.motion)
+            self._fields.append(reading)
+            # A translation that leaves this much unexplained is not the camera's motion alone: until a
+            # reading says otherwise, the frames keep the last motion a translation explained.
+            self._credible = not reading > NON_TRANSLATION_WARN_PX
             best = replace(best, non_translation=float(np.nanmedian(self._fields[-FIELD_RUNS:])))
+            if math.isfinite(best.non_translation):
+                self._unexplained = best.non_translation
         return best
 
     def _solve(self, frame: np.ndarray, start: np.ndarray, *, anneal: bool,
@@ -610,14 +733,31 @@ class FrameRegistrar:
         spread = chi2 / max(noise2, 1e-12) / max(2.0 * int(ok.sum()) - len(q), 1.0)
         covariance = noise2 * max(spread, 1.0) * np.linalg.inv(normal)
         texture = float(self._texture[good].sum() / max(self._texture.sum(), 1e-12))
-        return _Solution(q, covariance, int(good.sum()), converged, texture)
+        return _Solution(q, covariance, int(good.sum()), converged, texture, self._halves(h, b))
+
+    def _halves(self, h: np.ndarray, b: np.ndarray) -> float:
+        """How far apart the motions of the image's halves are (px): top and bottom, left and right, each
+        half's motion one Gauss–Newton step from the common one over its own patches. The camera moves
+        the whole image alike; the scene's changes seldom do (half of what they pull apart is a σ)."""
+        x, y = self._centres
+        worst = 0.0
+        for first in (x < 0, y < 0):
+            steps = []
+            for half in (first, ~first):
+                normal, rhs = h[half].sum(axis=0), b[half].sum(axis=0)
+                if not np.linalg.cond(normal) < 1e8:
+                    return float("nan")
+                steps.append(np.linalg.solve(normal, rhs))
+            worst = max(worst, float(np.hypot(*(steps[0] - steps[1]))))
+        return worst
 
     def _translation(self, frame: np.ndarray, start: np.ndarray, *, anneal: bool) -> _Estimate | None:
         """:meth:`_solve` for a translation: the motion and its σ (the larger axis of its covariance)."""
         solution = self._solve(frame, start, anneal=anneal)
         if solution is None:
             return None
-        sigma = float(math.sqrt(max(float(np.linalg.eigvalsh(solution.covariance).max()), 0.0)))
+        noise = float(math.sqrt(max(float(np.linalg.eigvalsh(solution.covariance).max()), 0.0)))
+        sigma = max(noise, solution.halves / 2) if math.isfinite(solution.halves) else noise
         return _Estimate(solution.q, sigma, solution.patches, float("nan"), solution.converged, solution.texture)
 
     def _non_translation(self, frame: np.ndarray, motion: np.ndarray) -> float:
@@ -658,10 +798,14 @@ class FrameRegistrar:
                              f"against frame {self.reference_frame} (the first: frame {k}, {self._names[k]}): the "
                              "camera moved more than a scan follows, or the view changed; keep the camera still, "
                              "or set [capture] register = \"off\" for a camera that did not move")
-        moved = self._motion[self._compensated]
+        motion = np.where(np.isfinite(self._motion), self._motion, 0.0)
+        for i, held in self._held_motion.items():
+            motion[i] = held
         return Registration(self.reference_frame, list(self._names), self._motion, self._sigma, self._bent,
-                            self._patches, self._compensated, list(self._unregistered),
-                            border_band(self.shape, moved), len(self._corners), self._measure_s, self._resample_s)
+                            self._patches, self._compensated, list(self._unregistered), list(self._dim),
+                            list(self._doubtful), list(self._anchors),
+                            border_band(self.shape, motion[self._compensated]), len(self._corners),
+                            self._measure_s, self._resample_s)
 
 
 def _robust_scale(residuals: np.ndarray) -> float:

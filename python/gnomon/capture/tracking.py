@@ -62,7 +62,7 @@ from gnomon import _kernel
 from gnomon.capture.cloud_levels import HeldFrame, cloud_levels
 from gnomon.capture.frames import DroppedFrame, Frame, FrameSource, frame_pass
 from gnomon.capture.noise import image_noise_dn
-from gnomon.capture.registration import FrameRegistrar, Registration
+from gnomon.capture.registration import FrameRegistrar, Registration, reference_frame
 from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, KernelLutError, KernelParameterError
 from gnomon.util.progress import Progress
 from gnomon.util.validate import MAX_DIP_FRAMES
@@ -541,16 +541,21 @@ def track_source(
     ``on_frame(frame)`` is called for every frame (skipped ones too), e.g. to
     record it; ``on_update(frame, tracker)`` after each frame the tracker took
     (a live view reads the tracker's watch there, :mod:`gnomon.runs.live`).
-    With ``settings.register`` every frame the tracker takes is first registered against the first
-    (:class:`~gnomon.capture.registration.FrameRegistrar`): ``on_frame``, ``on_update`` and the tracker
-    see it on the first frame's grid, a frame whose motion cannot be measured is left out, and the
-    pixels at the border the moved frames do not see get no dip.
+    With ``settings.register`` every frame the tracker takes is first registered against a reference
+    frame (:func:`~gnomon.capture.registration.reference_frame`, :class:`~gnomon.capture.registration.FrameRegistrar`):
+    ``on_frame``, ``on_update`` and the tracker see it on the reference's grid, a frame whose motion
+    cannot be measured is left out, and the pixels at the border the moved frames do not see get no dip.
     Raises :class:`FrameError` for a frame of another size, a
     source with fewer frames than expected, fewer than two usable frames, or a camera that moved more
     than the registration follows.
     """
     tracker: ShadowTracker | None = None
-    registrar = FrameRegistrar(shape, source.count) if settings.register else None
+    registrar = None
+    if settings.register:
+        registrar = FrameRegistrar(shape, source.count)
+        reference = reference_frame(source, skip)
+        if reference is not None and reference.grey.shape == shape:
+            registrar.set_reference(reference)
     first: Frame | None = None
     previous: np.ndarray | None = None
     noise: list[Future[float]] = []
