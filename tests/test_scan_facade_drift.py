@@ -133,3 +133,17 @@ def test_a_camera_knocked_further_than_a_scan_follows_is_refused(tmp_path, capsy
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and not (tmp_path / "out").exists()
     assert "frame 20 (" in err[0] and "the camera moved by 18.0 px since frame 0" in err[0]
+
+
+@pytest.mark.slow
+def test_a_tiled_scan_of_the_drifted_capture_is_the_untiled_one(scans, tmp_path, capsys) -> None:
+    """Every tile registers the whole frames alike; the frames the client decodes for the colours are
+    moved as the tracker's were: the same files byte for byte."""
+    from gnomon.cli import main
+
+    root, drifted, _ = scans
+    assert main(["scan", str(drifted / "field_log.toml"), "--out", str(tmp_path / "tiled"), "--tiles", "2x2",
+                 "--workers", "1", "--quiet", "--no-rrd"]) == 0
+    capsys.readouterr()
+    for name in ("depth.npy", "shadow_time.npy", "points.ply", "mesh.ply", "mesh.png"):
+        assert filecmp.cmp(tmp_path / "tiled" / name, root / "drift" / name, shallow=False), name

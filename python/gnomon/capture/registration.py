@@ -252,7 +252,8 @@ class Registration:
     (a point at ``p`` in the reference is at ``p + motion`` in the frame); ``sigma_px``: its σ;
     ``non_translation_px``: what a translation leaves of the frame's motion (px, across the image);
     ``patches``: the patches that agreed; ``compensated``: the frame was resampled onto the
-    reference grid (it moved by ``MOTION_TOLERANCE_PX`` or more); ``unregistered``: capture frames
+    reference grid (it moved by ``MOTION_TOLERANCE_PX`` or more); ``applied_px`` (N, 2): the motion it
+    was moved back by (NaN where it was not: a held frame's is the last one's); ``unregistered``: capture frames
     whose motion could not be measured (left out of the tracking); ``dim``: capture frames too dim to
     measure (``DIM``), moved as the last measured frame was; ``doubtful``: capture frames measured while
     the last reading of what a translation leaves exceeded ``NON_TRANSLATION_WARN_PX``, moved as the
@@ -269,6 +270,7 @@ class Registration:
     non_translation_px: np.ndarray
     patches: np.ndarray
     compensated: np.ndarray
+    applied_px: np.ndarray
     unregistered: list[int]
     dim: list[int]
     doubtful: list[int]
@@ -282,6 +284,15 @@ class Registration:
     def measured(self) -> np.ndarray:
         """(N,) bool: frames whose motion was measured."""
         return np.isfinite(self.motion_px[:, 0])
+
+    def moved(self, frame: Frame) -> Frame:
+        """``frame`` (grey and colour) on the reference grid as the tracker saw it (itself where it was
+        not resampled), e.g. a frame decoded again for the recording or the colours."""
+        if not self.compensated[frame.index]:
+            return frame
+        m = self.applied_px[frame.index]
+        return replace(frame, grey=shift_image(frame.grey, (m[0], m[1])),
+                       color=None if frame.color is None else shift_image(frame.color, (m[0], m[1])))
 
     def report(self) -> dict:
         """report.json's ``registration``: the motion per frame and its summary."""
@@ -798,13 +809,13 @@ class FrameRegistrar:
                              f"against frame {self.reference_frame} (the first: frame {k}, {self._names[k]}): the "
                              "camera moved more than a scan follows, or the view changed; keep the camera still, "
                              "or set [capture] register = \"off\" for a camera that did not move")
-        motion = np.where(np.isfinite(self._motion), self._motion, 0.0)
+        applied = np.where(self._compensated[:, None], self._motion, np.nan)
         for i, held in self._held_motion.items():
-            motion[i] = held
+            applied[i] = held
         return Registration(self.reference_frame, list(self._names), self._motion, self._sigma, self._bent,
-                            self._patches, self._compensated, list(self._unregistered), list(self._dim),
+                            self._patches, self._compensated, applied, list(self._unregistered), list(self._dim),
                             list(self._doubtful), list(self._anchors),
-                            border_band(self.shape, motion[self._compensated]), len(self._corners),
+                            border_band(self.shape, applied[self._compensated]), len(self._corners),
                             self._measure_s, self._resample_s)
 
 

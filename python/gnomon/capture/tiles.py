@@ -203,7 +203,7 @@ class TiledTracker:
                                key=f"gnomon-tile-{b[0]}-{b[2]}-{os.getpid()}-{time.time_ns()}")
             for i, b in enumerate(bounds)
         ]
-        if on_frame is not None:
+        if on_frame is not None and not settings.register:  # meanwhile; registered frames once their motion is known
             self._record_frames(source, on_frame)
         done = []
         with Progress("tiles", len(futures), enabled=progress) as bar:
@@ -213,6 +213,10 @@ class TiledTracker:
         del futures  # the workers may forget the tiles' maps now
         done.sort(key=lambda t: (t.bounds[0], t.bounds[2]))
         tracked = stitch(done, shape)
+        if on_frame is not None and settings.register:
+            registration = tracked.registration
+            self._record_frames(source, on_frame if registration is None
+                                else lambda frame: on_frame(registration.moved(frame)))
         for t in done:  # keep where and how each tile ran, not a second copy of its maps
             t.tracked = replace(t.tracked, times=None)
         self.tiles = done
