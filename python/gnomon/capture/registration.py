@@ -112,12 +112,12 @@ SCALE_PERCENTILE = 25  # … read from this percentile of the residuals' magnitu
 SCALE_STRIDE = 5  # … of every 5th pixel
 MAX_OUTLIER_SHARE = 0.3  # a patch with more of its pixels cut is left out
 MAX_ITERATIONS = 20
-CONVERGED_PX = 2e-3  # the last step moves no patch by more
+CONVERGED_PX = 5e-3  # the last step moves no patch by more
 RELINEARISE_PX = 0.05  # the reference is interpolated again once the motion moved this far from where it was
 PHASE_CHECK_PX = 3.0  # a frame's motion is measured again from the phase correlation's when they differ by more
 COARSE_SIDE = 256  # the phase correlation's frames (4× smaller, or as many times as bring them to this wide)
 FIELD_EVERY = 10  # frames between measurements of what a translation leaves …
-FIELD_MOVE_PX = 0.1  # … or once the motion moved on by this much; what is reported is the median …
+FIELD_MOVE_PX = 0.25  # … or once the motion moved on by this much; what is reported is the median …
 FIELD_RUNS = 3  # … of the last this many
 _SMOOTH_RADIUS = 3
 _GAUSS = np.exp(-0.5 * (np.arange(-_SMOOTH_RADIUS, _SMOOTH_RADIUS + 1) / SMOOTH_PX) ** 2)
@@ -678,6 +678,7 @@ class FrameRegistrar:
         k, n = frame.shape
         if design is None:
             design = np.broadcast_to(np.eye(2), (k, 2, 2))
+        translation = design.shape[2] == 2
         columns = np.empty((k, 5, n), np.float32)  # 1, R, F, ∂R/∂x, ∂R/∂y per pixel
         columns[:, 0] = 1.0
         columns[:, 2] = frame
@@ -721,10 +722,13 @@ class FrameRegistrar:
             b = np.stack([-a * (cov[:, 2, 3] - a * cov[:, 1, 3]), -a * (cov[:, 2, 4] - a * cov[:, 1, 4])], axis=1)
             h[~good] = 0.0
             b[~good] = 0.0
-            normal = np.einsum("kia,kij,kjb->ab", design, h, design)
+            if translation:
+                normal, rhs = h.sum(axis=0), b.sum(axis=0)
+            else:
+                normal, rhs = np.einsum("kia,kij,kjb->ab", design, h, design), np.einsum("kia,ki->a", design, b)
             if int(good.sum()) < MIN_PATCHES or not np.linalg.cond(normal) < 1e8:
                 return None
-            step = np.linalg.solve(normal, np.einsum("kia,ki->a", design, b))
+            step = np.linalg.solve(normal, rhs)
             q = q + step
             shift = np.abs(design @ step).max()
             if np.abs(design @ q - design @ np.asarray(start)).max() > MAX_MOTION_PX + 4:
