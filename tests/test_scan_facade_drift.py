@@ -147,3 +147,16 @@ def test_a_tiled_scan_of_the_drifted_capture_is_the_untiled_one(scans, tmp_path,
     capsys.readouterr()
     for name in ("depth.npy", "shadow_time.npy", "points.ply", "mesh.ply", "mesh.png"):
         assert filecmp.cmp(tmp_path / "tiled" / name, root / "drift" / name, shallow=False), name
+
+
+@pytest.mark.slow
+def test_a_live_scan_of_the_drifted_capture_is_the_scan(scans, tmp_path, capsys) -> None:
+    """gnomon live registers as it goes (its reference: the first frame, it cannot look ahead): here the
+    scan's, so it writes what the scan writes."""
+    from gnomon.cli import main
+
+    root, drifted, _ = scans
+    assert main(["live", str(drifted / "field_log.toml"), "--out", str(tmp_path / "live"), "--quiet"]) == 0
+    capsys.readouterr()
+    for name in ("depth.npy", "shadow_time.npy", "points.ply"):
+        assert filecmp.cmp(tmp_path / "live" / name, root / "drift" / name, shallow=False), name

@@ -372,27 +372,28 @@ class Registration:
         return out
 
 
-def reference_frame(source: FrameSource, skip: np.ndarray | None = None) -> Frame | None:
+def reference_frame(source: FrameSource | object, skip: np.ndarray | None = None) -> Frame | None:
     """The frame a capture is registered against: the first (not in ``skip``) at least ``REFERENCE_LEVEL``
     × as bright as the brightest of ``REFERENCE_SAMPLES`` frames spread over the capture (their mean
     level, decoded 4× smaller), decoded as a scan decodes it: a day's first frames are dawn's, lit by
     the sky alone, which shadow the scene otherwise than the sun (registered against one, the facade
-    lit by the sun reads motions of up to 0.8 px). None for a video (its first frame tracked is the
-    reference) and when there is no frame to sample."""
-    if source.video is not None or not source.image_files:
+    lit by the sun reads motions of up to 0.8 px). None for a video or a live source (their first frame
+    tracked is the reference) and when there is no frame to sample."""
+    files = tuple(getattr(source, "image_files", ()))  # a live source (a camera, a stream) has none
+    if getattr(source, "video", None) is not None or not files:
         return None
-    usable = [i for i in range(len(source.image_files)) if skip is None or not skip[i]]
+    usable = [i for i in range(len(files)) if skip is None or not skip[i]]
     if not usable:
         return None
     sample = usable[::max(1, len(usable) // REFERENCE_SAMPLES)]
     levels = []
     for i in sample:
-        small = cv2.imread(str(source.image_files[i]), cv2.IMREAD_REDUCED_GRAYSCALE_4)
+        small = cv2.imread(str(files[i]), cv2.IMREAD_REDUCED_GRAYSCALE_4)
         levels.append(float(small.mean()) if small is not None else 0.0)
     top = max(levels)
     first = next(i for i, level in zip(sample, levels, strict=True) if level >= REFERENCE_LEVEL * top)
-    grey, _, _ = decode_frame_file(source.image_files[first])
-    return Frame(first, grey, None, source.image_files[first].name)
+    grey, _, _ = decode_frame_file(files[first])
+    return Frame(first, grey, None, files[first].name)
 
 
 def motion_between(reference: np.ndarray, grey: np.ndarray) -> np.ndarray | None:
