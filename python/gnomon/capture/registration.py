@@ -62,7 +62,11 @@ warned about; so are frames registered to no better than ``MOTION_TOLERANCE_PX``
 from __future__ import annotations
 
 import math
+import queue
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 
@@ -74,7 +78,7 @@ from gnomon.errors import FrameError
 
 __all__ = ["MAX_MOTION_PX", "MAX_NON_TRANSLATION_PX", "MOTION_TOLERANCE_PX", "NON_TRANSLATION_WARN_PX",
            "REGISTER_MODES", "FrameRegistrar", "Registration", "border_band", "motion_between", "reference_frame",
-           "shift_image"]
+           "registered", "shift_image"]
 
 REGISTER_MODES = ("auto", "on", "off")
 """``[capture] register``: ``"auto"`` (on for a light whose capture lasts hours, the sun), ``"on"``, ``"off"``."""
@@ -396,6 +400,68 @@ def reference_frame(source: FrameSource | object, skip: np.ndarray | None = None
     return Frame(first, grey, None, files[first].name)
 
 
+AHEAD = 4
+"""Frames :func:`registered` registers ahead of the tracker, at most."""
+_END = object()
+
+
+@contextmanager
+def registered(frames: Iterator[Frame], registrar: FrameRegistrar | None,
+               skip: np.ndarray | None = None) -> Iterator[Iterator[tuple[Frame, Frame, bool]]]:
+    """``frames`` as ``(frame as read, frame on the reference grid, left out)``, registered on a thread of
+    their own up to ``AHEAD`` frames ahead (numpy and OpenCV release the interpreter for the arrays, the
+    kernel for the tracker: the two overlap), in order; without ``registrar`` as read, on this thread.
+    ``skip``: frames not registered (and left out). An error on the thread (a camera moved more than a
+    scan follows) is raised here; leaving the block stops and joins the thread."""
+    if registrar is None:
+        yield ((f, f, skip is not None and bool(skip[f.index])) for f in frames)
+        return
+    out: queue.Queue[object] = queue.Queue(maxsize=AHEAD)
+    stop = threading.Event()
+
+    def put(item: object) -> bool:
+        while not stop.is_set():
+            try:
+                out.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def work() -> None:
+        try:
+            for frame in frames:
+                if stop.is_set():
+                    return
+                if skip is not None and skip[frame.index]:
+                    item: object = (frame, frame, True)
+                else:
+                    moved = registrar.register(frame)
+                    item = (frame, frame if moved is None else moved, moved is None)
+                if not put(item):
+                    return
+            put(_END)
+        except BaseException as exc:  # forwarded to the consumer, raised there
+            put(exc)
+
+    def consume() -> Iterator[tuple[Frame, Frame, bool]]:
+        while True:
+            item = out.get()
+            if item is _END:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item  # type: ignore[misc]
+
+    worker = threading.Thread(target=work, name="gnomon-registration", daemon=True)
+    worker.start()
+    try:
+        yield consume()
+    finally:
+        stop.set()
+        worker.join()
+
+
 def motion_between(reference: np.ndarray, grey: np.ndarray) -> np.ndarray | None:
     """One frame's motion against a reference frame ((2,) px, as :class:`Registration`'s), or None when
     the reference has too little texture or the motion cannot be measured (grey images of one size)."""
@@ -477,6 +543,8 @@ class FrameRegistrar:
         measured frame was (as read before any). Raises :class:`FrameError` naming the frame when the
         camera moved more than Gnomon follows."""
         assert self._motion is not None and self._compensated is not None
+        if frame.grey.shape[:2] != self.shape:
+            return frame  # the pass refuses it, naming the frame
         i = frame.index
         self._names[i] = frame.name
         self._tracked += 1

@@ -62,7 +62,7 @@ from gnomon import _kernel
 from gnomon.capture.cloud_levels import HeldFrame, cloud_levels
 from gnomon.capture.frames import DroppedFrame, Frame, FrameSource, frame_pass
 from gnomon.capture.noise import image_noise_dn
-from gnomon.capture.registration import FrameRegistrar, Registration, reference_frame
+from gnomon.capture.registration import FrameRegistrar, Registration, reference_frame, registered
 from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, KernelLutError, KernelParameterError
 from gnomon.util.progress import Progress
 from gnomon.util.validate import MAX_DIP_FRAMES
@@ -561,18 +561,15 @@ def track_source(
     noise: list[Future[float]] = []
     seen = 0
     # The noise estimate (first frame pairs) runs on a worker thread while the tracker goes on.
+    # With registration, the frames are registered on a thread of their own a few frames ahead.
     with Progress("tracking", source.count, enabled=progress) as bar, \
-            ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-noise") as pool, frame_pass(source) as frames:
-        for frame in frames:
+            ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-noise") as pool, \
+            frame_pass(source) as frames, registered(frames, registrar, skip) as stream:
+        for read, frame, skipped in stream:
             seen += 1
             if first is None:
-                _check_first(frame, shape, where)
-                first, tracker = frame, ShadowTracker(settings, shape, frame.grey.dtype, crop)
-            skipped = skip is not None and bool(skip[frame.index])
-            if registrar is not None and not skipped:
-                registered = registrar.register(frame)
-                skipped = registered is None
-                frame = frame if registered is None else registered
+                _check_first(read, shape, where)
+                first, tracker = read, ShadowTracker(settings, shape, read.grey.dtype, crop)
             if not skipped:
                 if previous is not None and len(noise) < NOISE_PAIRS:
                     # the first frames the tracker sees (not the night's, clipped at black), before any
