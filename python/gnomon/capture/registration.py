@@ -338,7 +338,7 @@ class Registration:
         out: list[str] = []
         m = self.measured
         if self.compensated.any():
-            size = np.hypot(self.motion_px[:, 0], self.motion_px[:, 1])
+            size = np.hypot(self.applied_px[:, 0], self.applied_px[:, 1])  # what the frames were moved back by
             worst = int(np.nanargmax(size))
             out.append(f"the camera moved: up to {size[worst]:.2f} px by frame {worst} ({self.names[worst]}) against "
                        f"frame {self.reference_frame}; {int(self.compensated.sum())} frames resampled onto frame "
@@ -360,10 +360,12 @@ class Registration:
                        f"as the last frame a translation explained ({_frames(np.asarray(self.doubtful))}); "
                        "if the camera turned, fix its mount")
         if len(self.anchors) > 1:
+            later = [str(i) for i, _ in self.anchors[1:]]
             out.append(f"the scene's shadows changed too much to measure every frame against frame "
-                       f"{self.reference_frame}: measured against frames "
-                       f"{', '.join(str(i) for i, _ in self.anchors[1:])} in turn from where a translation no "
-                       "longer explained the motion (each adds its own error, a few hundredths of a pixel)")
+                       f"{self.reference_frame}: from where a translation no longer explained the motion, the "
+                       f"frames were measured against frame{'s' if len(later) > 1 else ''} {', '.join(later)} "
+                       "(in turn), whose own motion adds its error to theirs: the camera's motion is known less "
+                       "well there (on the simulated whole day, to 0.2 px)")
         held = [i for i in self.dim if self.compensated[i]]
         if held:
             out.append(f"{len(held)} frames too dim to register against frame {self.reference_frame} (dawn, dusk, "
