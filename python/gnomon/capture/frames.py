@@ -29,27 +29,24 @@ import glob
 import hashlib
 import io
 import os
-import queue
 import re
-import threading
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import cast
 
 import cv2
 import numpy as np
 import simplejpeg
 
 from gnomon.errors import CorruptFrameError, FrameError
+from gnomon.util.threads import ahead
 
 FRAMES_IN_FLIGHT = 8
 """Frames decoded ahead of the consumer, at most (image files: submitted to the decoding threads and
 not yet taken; a video: in the reader's queue)."""
-_DONE = object()
 
 #: The file suffixes read as a video (any case); any other file is an image.
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm")
@@ -555,21 +552,6 @@ class FrameSource:
     def name(self) -> str:
         return str(self.video) if self.video is not None else str(self.image_files[0].parent)
 
-    def _produce(self, out: queue.Queue[object], stop: threading.Event) -> None:
-        try:
-            for frame in self._decode():
-                while not stop.is_set():
-                    try:
-                        out.put(frame, timeout=0.1)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
-                    return
-            out.put(_DONE)
-        except BaseException as exc:  # forwarded to the consumer, re-raised there
-            out.put(exc)
-
     def _check_size(self, index: int, name: str, image: np.ndarray, first: np.ndarray | None) -> None:
         if first is not None:
             _check_like(index, name, image.shape, image.dtype, first.shape, first.dtype)
@@ -666,21 +648,7 @@ class FrameSource:
         if self.video is None and type(self)._decode is FrameSource._decode:  # image files
             yield from self._decode_parallel()
             return
-        out: queue.Queue[object] = queue.Queue(maxsize=FRAMES_IN_FLIGHT)
-        stop = threading.Event()
-        worker = threading.Thread(target=self._produce, args=(out, stop), name="gnomon-frame-reader", daemon=True)
-        worker.start()
-        try:
-            while True:
-                item = out.get()
-                if item is _DONE:
-                    return
-                if isinstance(item, BaseException):
-                    raise item
-                yield cast(Frame, item)  # the queue holds frames, an exception or _DONE
-        finally:
-            stop.set()
-            worker.join(timeout=5)
+        yield from ahead(self._decode(), FRAMES_IN_FLIGHT, "gnomon-frame-reader", join_timeout=5)
 
 
 @dataclass

@@ -62,8 +62,6 @@ warned about; so are frames registered to no better than ``MOTION_TOLERANCE_PX``
 from __future__ import annotations
 
 import math
-import queue
-import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -75,6 +73,7 @@ import numpy as np
 
 from gnomon.capture.frames import Frame, FrameSource, decode_frame_file
 from gnomon.errors import FrameError
+from gnomon.util.threads import ahead
 
 __all__ = ["MAX_MOTION_PX", "MAX_NON_TRANSLATION_PX", "MOTION_TOLERANCE_PX", "NON_TRANSLATION_WARN_PX",
            "REGISTER_MODES", "FrameRegistrar", "Registration", "border_band", "motion_between", "reference_frame",
@@ -404,7 +403,6 @@ def reference_frame(source: FrameSource | object, skip: np.ndarray | None = None
 
 AHEAD = 4
 """Frames :func:`registered` registers ahead of the tracker, at most."""
-_END = object()
 
 
 @contextmanager
@@ -418,50 +416,20 @@ def registered(frames: Iterator[Frame], registrar: FrameRegistrar | None,
     if registrar is None:
         yield ((f, f, skip is not None and bool(skip[f.index])) for f in frames)
         return
-    out: queue.Queue[object] = queue.Queue(maxsize=AHEAD)
-    stop = threading.Event()
 
-    def put(item: object) -> bool:
-        while not stop.is_set():
-            try:
-                out.put(item, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
+    def each() -> Iterator[tuple[Frame, Frame, bool]]:
+        for frame in frames:
+            if skip is not None and skip[frame.index]:
+                yield frame, frame, True
+            else:
+                moved = registrar.register(frame)
+                yield frame, frame if moved is None else moved, moved is None
 
-    def work() -> None:
-        try:
-            for frame in frames:
-                if stop.is_set():
-                    return
-                if skip is not None and skip[frame.index]:
-                    item: object = (frame, frame, True)
-                else:
-                    moved = registrar.register(frame)
-                    item = (frame, frame if moved is None else moved, moved is None)
-                if not put(item):
-                    return
-            put(_END)
-        except BaseException as exc:  # forwarded to the consumer, raised there
-            put(exc)
-
-    def consume() -> Iterator[tuple[Frame, Frame, bool]]:
-        while True:
-            item = out.get()
-            if item is _END:
-                return
-            if isinstance(item, BaseException):
-                raise item
-            yield item  # type: ignore[misc]
-
-    worker = threading.Thread(target=work, name="gnomon-registration", daemon=True)
-    worker.start()
+    stream = ahead(each(), AHEAD, "gnomon-registration")
     try:
-        yield consume()
+        yield stream
     finally:
-        stop.set()
-        worker.join()
+        stream.close()
 
 
 def motion_between(reference: np.ndarray, grey: np.ndarray) -> np.ndarray | None:

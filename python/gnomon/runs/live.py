@@ -88,6 +88,7 @@ from gnomon.reconstruct.fusion import fuse_depths
 from gnomon.recording.recorder import ScanRecording, display_available, playable_video
 from gnomon.runs.scan import ScanResult, scan, write_scan
 from gnomon.util.fitting import fit_line_robust
+from gnomon.util.threads import received
 
 __all__ = ["CaptureSource", "LiveFrames", "LiveOptions", "LiveStats", "LiveView", "open_source", "run_live"]
 
@@ -334,12 +335,7 @@ class LiveFrames:
         worker = threading.Thread(target=produce, name="gnomon-live-pacer", daemon=True)
         worker.start()
         try:
-            while True:
-                item = out.get()
-                if item is done:
-                    return
-                if isinstance(item, BaseException):
-                    raise item
+            for item in received(out, done):
                 assert isinstance(item, Frame)
                 self.delivered += 1
                 yield item

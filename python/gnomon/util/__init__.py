@@ -2,7 +2,8 @@
 (:mod:`~gnomon.util.atomic`), TOML read and written (:mod:`~gnomon.util.toml_io`), inputs validated at
 the edge with one-line errors (:mod:`~gnomon.util.validate`), robust line and plane fits and a small
 Levenberg–Marquardt solver (:mod:`~gnomon.util.fitting`), the χ² tail (:mod:`~gnomon.util.chi2`), a
-progress bar, stage timings, and signals held off a block of code (:mod:`~gnomon.util.interrupts`).
+progress bar, stage timings, signals held off a block of code (:mod:`~gnomon.util.interrupts`), and a
+producer thread feeding its consumer (:mod:`~gnomon.util.threads`).
 Each is loaded when first used: the command line starts without numpy.
 """
 
@@ -22,6 +23,7 @@ if TYPE_CHECKING:
     from gnomon.util.fitting import fit_plane_robust as fit_plane_robust
     from gnomon.util.fitting import levenberg_marquardt as levenberg_marquardt
     from gnomon.util.progress import Progress as Progress
+    from gnomon.util.threads import ahead as ahead
     from gnomon.util.timing import timed as timed
     from gnomon.util.validate import check_output_file as check_output_file
     from gnomon.util.validate import check_output_folder as check_output_folder
@@ -42,6 +44,7 @@ _WHERE = {
     "fit_plane_robust": "gnomon.util.fitting",
     "levenberg_marquardt": "gnomon.util.fitting",
     "Progress": "gnomon.util.progress",
+    "ahead": "gnomon.util.threads",
     "timed": "gnomon.util.timing",
     "check_output_file": "gnomon.util.validate",
     "check_output_folder": "gnomon.util.validate",
