@@ -238,7 +238,7 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
     frame_stride = max(1, int(frame_stride))
     if out is None and (rrd or rrd_path is not None or view):
         raise ValueError("a recording needs an output folder: give out=")
-    formats = _mesh_formats(mesh_formats)
+    formats = _formats(mesh_formats, "mesh")
     if out is not None and (rrd is None or rrd or view):
         from gnomon.recording.recorder import warm_rerun_import
 
@@ -248,36 +248,23 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
             opts = ScanOptions(rrd=True if rrd is None else bool(rrd), progress=progress,
                                rrd_path=None if rrd_path is None else Path(rrd_path), view=view,
                                frame_stride=frame_stride, track=track, mesh_formats=formats,
-                               cloud_formats=_cloud_formats(cloud_formats), crs=crs)
+                               cloud_formats=_formats(cloud_formats, "cloud"), crs=crs)
             return _from_result(run_scan(log, Path(out), opts), Path(out))
-        setup, source = prepare_scan(log, formats, _cloud_formats(cloud_formats), crs)
+        setup, source = prepare_scan(log, formats, _formats(cloud_formats, "cloud"), crs)
         result = scan_in_memory(setup, source, None, progress=progress, frame_stride=frame_stride,
                                 **({} if track is None else {"track": track}))
         return _from_result(result, None)
 
 
-def _mesh_formats(value: Any) -> tuple[str, ...] | None:
-    """scan()'s ``mesh_formats`` checked (None: the field log's)."""
-    from gnomon.outputs.formats import mesh_formats, names_of
+def _formats(value: Any, kind: str) -> tuple[str, ...] | None:
+    """scan()'s ``mesh_formats`` (kind "mesh") or ``cloud_formats`` ("cloud") checked (None: the field log's)."""
+    from gnomon.outputs.formats import formats_of_kind, names_of
 
     if value is None:
         return None
-    chosen = mesh_formats(list(value) if isinstance(value, (list, tuple)) else value)
+    chosen = formats_of_kind(list(value) if isinstance(value, (list, tuple)) else value, kind)
     if chosen is None:
-        raise GnomonError(f"mesh_formats: expected 'all' or formats among {', '.join(names_of('mesh'))}, "
-                          f"got {value!r}")
-    return chosen
-
-
-def _cloud_formats(value: Any) -> tuple[str, ...] | None:
-    """scan()'s ``cloud_formats`` checked (None: the field log's; () none)."""
-    from gnomon.outputs.formats import cloud_formats, names_of
-
-    if value is None:
-        return None
-    chosen = cloud_formats(list(value) if isinstance(value, (list, tuple)) else value)
-    if chosen is None:
-        raise GnomonError(f"cloud_formats: expected 'all' or formats among {', '.join(names_of('cloud'))}, "
+        raise GnomonError(f"{kind}_formats: expected 'all' or formats among {', '.join(names_of(kind))}, "
                           f"got {value!r}")
     return chosen
 

@@ -39,7 +39,7 @@ from gnomon.config.tables import Table, boolean
 from gnomon.errors import FieldLogError
 from gnomon.light import TIMESTAMP_MODES
 from gnomon.outputs.crs import ALTITUDE_DATUMS, GEOIDS
-from gnomon.outputs.formats import DEFAULT_MESH_FORMATS, cloud_formats, mesh_formats, names_of
+from gnomon.outputs.formats import DEFAULT_MESH_FORMATS, formats_of_kind, names_of
 from gnomon.util import toml_io
 
 
@@ -387,21 +387,8 @@ def _parse_scan(t: Table | None) -> ScanSettings:
 def _parse_output(t: Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec:
     if t is None:
         return OutputSpec()
-    formats: tuple[str, ...] = DEFAULT_MESH_FORMATS
-    if "mesh_formats" in t.data:
-        raw = t.take("mesh_formats")
-        chosen = mesh_formats(raw)
-        if chosen is None:
-            raise t.error("mesh_formats", f"expected \"all\" or a list of {', '.join(map(repr, names_of('mesh')))}, "
-                                          f"got {raw!r}")
-        formats = chosen
-    clouds = None
-    if "cloud_formats" in t.data:
-        raw = t.take("cloud_formats")
-        clouds = cloud_formats(raw)
-        if clouds is None:
-            raise t.error("cloud_formats", f"expected \"all\" or a list of {', '.join(map(repr, names_of('cloud')))}"
-                                           f", got {raw!r}")
+    formats = _formats_key(t, "mesh_formats", "mesh") or DEFAULT_MESH_FORMATS
+    clouds = _formats_key(t, "cloud_formats", "cloud")
     crs = None
     if "crs" in t.data:
         crs = t.string("crs")
@@ -431,6 +418,17 @@ def _parse_output(t: Table | None, planes: tuple[PlaneSpec, ...]) -> OutputSpec:
     max_sigma = t.number("max_sigma", positive=True) if "max_sigma" in t.data else None
     t.done()
     return OutputSpec(box, above, low, high, formats, max_sigma, clouds, crs)
+
+
+def _formats_key(t: Table, key: str, kind: str) -> tuple[str, ...] | None:
+    """[output] mesh_formats / cloud_formats: the registry's formats of ``kind`` it names (None: absent)."""
+    if key not in t.data:
+        return None
+    raw = t.take(key)
+    chosen = formats_of_kind(raw, kind)
+    if chosen is None:
+        raise t.error(key, f"expected \"all\" or a list of {', '.join(map(repr, names_of(kind)))}, got {raw!r}")
+    return chosen
 
 
 def _check_crs(t: Table, crs: str) -> None:

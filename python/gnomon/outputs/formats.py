@@ -23,7 +23,7 @@ from gnomon.outputs.ply import write_scan_mesh_ply
 from gnomon.outputs.stl import write_scan_stl
 
 __all__ = ["DEFAULT_MESH_FORMATS", "FORMATS", "MESH_FORMATS", "CLOUD_FORMATS", "MeshFormat", "OutputContext",
-           "cloud_formats", "mesh_format", "mesh_formats", "names_of"]
+           "cloud_formats", "formats_of_kind", "mesh_format", "mesh_formats", "names_of"]
 
 
 @dataclass(frozen=True)
@@ -91,6 +91,11 @@ DEFAULT_MESH_FORMATS = tuple(name for name, f in FORMATS.items() if f.always)
 def mesh_format(name: str) -> MeshFormat:
     """The registry's entry of a format chosen by :func:`mesh_formats` or :func:`cloud_formats`."""
     return FORMATS[name]
+
+
+def formats_of_kind(value: object, kind: str) -> tuple[str, ...] | None:
+    """The formats of ``kind`` a value asks for (see :func:`mesh_formats`); None if it names no known one."""
+    return _chosen(value, kind)
 
 
 def _chosen(value: object, kind: str) -> tuple[str, ...] | None:
