@@ -124,8 +124,15 @@ def test_init_writes_a_template_that_loads_once_filled(two_plane_small: Path, tm
     assert text.count("\n#") > 10  # commented
     data = tomllib.loads(text)
     assert data["capture"]["frames"].startswith("frames/*") and data["camera"] == {"file": "camera.toml"}
-    # fill in what a user would: the markers and regions (here the simulator's)
+    # the printed checkers found in the first frame, each within 0.2 px of its true centre
     original = tomllib.loads((two_plane_small / "field_log.toml").read_text())
+    true_pixels = np.load(two_plane_small / "ground_truth.npz")["marker_pixels"]
+    for plane, truth in zip(data["planes"], true_pixels, strict=True):
+        found = np.array([m["pixel_hint"] for m in plane["markers"]])
+        assert len(found) == len(truth) == 4
+        assert np.max(np.min(np.linalg.norm(found[:, None] - truth[None], axis=2), axis=0)) < 0.2
+    # fill in what a user would: measured markers (then units mm) and regions (here the simulator's)
+    data["capture"]["units"] = "mm"
     for plane, filled in zip(data["planes"], original["planes"], strict=True):
         plane["markers"] = filled["markers"]
         plane["regions"] = filled["regions"]

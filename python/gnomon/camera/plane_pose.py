@@ -121,16 +121,18 @@ def symmetric_centre_sigma(img: np.ndarray, centre: tuple[float, float], radius:
     return float(np.sqrt(max(np.trace(cov), 0.0) / 2.0))
 
 
-def _symmetric_centre(img: np.ndarray, start: tuple[float, float], radius: int, iters: int = 30) -> tuple[float, float]:
+def _symmetric_centre(img: np.ndarray, start: tuple[float, float], radius: int, iters: int = 30,
+                      system=None) -> tuple[float, float]:
     """Sub-pixel centre of a point-symmetric pattern: minimise Σ (I(p + d) − I(p − d))² over a disk.
 
     A 2×2 checker stays point-symmetric about its centre under perspective
     (its two edges through the centre stay straight lines), so this holds
     where gradient-based refiners (cornerSubPix) are biased by the skewed,
     blurred junction — on our synthetic frames ≈0.02 px instead of ≈0.1 px.
-    Gauss–Newton on the lightly blurred image with bilinear sampling.
+    Gauss–Newton on the lightly blurred image with bilinear sampling. ``system``: the image's
+    :func:`_symmetry_system` at ``radius``, when many centres are sought in one image.
     """
-    system = _symmetry_system(img, radius)
+    system = _symmetry_system(img, radius) if system is None else system
     p = np.array(start, dtype=np.float64)
     for _ in range(iters):
         r, J = _symmetry_residuals(system, p)
@@ -237,6 +239,105 @@ def find_markers(
                     f"({dets[i].pixel[0]:.1f}, {dets[i].pixel[1]:.1f}); check their hints or reduce search_px"
                 )
     return dets
+
+
+#: The image radii (px) at which :func:`search_markers` looks for 2×2 checkers: a checker whose squares
+#: span about 3–40 px in the image is found at one of them.
+SEARCH_RADII_PX = (4, 6, 9, 13, 19)
+
+
+def search_markers(
+    image: np.ndarray,
+    *,
+    radii_px: Sequence[int] = SEARCH_RADII_PX,
+    min_contrast: float = 40.0,
+    min_x_score: float = 0.7,
+    max_asymmetry: float = 0.2,
+    max_candidates: int = 400,
+) -> list[MarkerDetection]:
+    """Every printed 2×2 checker in ``image``, found without hints: the saddle response (as in
+    :func:`find_marker`) at each radius of ``radii_px``, its strongest local maxima refined to sub-pixel
+    and kept when they pass the checker test at that radius with the stricter thresholds given here
+    (a hint-free search must not take the corner of a box or a texture for a mark). One detection per
+    checker (the radius with the best 2×2-checker score), named ``m0, m1, ...`` from the top of the image
+    down. ``hint`` is the saddle where the search started (pixels)."""
+    img = grey_8bit_scale(image)
+    found: list[tuple[float, int, MarkerDetection]] = []
+    for radius in radii_px:
+        sigma = max(1.0, radius / 3.0)
+        b = cv2.GaussianBlur(img, (0, 0), sigma)
+        ixx = cv2.Sobel(b, cv2.CV_32F, 2, 0, ksize=3)
+        iyy = cv2.Sobel(b, cv2.CV_32F, 0, 2, ksize=3)
+        ixy = cv2.Sobel(b, cv2.CV_32F, 1, 1, ksize=3)
+        resp = ixy * ixy - ixx * iyy
+        # an X-junction of contrast C gives a response of the order of (C/σ²)²/16: half of that at the
+        # least contrast accepted keeps every candidate worth the test
+        floor = 0.5 * (min_contrast / (4.0 * sigma * sigma)) ** 2
+        peak = (resp >= cv2.dilate(resp, np.ones((2 * radius + 1, 2 * radius + 1), np.uint8))) & (resp > floor)
+        m = 3 * radius + 2  # room for the check at 1.5 × radius
+        peak[:m], peak[-m:], peak[:, :m], peak[:, -m:] = False, False, False, False
+        vs, us = np.nonzero(peak)
+        order = np.argsort(-resp[vs, us])[:max_candidates]
+        system = _symmetry_system(img, radius)
+        for v0, u0 in zip(vs[order], us[order], strict=True):
+            start = (float(u0), float(v0))
+            # a loose test at the saddle first: most candidates (edges' ends, texture) stop here
+            if _x_check(img, start, float(radius))[1] < 0.5 * min_x_score:
+                continue
+            u, v = _symmetric_centre(img, start, radius, system=system)
+            if not (np.isfinite(u) and np.isfinite(v)) or np.hypot(u - u0, v - v0) > radius:
+                continue
+            # a printed checker's squares reach beyond the radius it was found at; a texture's X does not
+            checks = [_x_check(img, (u, v), float(r)) for r in (radius, 1.5 * radius)]
+            contrast, x_score, asym = (min(c[0] for c in checks), min(c[1] for c in checks),
+                                       max(c[2] for c in checks))
+            if contrast < min_contrast or x_score < min_x_score or asym > max_asymmetry:
+                continue
+            det = MarkerDetection(name="", hint=start, pixel=(u, v), contrast=contrast, x_score=x_score,
+                                  asymmetry=asym, sigma_px=symmetric_centre_sigma(img, (u, v), radius))
+            found.append((x_score, radius, det))
+    kept: list[tuple[int, MarkerDetection]] = []
+    for _, radius, det in sorted(found, key=lambda f: -f[0]):
+        if all(np.hypot(det.pixel[0] - k.pixel[0], det.pixel[1] - k.pixel[1]) > max(radius, r) for r, k in kept):
+            kept.append((radius, det))
+    dets = sorted((d for _, d in kept), key=lambda d: (d.pixel[1], d.pixel[0]))
+    return [replace(d, name=f"m{i}") for i, d in enumerate(dets)]
+
+
+@dataclass(frozen=True)
+class MarkGroups:
+    """Marks found without hints, assigned to the set-up's two planes by where they lie in the image: the
+    lower plane (a desk, the ground) below the upper one (a wall, a facade). ``lower`` and ``upper`` are
+    empty when no split holds at least 4 marks on each side with the two groups' outlines apart; ``why``
+    then says what was found."""
+
+    lower: tuple[MarkerDetection, ...]
+    upper: tuple[MarkerDetection, ...]
+    why: str = ""
+
+
+def split_marks(dets: Sequence[MarkerDetection]) -> MarkGroups:
+    """Split marks into the plane below and the plane above: at the widest gap between their image rows
+    that leaves ≥ 4 marks on each side, when the upper group's lowest mark lies above the line through the
+    lower group's two highest marks (their outlines do not interleave)."""
+    dets = sorted(dets, key=lambda d: d.pixel[1])
+    n = len(dets)
+    if n < 8:
+        return MarkGroups((), (), f"{n} printed 2x2 checker(s) found in the first frame; two planes need 4 each")
+    v = np.array([d.pixel[1] for d in dets])
+    gaps = np.diff(v)
+    cut = max(range(3, n - 4), key=lambda i: gaps[i])
+    upper, lower = dets[: cut + 1], dets[cut + 1:]
+    top2 = sorted(lower, key=lambda d: d.pixel[1])[:2]
+    (u1, v1), (u2, v2) = top2[0].pixel, top2[1].pixel
+
+    def line_v(u: float) -> float:
+        return v1 if abs(u2 - u1) < 1e-9 else v1 + (v2 - v1) * (u - u1) / (u2 - u1)
+
+    if not all(d.pixel[1] < line_v(d.pixel[0]) for d in upper):
+        return MarkGroups((), (), f"{n} printed 2x2 checkers found in the first frame, but no row splits them "
+                          "into two planes of 4 or more (the planes' marks interleave in the image)")
+    return MarkGroups(tuple(lower), tuple(upper))
 
 
 def find_cross(

@@ -45,6 +45,9 @@ STEPS = {
     "two-plane": "# Next: fill in the markers below, check with `gnomon preview {name}`,\n"
                  "# propose the regions with `gnomon regions {name}` (from the markers, or grown from rough\n"
                  "# rectangles of bare desk and wall given as regions), then `gnomon scan {name}`.",
+    "two-plane-found": "# Next: check the marks found (drawn in {drawing}) with `gnomon preview {name}`,\n"
+                       "# propose the regions with `gnomon regions {name}` (it switches on each plane's mask\n"
+                       "# below), then `gnomon scan {name}`.",
     "lamp": "# Next: fill in the desk's board (or markers) and each pencil photo's base and tip,\n"
             "# locate the lamp with `gnomon calibrate lamp {name}` (it writes lamp.toml), check with\n"
             "# `gnomon preview {name}`, draw two rough bands of bare desk (regions), grow them with\n"
@@ -89,6 +92,27 @@ normal = [0.0, 0.0, 1.0]
 x_axis = [1.0, 0.0, 0.0]
 markers = [
   # {{ id = {first_id}, plane_xy = [0.0, 0.0], pixel_hint = [u, v] }},
+]
+{regions}
+'''
+
+FOUND_MARKERS_HOWTO = '''\
+# Its marks: printed 2x2 checkers found in the first frame by `gnomon init` (drawn in {drawing}), taken
+# as a rectangle's corners of unknown size (field_logs/README.md, "Marks nobody measured"). Measured
+# positions, if you have them, go in as plane_xy = [x, y] on every mark.
+'''
+
+FOUND_PLANE = '''\
+[[planes]]
+# {what}
+{howto}name = "{name}"
+point = [0.0, 0.0, 0.0]
+normal = [0.0, 0.0, 1.0]
+x_axis = [1.0, 0.0, 0.0]
+# off_rectangle_px = {off}  # how far (px, 1 sigma) the marks may lie off a true rectangle (the default): 0.5-1
+                          # placed with a ruler and a square, 3-5 by eye
+{distance}markers = [
+{marks}
 ]
 {regions}
 '''
@@ -301,6 +325,56 @@ def _folder_frames(folder: Path) -> tuple[Path, ...]:
                                        "one video)"))
 
 
+def corrupt_frames(files: list[Path]) -> list[tuple[Path, str]]:
+    """The frame files whose image data is corrupt inside (decoded as a scan decodes them), with the
+    decoder's words; a file that cannot be read at all is an error naming it."""
+    from gnomon.capture.frames import decode_frame_file
+    from gnomon.errors import CorruptFrameError
+
+    bad = []
+    for f in files:
+        try:
+            decode_frame_file(f)
+        except CorruptFrameError as exc:
+            bad.append((f, str(exc).split(": ", 1)[-1]))
+    return bad
+
+
+def _found_plane(name: str, what: str, marks, first_id: int, drawing: str, regions_help: bool,
+                 units_line: bool) -> str:
+    """A [[planes]] table whose markers were found in the first frame (pixels as found, no plane_xy)."""
+    regions = REGIONS_MASK.format(name=name) if regions_help else f'# mask = "regions/{name}_mask.png"'
+    lines = ",\n".join(f"  {{ id = {first_id + i}, pixel_hint = [{m.pixel[0]:.1f}, {m.pixel[1]:.1f}] }}"
+                        for i, m in enumerate(marks))
+    distance = (f"# mark_distance = {{ between = [{first_id}, {first_id + 1}], length = L }}  # one measured "
+                "spacing sets the lengths (then [capture] units = \"mm\")\n") if units_line else ""
+    return FOUND_PLANE.format(what=f"The {name}. {what}", howto=FOUND_MARKERS_HOWTO.format(drawing=drawing),
+                              name=name, off="1.0", distance=distance, marks=lines, regions=regions)
+
+
+def draw_found_marks(image, groups, names: tuple[str, str], path: Path) -> None:
+    """The first frame with each found mark circled and labelled with its plane and id (a PNG)."""
+    import cv2
+    import numpy as np
+
+    from gnomon.capture.frames import grey_8bit_scale
+
+    img = cv2.cvtColor(np.clip(grey_8bit_scale(image), 0, 255).astype(np.uint8), cv2.COLOR_GRAY2BGR)
+    size = max(img.shape[:2]) / 800.0
+    for (marks, name, colour, first) in ((groups.lower, names[0], (0, 200, 0), 0),
+                                         (groups.upper, names[1], (0, 140, 255), len(groups.lower))):
+        for i, m in enumerate(marks):
+            c = (int(round(m.pixel[0])), int(round(m.pixel[1])))
+            cv2.circle(img, c, int(12 * size), colour, max(1, int(2 * size)), cv2.LINE_AA)
+            cv2.putText(img, f"{name} {first + i}", (c[0] + int(14 * size), c[1] - int(8 * size)),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.5 * size, colour, max(1, int(size)), cv2.LINE_AA)
+    from gnomon.util import atomic
+
+    ok, buf = cv2.imencode(".png", img)
+    if ok:
+        atomic.write_bytes(path, buf.tobytes())
+
+
 def run(args: argparse.Namespace) -> int:
     from gnomon.capture.frames import FrameSource, expand_glob_argument, natural_key, video_fps
     from gnomon.errors import GnomonError
@@ -374,17 +448,45 @@ def run(args: argparse.Namespace) -> int:
     light, name = args.light, out.name
     units = "m" if light == "sun" else "mm"
     capture = CAPTURE.format(frames=frames, count=count, what=what, width=width, height=height, units=units)
+    corrupt = [] if video else corrupt_frames(files)
+    if corrupt:
+        listed = "; ".join(f"{p.name}: {why}" for p, why in corrupt[:5]) + ("; ..." if len(corrupt) > 5 else "")
+        capture += (f'on_corrupt_frame = "drop"  # {len(corrupt)} corrupt frame(s) left out (the scan names them): '
+                    f"{listed}\n# replace them from the camera's card or a backup and delete this line to use them\n")
+        print(f"warning: {len(corrupt)} of the {len(files)} frames are corrupt ({listed}): the field log leaves "
+              "them out (on_corrupt_frame = \"drop\"); replace them from the camera's card or a backup to use them")
     if light == "sun":
         fps = video_fps(files[0]) if video else None  # a rate of 10^4 or more is a container's time base
         capture += _sun_times(files, video, fps if fps is not None and fps < 1e4 else None)
     howto = MARKERS_HOWTO.format(units=units)
+    found_note = ""
+    if light == "two-plane":
+        from gnomon.camera.plane_pose import search_markers, split_marks
+
+        groups = split_marks(search_markers(first.grey))
+        if groups.lower:
+            drawing = out.with_name(out.stem + "_marks.png")
+            draw_found_marks(first.grey, groups, ("desk", "wall"), drawing)
+            units = "relative"
+            capture = capture.replace('units = "mm"', 'units = "relative"  # the unit is the desk\'s distance '
+                                      'from the camera; or "mm" with a mark_distance')
+            planes = [_found_plane("desk", "Its marks' rectangle is the world frame: origin at its centre, z up "
+                                   "from the desk, x along its side nearer the image's rows.",
+                                   groups.lower, 0, drawing.name, True, True),
+                      _found_plane("wall", "Placed by its own marks, its distance from where it meets the desk.",
+                                   groups.upper, len(groups.lower), drawing.name, False, False)]
+            found_note = (f"; found {len(groups.lower)} marks on the desk and {len(groups.upper)} on the wall "
+                          f"(drawn in {drawing.name})")
+        else:
+            found_note = f"; {groups.why}: give the markers' pixels by hand"
     if light in ("two-plane", "sun"):
-        named = ("desk", "wall") if light == "two-plane" else ("ground", "facade")
-        where = ("origin `point`, axes `x_axis` and normal x x_axis" if light == "two-plane"
-                 else "z up; its x axis is [site] heading_deg")
-        planes = [_marked_plane(named[0], f"Its markers' frame is the world frame ({where}).", howto, 0, True),
-                  _marked_plane(named[1], "In its own frame (placed in the world by its own markers: no pose to "
-                                 "type).", "", 4, False)]
+        if not found_note.startswith("; found"):
+            named = ("desk", "wall") if light == "two-plane" else ("ground", "facade")
+            where = ("origin `point`, axes `x_axis` and normal x x_axis" if light == "two-plane"
+                     else "z up; its x axis is [site] heading_deg")
+            planes = [_marked_plane(named[0], f"Its markers' frame is the world frame ({where}).", howto, 0, True),
+                      _marked_plane(named[1], "In its own frame (placed in the world by its own markers: no pose "
+                                    "to type).", "", 4, False)]
     else:
         if args.board is not None or args.square is not None or args.board_image is not None:
             # a "COLSxROWS" left in the log is refused by name, a NaN square too: both stop the calibration
@@ -415,11 +517,13 @@ def run(args: argparse.Namespace) -> int:
     setup = {"two-plane": "two-plane capture", "lamp": "desk-lamp capture", "sun": "sun capture"}[light]
     sections = [capture, "[camera]\n" + camera, *planes, *([SITE] if light == "sun" else []),
                 LIGHT[light].format(name=name), scan]
-    text = HEADER.format(setup=setup, steps=STEPS[light].format(name=name)) + "\n".join(sections)
+    steps = (STEPS["two-plane-found"].format(name=name, drawing=out.stem + "_marks.png")
+             if found_note.startswith("; found") else STEPS[light].format(name=name))
+    text = HEADER.format(setup=setup, steps=steps) + "\n".join(sections)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic.write_text(out, text)
-    todo = {"two-plane": "fill in the markers", "lamp": "fill in the board and the pencil photos",
-            "sun": "fill in [site] and the markers"}[light]
-    print(f"wrote {out}: {count} {what} of {width}x{height}; {todo}, then "
+    todo = {"two-plane": "check the marks" if found_note.startswith("; found") else "fill in the markers",
+            "lamp": "fill in the board and the pencil photos", "sun": "fill in [site] and the markers"}[light]
+    print(f"wrote {out}: {count} {what} of {width}x{height}{found_note}; {todo}, then "
           + (f"`gnomon calibrate lamp {out}`" if light == "lamp" else f"`gnomon preview {out}`"))
     return 0

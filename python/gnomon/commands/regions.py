@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -166,4 +167,55 @@ def run(args: argparse.Namespace) -> int:
     first = tracked.first_color if tracked.first_color is not None else tracked.first_grey
     _png(out / "regions.png", draw_regions(first, [r.mask for r in proposals]))
     print(f"wrote {out / 'regions.toml'}, {len(proposals)} masks and {out / 'regions.png'}")
+    masks = {r.name: (rel / f"{r.name}_mask.png").as_posix() for r in proposals if r.mask.any()}
+    text = args.field_log.read_text(encoding="utf-8")
+    switched, text = switch_on_masks(text, masks)
+    if switched:
+        atomic.write_text(args.field_log, text)
+        print(f"{args.field_log}: {' and '.join(switched)} now read their masks (the template's `mask` lines "
+              "switched on)")
+    rest = [n for n in masks if n not in switched and not _reads_mask(text, n, masks[n])]
+    if rest:
+        print(f"add each plane's `mask` from {out / 'regions.toml'} to {args.field_log} ({', '.join(rest)})")
     return 0
+
+
+_TABLE = re.compile(r"^\[\[planes\]\][^\n]*$", re.M)
+
+
+def _plane_blocks(text: str) -> list[tuple[int, int, str]]:
+    """(start, end, name) of each [[planes]] table of a field log's text (the name from its `name = ` line)."""
+    starts = [m.start() for m in _TABLE.finditer(text)]
+    blocks = []
+    for i, a in enumerate(starts):
+        b = starts[i + 1] if i + 1 < len(starts) else len(text)
+        head = text.find("\n", a, b)
+        head = b if head < 0 else head
+        nxt = re.search(r"^\[(?!\[planes\.)[^\n]*$", text[head:b], re.M)  # a following table ends it
+        b = head + nxt.start() if nxt else b
+        name = re.search(r'^name\s*=\s*"([^"]*)"', text[a:b], re.M)
+        blocks.append((a, b, name.group(1) if name else ""))
+    return blocks
+
+
+def _reads_mask(text: str, name: str, path: str) -> bool:
+    return any(n == name and re.search(rf'^mask\s*=\s*"{re.escape(path)}"', text[a:b], re.M)
+               for a, b, n in _plane_blocks(text))
+
+
+def switch_on_masks(text: str, masks: dict[str, str]) -> tuple[list[str], str]:
+    """Uncomment, in each named plane's table, the line ``# mask = "PATH"`` that `gnomon init` writes, where
+    PATH is the mask just written for it; a table with any other `mask` (or none commented) is left as it is.
+    Returns the planes switched on and the new text."""
+    switched = []
+    for a, b, name in reversed(_plane_blocks(text)):
+        path = masks.get(name)
+        if path is None or re.search(r"^mask\s*=", text[a:b], re.M):
+            continue
+        line = re.search(rf'^# mask = "{re.escape(path)}"[^\n]*$', text[a:b], re.M)
+        if line is None:
+            continue
+        text = (text[:a + line.start()] + f'mask = "{path}"  # written by `gnomon regions`'
+                + text[a + line.end():])
+        switched.append(name)
+    return sorted(switched, key=list(masks).index), text
