@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from functools import partial
 from pathlib import Path
 
 from gnomon.commands import COMMANDS
@@ -161,28 +162,35 @@ def _fmt(v: float, s: float | None) -> str:
     return f"{v:.6g}" if s is None else f"{v:.6g} ± {s:.2g}"
 
 
-def _record_calibration(cal, path: Path) -> None:
-    """A recording of the calibration: every used view, the board reprojected with the
+def _open_recording(path: Path):
+    """The calibration's recording, opened on its own thread (:class:`~gnomon.recording.worker.RecordingWorker`:
+    rerun's import and the viewer's layout, ≈ 1 s of CPU, while the boards are found)."""
+    from gnomon.recording.recorder import ScanRecording
+    from gnomon.recording.worker import RecordingWorker
+
+    return RecordingWorker(lambda: ScanRecording(path, recording_name="calibrate camera", frame_stride=1,
+                                                 image_scale=1.0))
+
+
+def _log_calibration(cal, rec) -> None:
+    """Log the calibration into the recording ``rec``: every used view, the board reprojected with the
     calibrated camera and that view's pose, the per-view RMS, and the warnings."""
     import numpy as np
 
     from gnomon.camera import calibration
     from gnomon.camera.models import Pose
-    from gnomon.recording.recorder import ScanRecording
 
     cam = cal.camera
     board = calibration.board_points(cal.board[0], cal.board[1], cal.square)
-    with ScanRecording(path, recording_name=f"calibrate camera ({cal.method})", frame_stride=1,
-                       image_scale=1.0) as rec:
-        rec.log_camera(cam.K, cam.width, cam.height, np.eye(3), np.zeros(3), "board units")
-        for i, (name, pose, rms) in enumerate(zip(cal.names, cal.poses, cal.per_view_rms_px, strict=True)):
-            image = cal.photos.get(name, cal.video_frames.get(name))
-            rec.log_frame(i, image if image is not None else calibration.read_grey(name))
-            rec.log_image_points(i, cam.project(Pose(pose.R, pose.t).world_to_camera(board)), name="board")
-            rec.log_metrics({"view_rms_px": float(rms)}, index=i)
-        for w in cal.warnings:
-            rec.log_warning(w)
-        rec.log_metrics({"rms_px": float(cal.rms_px), "views": float(cal.n_views)})
+    rec.log_camera(cam.K, cam.width, cam.height, np.eye(3), np.zeros(3), "board units")
+    for i, (name, pose, rms) in enumerate(zip(cal.names, cal.poses, cal.per_view_rms_px, strict=True)):
+        image = cal.photos.get(name, cal.video_frames.get(name))
+        rec.log_frame(i, image if image is not None else calibration.read_grey(name))
+        rec.log_image_points(i, cam.project(Pose(pose.R, pose.t).world_to_camera(board)), name="board")
+        rec.log_metrics({"view_rms_px": float(rms)}, index=i)
+    for w in [f"method: {cal.method}", *cal.warnings]:
+        rec.log_warning(w)
+    rec.log_metrics({"rms_px": float(cal.rms_px), "views": float(cal.n_views)})
 
 
 def run(args: argparse.Namespace) -> int:
@@ -210,34 +218,39 @@ def run(args: argparse.Namespace) -> int:
     if video_views < calibration.MIN_ZHANG_VIEWS:
         raise GnomonError(f"--video-views {video_views}: must be ≥ {calibration.MIN_ZHANG_VIEWS}")
     paths = calibration.expand_image_args(args.images)
-    if not args.no_rrd:
-        from gnomon.recording.recorder import warm_rerun_import
+    # the recording is opened (rerun's import and layout) on its own thread while the boards are found
+    recording = None if args.no_rrd else _open_recording(Path(args.rrd) if args.rrd
+                                                          else Path(args.out).with_suffix(".rrd"))
+    try:
+        with Progress("boards", len(paths), enabled=not args.quiet) as bar:
 
-        warm_rerun_import()  # rerun is imported (≈ 1 s) while the boards are found
-    with Progress("boards", len(paths), enabled=not args.quiet) as bar:
+            def progress(done: int, total: int, name: str) -> None:
+                bar.total = total  # an image counts one, a video its frames (known once the videos are opened)
+                bar.update(done)
 
-        def progress(done: int, total: int, name: str) -> None:
-            bar.total = total  # an image counts one, a video its frames (known once the videos are opened)
-            bar.update(done)
-
-        cal = calibration.calibrate_images(
-            paths,
-            board,
-            args.square,
-            model=args.model,
-            pixel_pitch_mm=pitch,
-            sx=args.sx,
-            full=args.full,
-            fix_k3=args.fix_k3,
-            reject_factor=args.reject,
-            progress=progress,
-            max_video_views=video_views,
-            keep_photos=not args.no_rrd,
-        )
+            cal = calibration.calibrate_images(
+                paths,
+                board,
+                args.square,
+                model=args.model,
+                pixel_pitch_mm=pitch,
+                sx=args.sx,
+                full=args.full,
+                fix_k3=args.fix_k3,
+                reject_factor=args.reject,
+                progress=progress,
+                max_video_views=video_views,
+                keep_photos=not args.no_rrd,
+            )
+    except BaseException:
+        if recording is not None:
+            recording.abort()  # no recording of a calibration that did not happen
+        raise
     for w in cal.warnings:
         print(f"gnomon: warning: {w}", file=sys.stderr)
-    if not args.no_rrd:
-        _record_calibration(cal, Path(args.rrd) if args.rrd else Path(args.out).with_suffix(".rrd"))
+    if recording is not None:
+        recording.submit(partial(_log_calibration, cal))
+        recording.finish()
 
     print(f"{'view':40s} {'RMS px':>8s}  status")
     rms = dict(zip(cal.names, cal.per_view_rms_px, strict=True))
