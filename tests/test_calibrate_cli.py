@@ -153,3 +153,18 @@ def test_calibrate_lamp_is_wired(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2
     assert len(error_lines(err)) == 1 and ("nope.toml" in err or "not available" in err)
+
+
+@pytest.mark.slow  # the boards sought on blank photos by every detector, and rerun opened: seconds
+def test_a_calibration_that_fails_leaves_no_recording(tmp_path, capsys) -> None:
+    """Photos without a board: exit 2 in one line, and neither the camera file nor the recording (opened
+    while the boards were sought) is left behind."""
+    rng = np.random.default_rng(0)
+    for k in range(3):
+        cv2.imwrite(str(tmp_path / f"blank_{k}.png"), rng.integers(100, 140, (240, 320), dtype=np.uint8))
+    out = tmp_path / "camera.toml"
+    assert run_cli(["calibrate", "camera", str(tmp_path), "--board", "9x6", "--square", "25", "--out", str(out),
+                    "--quiet"]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert not out.exists() and not out.with_suffix(".rrd").exists()
+    assert not [p for p in tmp_path.iterdir() if p.suffix not in (".png",)], list(tmp_path.iterdir())

@@ -46,7 +46,7 @@ def walk(root: Path, sim: Path, coplanar: bool) -> dict:
     views = sorted(str(p) for p in (root / "board").glob("view_*.png"))
     steps = {
         "calibrate": ["calibrate", "camera", *views, "--board", "9x6", "--square", "25", "--out",
-                      str(root / "camera.toml"), "--no-rrd"],
+                      str(root / "camera.toml"), "--quiet"],
         "init": ["init", str(root / "frames"), "--camera", str(root / "camera.toml")],
         "regions": ["regions", str(root / "field_log.toml"), "--quiet"],
         "scan": ["scan", str(root / "field_log.toml"), "--out", str(root / "scan"), "--no-rrd", "--quiet"],
@@ -94,6 +94,7 @@ def test_the_walkthrough_needs_no_edit(walked: dict, board: str) -> None:
     assert [p["mask"] for p in log["planes"]] == ["regions/desk_mask.png", "regions/wall_mask.png"]
     report = json.loads((w["root"] / "scan" / "report.json").read_text())
     assert any(w["corrupt"].name in m for m in report["warnings"]), report["warnings"]
+    assert (w["root"] / "camera.rrd").stat().st_size > 0  # the calibration's recording, by default
     method = tomllib.loads((w["root"] / "camera.toml").read_text())["calibration"]["method"]
     assert method == ("zhang-coplanar" if board == "on_desk" else "zhang")
 
