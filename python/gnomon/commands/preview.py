@@ -93,7 +93,9 @@ def run(args: argparse.Namespace) -> int:
     for k, photo in enumerate(raw.get("photos", []) if isinstance(raw, dict) else []):
         for key in ("base", "tip"):
             if isinstance(photo, dict) and isinstance(photo.get(key), list) and len(photo[key]) == 2:
-                pencil.append((f"pencil {k} {key}", np.asarray(photo[key], dtype=np.float64)))
+                image = photo.get("image")  # named as the user's files are, not by a count from 0
+                label = Path(image).name if isinstance(image, str) else f"pencil photo {k + 1}"
+                pencil.append((f"{label} {key}", np.asarray(photo[key], dtype=np.float64)))
     image = setup_preview(first, camera, log.pose, drawings, pencil)
     out = args.out if args.out is not None else log.path.with_name(log.path.stem + "_preview.png")
     ok, data = cv2.imencode(".png", image)
