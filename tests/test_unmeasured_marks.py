@@ -366,6 +366,10 @@ def test_a_capture_whose_marks_nobody_measured_scans_to_a_tenth_of_a_percent(unm
         print(f"{entry['plane']}: normal {error:.4f}° off, bound {limits[entry['plane']]:.4f}°")
         assert error <= limits[entry["plane"]], entry
     assert report[1]["distance"] == "tied to desk" and report[1]["tie"]["frames"] > 50
+    for entry in report:  # the rectangle's pose in the report is the tied plane's, not the provisional one's
+        assert np.dot(entry["normal_cam"], entry["tvec"]) == pytest.approx(entry["offset_cam"], rel=1e-9)
+    wall_side = np.ptp(truth["marker_plane_xy"][1], axis=0).max() / np.ptp(truth["marker_plane_xy"][0], axis=0).max()
+    assert max(report[1]["rectangle"]) / max(report[0]["rectangle"]) == pytest.approx(wall_side, rel=0.005)
     assert result.report["units"] == "relative"
     assert not [w for w in result.warnings if "[[planes]]" in w], result.warnings
     # world z up from the desk: the camera above it, the sphere's top above it

@@ -112,6 +112,15 @@ def apply_ties(setup: ScanSetup, ties: dict[str, CornerTie | None], warnings: li
         plane = moved(planes[k].plane, tie.offset)
         planes[k] = dataclasses.replace(planes[k], plane=plane)
         entry = by_name[name]
+        # the marks' rays meet the moved plane at their points scaled about the camera centre: the rectangle's
+        # pose and size in the report scale with the distance (they were the provisional plane's)
+        ratio = abs(tie.offset) / float(entry["offset_cam"]) if entry.get("offset_cam") else 1.0
+        if "tvec" in entry:
+            entry["tvec"] = [ratio * float(x) for x in entry["tvec"]]
+        if "rectangle" in entry:
+            entry["rectangle"] = [ratio * float(x) for x in entry["rectangle"]]
+        if "marks_xy" in entry:
+            entry["marks_xy"] = {m: [ratio * float(x) for x in xy] for m, xy in entry["marks_xy"].items()}
         entry.update(offset_cam=abs(tie.offset), std_offset=tie.sigma, std_offset_relative=tie.sigma / abs(tie.offset),
                      distance=f"tied to {anchor}",
                      world_point=setup.pose.camera_to_world(plane.origin).tolist(),
