@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import re
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -382,7 +383,8 @@ def test_tips_found_against_the_photos_median(desk_lamp_full, dark_pencil, tmp_p
     toml_io.dump(log, cap / "auto.toml")
     capsys.readouterr()
     assert main(["calibrate", "lamp", str(cap / "auto.toml")]) == 0
-    found = [line for line in capsys.readouterr().out.splitlines() if "found against the median" in line]
+    out = capsys.readouterr().out
+    found = [line for line in out.splitlines() if "found against the median" in line]
     pixels = np.array([[float(x) for x in re.findall(r"-?\d+\.\d+", line)] for line in found])
     truth = np.load(cap / "ground_truth.npz")
     assert np.linalg.norm(pixels[:, 2:4] - truth["pencil_tip_pixels"], axis=1).max() <= 2.0
@@ -390,6 +392,11 @@ def test_tips_found_against_the_photos_median(desk_lamp_full, dark_pencil, tmp_p
     lamp = tomllib.loads((cap / "lamp.toml").read_text())
     position, sigma = (np.array(lamp["light"]["position"]), np.array(lamp["lamp_calibration"]["sigma"]))
     assert np.all(np.abs(position - truth["lamp"]) <= 3.0 * sigma)
+    # each photo's tip against where the solved lamp puts it, by the photo's file name, and drawn
+    misses = {name: float(px) for name, px in re.findall(r"^  (\S+\.\w+): (\d+\.\d+) px$", out, re.M)}
+    assert sorted(misses) == sorted(Path(p["image"]).name for p in log["pencil"]["photos"])
+    assert max(misses.values()) <= 2.0 + 2.0  # a tip found within 2 px, the lamp's within 2 px of the truth's
+    assert cv2.imread(str(cap / "lamp_tips.png")) is not None
 
 
 def test_a_missing_tip_needs_the_empty_desk_or_three_photos(tmp_path, capsys) -> None:

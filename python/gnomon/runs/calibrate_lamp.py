@@ -86,6 +86,72 @@ def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
     return replace(log, bases_px=bases, tips_px=tips), lines
 
 
+def predicted_tips_px(log: PencilLog, cal) -> np.ndarray:
+    """(N, 2) pixels where the solved lamp puts each photo's shadow tip: the ray from the lamp through
+    the pencil's top, met with the plane, seen by the camera."""
+    lamp = np.asarray(cal.position_world, dtype=np.float64)
+    n = np.asarray(cal.plane_normal_world, dtype=np.float64)
+    tops = np.asarray(cal.tops_world, dtype=np.float64)
+    d = tops - lamp
+    s = ((log.plane_point - lamp) @ n) / (d @ n)
+    on_plane = lamp + s[:, None] * d
+    return np.asarray(log.camera.project(log.pose.world_to_camera(on_plane)), dtype=np.float64).reshape(-1, 2)
+
+
+def draw_tips(log: PencilLog, predicted: np.ndarray, path: Path) -> None:
+    """``lamp_tips.png``: each pencil photo cropped around its pencil and shadow, its base (green), its
+    shadow's tip as clicked or found (red) and where the solved lamp puts it (yellow cross), labelled with
+    the photo's file name and the tip's miss in pixels. Photos the log does not name, or that cannot be
+    read beside it, are left out (and named)."""
+    import cv2
+
+    from gnomon.camera.calibration import read_grey
+    from gnomon.capture.frames import grey_8bit_scale
+    from gnomon.util import atomic
+
+    tiles, unread = [], []
+    for name, base, tip, pred in zip(log.images, log.bases_px, log.tips_px, predicted, strict=True):
+        if name is None:
+            continue
+        try:
+            img = np.clip(grey_8bit_scale(read_grey(log.path.parent / name)), 0, 255).astype(np.uint8)
+        except GnomonError:  # the photo is only named (its pixels clicked elsewhere): nothing to draw on
+            unread.append(Path(name).name)
+            continue
+        pts = np.array([base, tip, pred])
+        span = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 1])), 40.0)
+        c = pts.mean(axis=0)
+        half = 0.75 * span
+        x0, y0 = int(max(c[0] - half, 0)), int(max(c[1] - half, 0))
+        x1, y1 = int(min(c[0] + half, img.shape[1])), int(min(c[1] + half, img.shape[0]))
+        crop = cv2.cvtColor(img[y0:y1, x0:x1], cv2.COLOR_GRAY2BGR)
+        k = 300.0 / max(crop.shape[:2])
+        crop = cv2.resize(crop, None, fx=k, fy=k, interpolation=cv2.INTER_AREA if k < 1 else cv2.INTER_LINEAR)
+
+        def at(p: np.ndarray) -> tuple[int, int]:
+            return int(round((p[0] - x0) * k)), int(round((p[1] - y0) * k))
+
+        cv2.circle(crop, at(base), 6, (0, 200, 0), 2, cv2.LINE_AA)
+        cv2.circle(crop, at(tip), 6, (0, 0, 255), 2, cv2.LINE_AA)
+        cv2.drawMarker(crop, at(pred), (0, 230, 255), cv2.MARKER_CROSS, 14, 2, cv2.LINE_AA)
+        tile = np.full((330, 300, 3), 255, np.uint8)
+        tile[:crop.shape[0], :crop.shape[1]] = crop
+        miss = float(np.hypot(*(tip - pred)))
+        cv2.putText(tile, f"{Path(name).name}  tip off {miss:.1f} px", (4, 322), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                    (0, 0, 0), 1, cv2.LINE_AA)
+        tiles.append(tile)
+    if unread:
+        print(f"note: {path.name} leaves out {', '.join(unread)} (not readable beside the log)")
+    if not tiles:
+        return
+    per_row = min(len(tiles), 4)
+    rows = [np.hstack(tiles[i:i + per_row] + [np.full_like(tiles[0], 255)] * (per_row - len(tiles[i:i + per_row])))
+            for i in range(0, len(tiles), per_row)]
+    ok, buf = cv2.imencode(".png", np.vstack(rows))
+    if ok:
+        atomic.write_bytes(path, buf.tobytes())
+
+
 def _decimals(sigma: float) -> int:
     """Decimals showing a value to about a tenth of its 1σ."""
     if not (sigma > 0 and math.isfinite(sigma)):
@@ -140,6 +206,12 @@ def calibrate_lamp_cli(args: argparse.Namespace) -> int:
         print(f"  photo {i + 1}: {r:.{dec + 1}f}{name}")
     if math.isfinite(cal.chi2):
         print(f"consistency: χ² = {cal.chi2:.3g} for {cal.dof} dof; line spread {cal.line_spread_deg:.1f}°")
+    predicted = predicted_tips_px(log, cal)
+    print("shadow tips against the lamp's (pixels, base green, tip red, the lamp's yellow in "
+          f"{log.path.with_name('lamp_tips.png').name}):")
+    for i, (tip, pred) in enumerate(zip(log.tips_px, predicted, strict=True)):
+        name = log.images[i] or f"photo {i + 1}"
+        print(f"  {Path(name).name}: {float(np.hypot(*(tip - pred))):.2f} px")
     for w in cal.warnings:
         print(f"warning: {w}")
 
@@ -172,5 +244,6 @@ def calibrate_lamp_cli(args: argparse.Namespace) -> int:
         f"World frame, {u}; covariance in {u}². Paste [light] into a scan's field log."
     )
     toml_io.dump(data, out, header)
+    draw_tips(log, predicted, out.with_name("lamp_tips.png"))
     print(f"wrote {out}")
     return 0
