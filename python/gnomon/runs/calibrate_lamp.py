@@ -128,12 +128,10 @@ def draw_tips(log: PencilLog, predicted: np.ndarray, path: Path) -> None:
         k = 300.0 / max(crop.shape[:2])
         crop = cv2.resize(crop, None, fx=k, fy=k, interpolation=cv2.INTER_AREA if k < 1 else cv2.INTER_LINEAR)
 
-        def at(p: np.ndarray) -> tuple[int, int]:
-            return int(round((p[0] - x0) * k)), int(round((p[1] - y0) * k))
-
-        cv2.circle(crop, at(base), 6, (0, 200, 0), 2, cv2.LINE_AA)
-        cv2.circle(crop, at(tip), 6, (0, 0, 255), 2, cv2.LINE_AA)
-        cv2.drawMarker(crop, at(pred), (0, 230, 255), cv2.MARKER_CROSS, 14, 2, cv2.LINE_AA)
+        b, t, q = (tuple(int(round(x)) for x in (p - (x0, y0)) * k) for p in (base, tip, pred))
+        cv2.circle(crop, b, 6, (0, 200, 0), 2, cv2.LINE_AA)
+        cv2.circle(crop, t, 6, (0, 0, 255), 2, cv2.LINE_AA)
+        cv2.drawMarker(crop, q, (0, 230, 255), cv2.MARKER_CROSS, 14, 2, cv2.LINE_AA)
         tile = np.full((330, 300, 3), 255, np.uint8)
         tile[:crop.shape[0], :crop.shape[1]] = crop
         miss = float(np.hypot(*(tip - pred)))
