@@ -145,6 +145,16 @@ def _symmetric_centre(img: np.ndarray, start: tuple[float, float], radius: int, 
     return float(p[0]), float(p[1])
 
 
+def _saddle_response(img: np.ndarray, radius_px: int) -> np.ndarray:
+    """−det(H) of the image blurred to the radius's scale (σ = radius/3, at least 1 px): c² at an
+    X-junction of contrast c (any orientation), 0 on a straight edge, negative on a blob."""
+    b = cv2.GaussianBlur(img, (0, 0), max(1.0, radius_px / 3.0))
+    ixx = cv2.Sobel(b, cv2.CV_32F, 2, 0, ksize=3)
+    iyy = cv2.Sobel(b, cv2.CV_32F, 0, 2, ksize=3)
+    ixy = cv2.Sobel(b, cv2.CV_32F, 1, 1, ksize=3)
+    return ixy * ixy - ixx * iyy
+
+
 def find_marker(
     image: np.ndarray,
     hint: Sequence[float] | np.ndarray,
@@ -174,15 +184,7 @@ def find_marker(
     pad = int(np.ceil(search_px + 2 * radius_px + 4))
     x0, x1 = max(int(u0) - pad, 0), min(int(u0) + pad + 1, w)
     y0, y1 = max(int(v0) - pad, 0), min(int(v0) + pad + 1, h)
-    win = img[y0:y1, x0:x1]
-    sigma = max(1.0, radius_px / 3.0)
-    b = cv2.GaussianBlur(win, (0, 0), sigma)
-    ixx = cv2.Sobel(b, cv2.CV_32F, 2, 0, ksize=3)
-    iyy = cv2.Sobel(b, cv2.CV_32F, 0, 2, ksize=3)
-    ixy = cv2.Sobel(b, cv2.CV_32F, 1, 1, ksize=3)
-    # Saddle response −det(H): c² at an X-junction (any orientation), 0 on a
-    # straight edge, negative on a blob.
-    resp = ixy * ixy - ixx * iyy
+    resp = _saddle_response(img[y0:y1, x0:x1], radius_px)
     yy, xx = np.mgrid[y0:y1, x0:x1]
     inside = (xx - u0) ** 2 + (yy - v0) ** 2 <= search_px**2
     inside &= (xx >= radius_px) & (xx <= w - 1 - radius_px) & (yy >= radius_px) & (yy <= h - 1 - radius_px)
@@ -265,11 +267,7 @@ def search_markers(
     found: list[tuple[float, int, MarkerDetection]] = []
     for radius in radii_px:
         sigma = max(1.0, radius / 3.0)
-        b = cv2.GaussianBlur(img, (0, 0), sigma)
-        ixx = cv2.Sobel(b, cv2.CV_32F, 2, 0, ksize=3)
-        iyy = cv2.Sobel(b, cv2.CV_32F, 0, 2, ksize=3)
-        ixy = cv2.Sobel(b, cv2.CV_32F, 1, 1, ksize=3)
-        resp = ixy * ixy - ixx * iyy
+        resp = _saddle_response(img, radius)
         # an X-junction of contrast C gives a response of the order of (C/σ²)²/16: half of that at the
         # least contrast accepted keeps every candidate worth the test
         floor = 0.5 * (min_contrast / (4.0 * sigma * sigma)) ** 2

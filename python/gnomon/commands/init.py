@@ -83,13 +83,16 @@ MARKERS_HOWTO = '''\
 # pixel = [u, v] for the exact pixel of any other mark (a clicked cross).
 '''
 
-MARKED_PLANE = '''\
+PLANE_HEAD = '''\
 [[planes]]
 # {what}
 {howto}name = "{name}"
 point = [0.0, 0.0, 0.0]
 normal = [0.0, 0.0, 1.0]
 x_axis = [1.0, 0.0, 0.0]
+'''
+
+MARKED_PLANE = PLANE_HEAD + '''\
 markers = [
   # {{ id = {first_id}, plane_xy = [0.0, 0.0], pixel_hint = [u, v] }},
 ]
@@ -102,13 +105,7 @@ FOUND_MARKERS_HOWTO = '''\
 # positions, if you have them, go in as plane_xy = [x, y] on every mark.
 '''
 
-FOUND_PLANE = '''\
-[[planes]]
-# {what}
-{howto}name = "{name}"
-point = [0.0, 0.0, 0.0]
-normal = [0.0, 0.0, 1.0]
-x_axis = [1.0, 0.0, 0.0]
+FOUND_PLANE = PLANE_HEAD + '''\
 # off_rectangle_px = {off}  # how far (px, 1 sigma) the marks may lie off a true rectangle (the default): 0.5-1
                           # placed with a ruler and a square, 3-5 by eye
 {distance}markers = [
