@@ -476,6 +476,10 @@ def run(args: argparse.Namespace) -> int:
                           f"(drawn in {drawing.name})")
         else:
             found_note = f"; {groups.why}: give the markers' pixels by hand"
+            if groups.found:
+                found_note += " (the checkers found are listed in the desk's table)"
+                howto += ("# Printed 2x2 checkers found in the first frame (copy each into its plane's markers):\n"
+                          + "".join(f"#   pixel_hint = [{m.pixel[0]:.1f}, {m.pixel[1]:.1f}]\n" for m in groups.found))
     if light in ("two-plane", "sun"):
         if not found_note.startswith("; found"):
             named = ("desk", "wall") if light == "two-plane" else ("ground", "facade")
