@@ -89,7 +89,7 @@ def score(folder: Path) -> None:
     points = rays * (depth / rays[..., 2])[..., None]
     desk = rep["reference_planes"][0]
     R = Pose.from_rvec_tvec(np.array(desk["rvec"]), np.array(desk["tvec"])).R
-    d = (points - np.array(desk["tvec"])) @ R[:, 2]  # signed distance to the board's plane (mm)
+    d = (points - np.array(desk["tvec"])) @ R[:, 2]  # height above the board's plane (mm; its z is up, out of the desk)
     has = np.isfinite(depth)
     obj = circle(depth.shape, BOWL) | circle(depth.shape, CAST)
     # swept: a shadow time, with one at 80 % of the pixels around (not the sparse noise dips of the desk
@@ -107,7 +107,7 @@ def score(folder: Path) -> None:
           f"of {has.sum()}")
     bowl = circle(depth.shape, BOWL) & has
     print(f"bowl: points on {100 * bowl.sum() / circle(depth.shape, BOWL).sum():.1f} % of its disc; height above "
-          f"the desk p5 / p50 / p95 {' / '.join(f'{h:.1f}' for h in np.percentile(-d[bowl], [5, 50, 95]))} mm")
+          f"the desk p5 / p50 / p95 {' / '.join(f'{h:.1f}' for h in np.percentile(d[bowl], [5, 50, 95]))} mm")
 
 
 def auto_tips(mirror: Path, folder: Path, log: dict, tips: list, bases: list) -> None:
@@ -145,11 +145,69 @@ def auto_tips(mirror: Path, folder: Path, log: dict, tips: list, bases: list) ->
           f"(chi2 {lamp['lamp_calibration']['chi2']:.3g} for {lamp['lamp_calibration']['dof']} dof)", flush=True)
 
 
+def clicked_photos(mirror: Path, bases: list) -> dict[str, list]:
+    """Each clicked base's photo (the one darkest there against the photos' median: the author's script
+    does not say which click is which photo), by file name."""
+    files = sorted((mirror / "light").glob("*.jpg"))
+    greys = np.stack([cv2.imread(str(f), cv2.IMREAD_GRAYSCALE).astype(np.float32) for f in files])
+    ratio = (greys + 1.0) / (np.median(greys, axis=0) + 1.0)
+    out = {}
+    for b in bases:
+        u, v = int(round(b[0])), int(round(b[1]))
+        out[files[int(np.argmin(ratio[:, v - 3:v + 4, u - 3:u + 4].mean(axis=(1, 2))))].name] = b
+    if len(out) != len(bases):
+        raise SystemExit("two clicked bases fall in one photo: cannot tell which photo each click is from")
+    return out
+
+
+def walkthrough(mirror: Path, out: Path) -> None:
+    """The README's lamp walk-through, as a user runs it: `gnomon calibrate camera` on the board photos,
+    `gnomon init --light lamp` (the board photo from the scan's place, the pencil photos), then the only
+    edits: the pencil's length and each photo's base (the author's clicks); `gnomon calibrate lamp` (the
+    shadows' tips found), `gnomon regions` (from the two bands it starts from when none are given),
+    `gnomon scan`; scored as the scripted run is."""
+    folder = out / "walkthrough"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("bowl", "calib", "light"):
+        link = folder / name
+        if not link.exists():
+            link.symlink_to((mirror / name).resolve(), target_is_directory=True)
+    t0 = time.perf_counter()
+    run(["calibrate", "camera", str(folder / "calib"), "--board", BOARD, "--square", str(SQUARE_MM), "--out",
+         str(folder / "camera.toml"), "--quiet"])
+    path = folder / "field_log.toml"
+    run(["init", str(folder / "bowl"), "--camera", str(folder / "camera.toml"), "--light", "lamp", "--board", BOARD,
+         "--square", str(SQUARE_MM), "--board-image", str(folder / "calib" / "calib_1.jpg"), "--pencil",
+         str(folder / "light" / "*.jpg"), "--out", str(path), "--force"])
+    _, bases = clicked(mirror)
+    base_of = clicked_photos(mirror, bases)
+    text = path.read_text()
+    edited = text.replace("height = nan  # the pencil's length in mm: measure it", f"height = {PENCIL_MM}")
+
+    def fill(m: re.Match) -> str:
+        b = base_of[Path(m.group(1)).name]
+        return f'image = "{m.group(1)}"\nbase = [{b[0]:.0f}, {b[1]:.0f}]'
+
+    edited = re.sub(r'image = "(light/[^"]+)"\n# base = \[u, v\]  # the pencil\'s foot: fill in', fill, edited)
+    lines = sum(a != b for a, b in zip(text.splitlines(), edited.splitlines(), strict=True))
+    path.write_text(edited)
+    print(f"the field log's lines edited by hand: {lines} (the pencil's length and {len(base_of)} bases)")
+    run(["calibrate", "lamp", str(path)])
+    run(["regions", str(path), "--quiet"])
+    run(["scan", str(path), "--out", str(folder / "scan"), "--no-rrd", "--quiet"])
+    print(f"commands: {time.perf_counter() - t0:.0f} s")
+    score(folder)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("mirror", type=Path, help="checkout of Leeiieeo/3D-photography-on-your-desk")
     ap.add_argument("--out", type=Path, default=Path("desk_lamp_capture"))
+    ap.add_argument("--walkthrough", action="store_true", help="the README's walk-through instead (see walkthrough)")
     args = ap.parse_args(argv)
+    if args.walkthrough:
+        walkthrough(args.mirror, args.out)
+        return 0
     t0 = time.perf_counter()
     folder = args.out
     folder.mkdir(parents=True, exist_ok=True)

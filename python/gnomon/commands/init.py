@@ -48,10 +48,10 @@ STEPS = {
     "two-plane-found": "# Next: check the marks found (drawn in {drawing}) with `gnomon preview {name}`,\n"
                        "# propose the regions with `gnomon regions {name}` (it switches on each plane's mask\n"
                        "# below), then `gnomon scan {name}`.",
-    "lamp": "# Next: fill in the desk's board (or markers) and each pencil photo's base and tip,\n"
+    "lamp": "# Next: fill in the desk's board (or markers), the pencil's length and each photo's base,\n"
             "# locate the lamp with `gnomon calibrate lamp {name}` (it writes lamp.toml), check with\n"
-            "# `gnomon preview {name}`, draw two rough bands of bare desk (regions), grow them with\n"
-            "# `gnomon regions {name}`, then `gnomon scan {name}`.",
+            "# `gnomon preview {name}`, propose the bare desk with `gnomon regions {name}` (from two bands\n"
+            "# of the image's top and bottom rows, or the regions you give), then `gnomon scan {name}`.",
     "sun": "# Next: fill in [site] (every NaN), the frames' times if asked below and the markers,\n"
            "# check with `gnomon preview {name}`, propose the regions with `gnomon regions {name}`,\n"
            "# then `gnomon scan {name}`.",
@@ -132,8 +132,9 @@ point = [0.0, 0.0, 0.0]
 normal = [0.0, 0.0, 1.0]
 x_axis = [1.0, 0.0, 0.0]
 {board}
-# regions: two rough bands of bare desk that the shadow crosses (above and below the object);
-# `gnomon regions` grows them into a mask of the bare, swept desk:
+# regions: rough bands of bare desk that the shadow crosses (above and below the object), for
+# `gnomon regions` to grow into a mask of the bare, swept desk; left empty, it starts from two bands
+# of the image's top and bottom rows (5-20 % and 80-95 % of its height), as the paper does:
 regions = [
   # [u0, v0, u1, v1],
 ]

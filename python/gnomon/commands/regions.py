@@ -106,6 +106,16 @@ def run(args: argparse.Namespace) -> int:
         if plane.has_regions:
             seeds.append(plane_region_mask(plane, shape))
             start[plane.name] = "its regions"
+        elif len(log.planes) == 1 and plane.chessboard is not None:
+            # one desk placed by a board lying on it (a lamp capture): the board's outline is where it lay,
+            # not where the desk is bare (an object may stand there), so start as the paper does, from two
+            # bands of the image's top and bottom rows
+            seeds.append(paper_bands(shape))
+            start[plane.name] = "two bands of the image's top and bottom rows"
+            print(f"{plane.name}: no regions given: started from two bands of the image's top and bottom rows "
+                  f"(rows {int(BAND_ROWS[0][0] * shape[0])}-{int(BAND_ROWS[0][1] * shape[0])} and "
+                  f"{int(BAND_ROWS[1][0] * shape[0])}-{int(BAND_ROWS[1][1] * shape[0])}); if the object reaches "
+                  "into them, give regions of bare desk instead")
         elif plane.name in measured and len(measured[plane.name]) >= 3:
             seeds.append(hull_mask(shape, measured[plane.name], shrink=SEED_GROWTH))
             start[plane.name] = "its marks' outline"
@@ -172,12 +182,26 @@ def run(args: argparse.Namespace) -> int:
     switched, text = switch_on_masks(text, masks)
     if switched:
         atomic.write_text(args.field_log, text)
-        print(f"{args.field_log}: {' and '.join(switched)} now read their masks (the template's `mask` lines "
-              "switched on)")
+        one = len(switched) == 1
+        print(f"{args.field_log}: {' and '.join(switched)} now read{'s its mask' if one else ' their masks'} (the "
+              f"template's `mask` line{'' if one else 's'} switched on)")
     rest = [n for n in masks if n not in switched and not _reads_mask(text, n, masks[n])]
     if rest:
         print(f"add each plane's `mask` from {out / 'regions.toml'} to {args.field_log} ({', '.join(rest)})")
     return 0
+
+
+#: The paper's reference rows: where a desk-lamp capture's regions start when none are given (shares of the
+#: image's height, top band and bottom band).
+BAND_ROWS = ((0.05, 0.2), (0.8, 0.95))
+
+
+def paper_bands(shape: tuple[int, int]) -> np.ndarray:
+    """(H, W) bool: the two bands of :data:`BAND_ROWS` across the whole width."""
+    mask = np.zeros(shape, dtype=bool)
+    for top, bottom in BAND_ROWS:
+        mask[int(top * shape[0]):int(bottom * shape[0])] = True
+    return mask
 
 
 _TABLE = re.compile(r"^\[\[planes\]\][^\n]*$", re.M)
