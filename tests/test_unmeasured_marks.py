@@ -451,3 +451,26 @@ def test_marks_five_pixels_off_a_rectangle_are_no_silent_plane(five_px_off: Path
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "[[planes]] wall" in err[0] and "uncertain by" in err[0], err
     assert not (tmp_path / "scan").exists()
+
+
+def test_the_shadows_corner_doubts_a_focal_length_the_marks_blame() -> None:
+    """Marks that fit another focal length (both planes' warnings say so) while the shadow's corner lies
+    on the planes' line at the camera's own (the real cup capture: 0.13° against normals 4.3° and 2.4°
+    uncertain; with the marks' factor × 0.52 the same check put it 2.22° off normals 0.6° and 0.4°
+    uncertain): the scan says the shadow does not call for it. A corner off the line, or marks that blame
+    nothing, give no such warning."""
+    from gnomon.geometry.plane_tie import CornerTie
+    from gnomon.reconstruct.corners import FOCAL_BLAME, corner_limit_deg, focal_blame_doubt
+
+    def tie(angle: float) -> CornerTie:
+        return CornerTie(offset=2.12, sigma=0.002, frames=60, spread=0.01, corner=np.zeros(3),
+                         direction=np.array([1.0, 0.0, 0.0]), corner_angle_deg=angle)
+
+    blamed = [f"[[planes]] desk: ... they fit to 0.1 px rms with the focal length × 0.53: {FOCAL_BLAME} ...", ""]
+    sigmas = (4.33, 2.39)
+    message = focal_blame_doubt("wall", "desk", tie(0.13), sigmas, blamed)
+    assert "does not call for another focal length" in message and "0.13°" in message
+    assert focal_blame_doubt("wall", "desk", tie(0.13), sigmas, ["", ""]) == ""
+    beyond = corner_limit_deg(sigmas) + 0.01
+    assert focal_blame_doubt("wall", "desk", tie(beyond), sigmas, blamed) == ""
+    assert corner_limit_deg(sigmas) == pytest.approx(3.0 * np.hypot(*sigmas))

@@ -44,6 +44,12 @@ def moved(plane: PlaneInCamera, offset: float) -> PlaneInCamera:
     return PlaneInCamera(plane.normal, float(offset), plane.origin * k, plane.e1, plane.e2)
 
 
+def corner_limit_deg(sigmas_deg: tuple[float, float]) -> float:
+    """How far (degrees) the shadow's corner may lie from the line where two planes' marks put them:
+    CORNER_SIGMAS of their normals' σ combined, at least MIN_CORNER_ANGLE_DEG."""
+    return max(CORNER_SIGMAS * float(np.hypot(*sigmas_deg)), MIN_CORNER_ANGLE_DEG)
+
+
 def tie_message(name: str, anchor: str, tie: CornerTie | None, sigmas_deg: tuple[float, float]) -> tuple[str, str]:
     """(error, warning) about one plane's tie to its anchor ('' when none): no tie is an error; a distance
     uncertain by more than MAX_PLANE_DEPTH_SHARE, or a corner off the planes' own line, a warning."""
@@ -55,7 +61,7 @@ def tie_message(name: str, anchor: str, tie: CornerTie | None, sigmas_deg: tuple
     if tie.sigma / abs(tie.offset) > MAX_PLANE_DEPTH_SHARE:
         notes.append(f"its distance is uncertain by {100 * tie.sigma / abs(tie.offset):.2f} % (1 σ, over {tie.frames} "
                      "frames)")
-    limit = max(CORNER_SIGMAS * float(np.hypot(*sigmas_deg)), MIN_CORNER_ANGLE_DEG)
+    limit = corner_limit_deg(sigmas_deg)
     if np.isfinite(limit) and tie.corner_angle_deg > limit:
         notes.append(f"the corner its shadow traces with {anchor} is {tie.corner_angle_deg:.2f}° off the line "
                      f"where their marks put the two planes (more than {limit:.2f}°, {CORNER_SIGMAS:g} σ of "
@@ -64,6 +70,25 @@ def tie_message(name: str, anchor: str, tie: CornerTie | None, sigmas_deg: tuple
         return "", ""
     return "", (f"[[planes]] {name}: placed by where it meets {anchor}, but " + "; ".join(notes)
                 + ": measure its marks' positions (plane_xy) or give it mark_distance")
+
+
+#: What a plane's marker warning says when its marks fit another focal length better (gnomon.config.setup).
+FOCAL_BLAME = "the camera's calibration does not fit these frames"
+
+
+def focal_blame_doubt(name: str, anchor: str, tie: CornerTie, sigmas_deg: tuple[float, float],
+                      marker_warnings: list[str]) -> str:
+    """A warning ('' for none) for marks that blame the focal length (``marker_warnings``, the two planes')
+    while the shadow's corner lies where the planes at the camera's own focal length meet: the corner is
+    evidence the marks are not, and a focal length wrong by the factor they suggest would move that line."""
+    if tie.corner_angle_deg > corner_limit_deg(sigmas_deg) or not any(FOCAL_BLAME in w for w in marker_warnings):
+        return ""
+    return (f"[[planes]] {name}: the corner its shadow traces with {anchor} lies {tie.corner_angle_deg:.2f}° from "
+            f"the line where their marks put the two planes at the camera's own focal length (their normals "
+            f"{sigmas_deg[0]:.2f}° and {sigmas_deg[1]:.2f}° uncertain): the shadow does not call for another focal "
+            "length, so the marks are more likely off a rectangle than the camera off its calibration; before "
+            "using `gnomon calibrate focal`'s camera, scan with it and check this corner (the scan warns when "
+            "it is off), or measure the marks' positions (plane_xy)")
 
 
 def tie_lines(untied: tuple[tuple[str, str], ...],
@@ -108,6 +133,10 @@ def apply_ties(setup: ScanSetup, ties: dict[str, CornerTie | None], warnings: li
         assert tie is not None
         if warning:
             warnings.append(f"{setup.inputs.field_log}: {warning}")
+        doubt = focal_blame_doubt(name, anchor, tie, sigmas, [str(by_name[n].get("marker_warning", ""))
+                                                              for n in (name, anchor)])
+        if doubt:
+            warnings.append(f"{setup.inputs.field_log}: {doubt}")
         k = next(i for i, p in enumerate(planes) if p.name == name)
         plane = moved(planes[k].plane, tie.offset)
         planes[k] = dataclasses.replace(planes[k], plane=plane)
