@@ -97,3 +97,11 @@ def test_calibrate_focal_writes_the_camera_file_with_the_fitted_focal_length(tmp
     assert gnomon(["calibrate", "focal", str(tmp_path / "field_log.toml"), "--planes", "floor",
                    "--out", str(tmp_path / "x.toml")]) == 2
     assert not (tmp_path / "x.toml").exists()
+    # filmed at the camera's own focal length, one desk mark 12 px off: the best factor (× 1.05 ± 0.06) is
+    # within 2 σ of the camera's own, so nothing is written (the marks are off, not the camera)
+    off = film(1000.0, DESK, seed=5)
+    off[2] += [0.0, 12.0]
+    log["planes"] = [plane("desk", off), plane("wall", film(1000.0, WALL, seed=6))]
+    toml_io.dump(log, tmp_path / "off.toml")
+    assert gnomon(["calibrate", "focal", str(tmp_path / "off.toml"), "--out", str(tmp_path / "y.toml")]) == 2
+    assert not (tmp_path / "y.toml").exists()

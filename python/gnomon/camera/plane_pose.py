@@ -306,17 +306,26 @@ def search_markers(
     return [replace(d, name=f"m{i}") for i, d in enumerate(dets)]
 
 
+#: Seven marks are split 4 and 3 only where the gap between the planes is this many times the other one.
+SEVEN_MARKS_GAP_RATIO = 3.0
+
+
 @dataclass(frozen=True)
 class MarkGroups:
     """Marks found without hints, assigned to the set-up's two planes by where they lie in the image: the
-    lower plane (a desk, the ground) below the upper one (a wall, a facade), each with at least 4. Both are
-    empty when the marks cannot be assigned (fewer than 8, or no clear split); ``why`` then says what was
-    found and ``found`` holds every mark, for the user to assign."""
+    lower plane (a desk, the ground) below the upper one (a wall, a facade), each with at least 4
+    (:attr:`complete`), or 4 and 3 when one of 8 is missing and a clear gap parts them. Both are empty when
+    the marks cannot be assigned (fewer, or no clear split); ``why`` then says what was found and ``found``
+    holds every mark, for the user to assign."""
 
     lower: tuple[MarkerDetection, ...]
     upper: tuple[MarkerDetection, ...]
     why: str = ""
     found: tuple[MarkerDetection, ...] = ()
+
+    @property
+    def complete(self) -> bool:
+        return len(self.lower) >= 4 and len(self.upper) >= 4
 
 
 def split_marks(dets: Sequence[MarkerDetection]) -> MarkGroups:
@@ -327,11 +336,17 @@ def split_marks(dets: Sequence[MarkerDetection]) -> MarkGroups:
     between the planes, and with a mark missing no split can be told from another."""
     dets = sorted(dets, key=lambda d: d.pixel[1])
     n = len(dets)
+    v = np.array([d.pixel[1] for d in dets])
+    gaps = np.diff(v)
+    if n == 7 and max(gaps[2], gaps[3]) >= SEVEN_MARKS_GAP_RATIO * min(gaps[2], gaps[3]):
+        # one mark missing: 4 above and 3 below, or 3 and 4, where one gap clearly parts them
+        upper, lower = (dets[:4], dets[4:]) if gaps[3] > gaps[2] else (dets[:3], dets[3:])
+        short = "lower" if len(lower) == 3 else "upper"
+        return MarkGroups(tuple(lower), tuple(upper), f"7 printed 2x2 checkers found in the first frame: the "
+                          f"{short} plane has 3 (its fourth mark is not a clean 2x2 checker, or hidden)", tuple(dets))
     if n < 8:
         return MarkGroups((), (), f"{n} printed 2x2 checker(s) found in the first frame; two planes need 4 each",
                           tuple(dets))
-    v = np.array([d.pixel[1] for d in dets])
-    gaps = np.diff(v)
     cut = max(range(3, n - 4), key=lambda i: gaps[i])
     upper, lower = dets[: cut + 1], dets[cut + 1:]
     top2 = sorted(lower, key=lambda d: d.pixel[1])[:2]

@@ -391,6 +391,17 @@ def run_focal(args: argparse.Namespace) -> int:
     fit = fit_focal(log.camera, planes)
     for line in fit.lines():
         print(line)
+    worse = [name for k, name in enumerate(fit.planes) if fit.rms_fit_px[k] > fit.rms_camera_px[k]]
+    why = ""
+    if worse:
+        why = f"the fitted one fits {', '.join(worse)}'s marks worse than the camera's own"
+    elif not math.isfinite(fit.sigma_factor):
+        why = "its σ is undefined (the factor is at the end of the range searched)"
+    elif abs(fit.factor - 1.0) < 2.0 * fit.sigma_factor:
+        why = f"× {fit.factor:.3f} ± {fit.sigma_factor:.3f} is within 2 σ of the camera's own"
+    if why:
+        raise GnomonError(f"{args.out}: not written: the marks do not call for another focal length ({why}): "
+                          "where they misfit, the marks are off, not the camera; measure their positions (plane_xy)")
     table = camera_to_table(log.camera)
     table["fx"], table["fy"] = log.camera.fx * fit.factor, log.camera.fy * fit.factor
     source = log.camera_file.name if log.camera_file is not None else f"{args.field_log.name} [camera]"

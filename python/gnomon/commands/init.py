@@ -475,6 +475,10 @@ def run(args: argparse.Namespace) -> int:
                                    groups.upper, len(groups.lower), drawing.name, False, False)]
             found_note = (f"; found {len(groups.lower)} marks on the desk and {len(groups.upper)} on the wall "
                           f"(drawn in {drawing.name})")
+            if not groups.complete:
+                short = "desk" if len(groups.lower) < 4 else "wall"
+                found_note += (f"; the {short}'s fourth mark is not a clean 2x2 checker (or hidden): add it to its "
+                               "markers, pixel = [u, v]")
         else:
             found_note = f"; {groups.why}: give the markers' pixels by hand"
             if groups.found:
@@ -524,7 +528,8 @@ def run(args: argparse.Namespace) -> int:
     text = HEADER.format(setup=setup, steps=steps) + "\n".join(sections)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic.write_text(out, text)
-    todo = {"two-plane": "check the marks" if found_note.startswith("; found") else "fill in the markers",
+    todo = {"two-plane": "check the marks" if found_note.startswith("; found") and "fourth" not in found_note
+            else "fill in the markers",
             "lamp": "fill in the board and the pencil photos", "sun": "fill in [site] and the markers"}[light]
     print(f"wrote {out}: {count} {what} of {width}x{height}{found_note}; {todo}, then "
           + (f"`gnomon calibrate lamp {out}`" if light == "lamp" else f"`gnomon preview {out}`"))
