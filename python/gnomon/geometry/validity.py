@@ -133,7 +133,7 @@ def dip_in_frames(enter: np.ndarray, leave: np.ndarray, frames: np.ndarray | Non
 # mostly by bounced light and keeps its point only where both edges agree within EDGES_AGREE_SIGMAS.
 BOUNCE_SHARE = 0.3
 MOSTLY_BOUNCE_SHARE = 0.6
-EDGES_AGREE_SIGMAS = 2.0
+EDGES_AGREE_SIGMAS = 3.0
 # Pixels (a disc of this radius) around a pixel the light does not reach within which a point's footprint (the
 # lens's blur, ~3σ of a 0.7 px PSF) may take in its lit neighbours' light and their dip.
 EDGE_OF_LIGHT_PX = 2
@@ -164,7 +164,7 @@ class DirectLight:
 def direct_light(candidates: np.ndarray, dip: np.ndarray, relative: np.ndarray,
                  depths: list[np.ndarray], sigmas: list[np.ndarray]) -> DirectLight:
     """Which candidate points (H, W) bool a light whose occluder hides it whole (a lamp and a stick) lit
-    directly, judged from each pixel's dip: ``dip`` (H, W) bool the pixel has one above the contrast floor,
+    directly, judged from each pixel's dip: ``dip`` (H, W) bool the pixel has one beyond the image noise,
     ``relative`` its depth over the lit level ``(Imax − Imin)/Imax`` in linear irradiance, ``depths`` and
     ``sigmas`` each edge's camera Z and σZ (see :class:`DirectLight`). The typical share is the median of
     ``relative`` over the candidates with a dip."""

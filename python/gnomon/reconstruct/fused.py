@@ -15,6 +15,7 @@ import numpy as np
 from gnomon import _kernel
 from gnomon.capture.tracking import (
     TrackedSequence,
+    contrast_floor,
 )
 from gnomon.config.setup import ScanSetup
 from gnomon.errors import Remark
@@ -85,8 +86,11 @@ def screen_direct_light(fused: FusedMaps, edges: list[EdgeResult], tracked: Trac
     bounced light with edges that disagree); for a light whose occluder hides it whole (a lamp). Returns
     the note that counts them (``fused.direct_light_refused`` by reason)."""
     relative, _ = levels.relative_depth
-    screen = direct_light(fused.keep, tracked.times.valid, relative, [e.depth for e in edges],
-                          [e.sigma for e in edges])
+    # a dip is there where it stands out of the image noise, even under the field log's min_contrast: a
+    # dim face the lamp lights at a grazing angle is reached by its light
+    with np.errstate(invalid="ignore"):
+        dip = tracked.times.contrast >= contrast_floor(None, tracked.noise_dn)
+    screen = direct_light(fused.keep, dip, relative, [e.depth for e in edges], [e.sigma for e in edges])
     refused = screen.refused
     fused.keep &= ~refused
     fused.depth[refused] = np.nan
