@@ -44,10 +44,8 @@ pixels never lit directly whose radiance bounced light changes by at least
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -62,10 +60,6 @@ from gnomon.simulate.desk_lamp import (
     SPHERE,
     SURFACE_PEAK,
     SimulationResult,
-    clear_previous,
-    nuisance_text,
-    prepare_out_dir,
-    write_frames,
 )
 from gnomon.simulate.two_plane_scene import (
     BOX_SPEC,
@@ -74,9 +68,9 @@ from gnomon.simulate.two_plane_scene import (
     WALL_Y,
     TwoPlaneConfig,
     TwoPlaneScene,
+    render_two_plane,
     world_to_plane,
 )
-from gnomon.util import toml_io
 
 CUBE = 5
 ROOM_OBJECT_NAMES = {DESK: "desk", SPHERE: "sphere", BOX: "box", CYLINDER: "can", WALL: "wall", CUBE: "cube"}
@@ -172,12 +166,8 @@ class RoomScene(TwoPlaneScene):
         return seen / LAMP_SAMPLES
 
     def _light(self) -> None:
-        P, n, hit = self.points_f, self.normals_f, self.hit_f
-        Pz = np.where(hit[..., None], P, 0.0)
-        to_s = self.S - Pz
-        dist2 = np.einsum("...i,...i->...", to_s, to_s)
-        cos_i = np.einsum("...i,...i->...", n, to_s) / np.sqrt(dist2)
-        facing = hit & (cos_i > 0.0)
+        n, hit = self.normals_f, self.hit_f
+        Pz, _, dist2, cos_i, facing = self._lamp_geometry()
         vis = np.zeros(hit.shape)
         vis[facing] = self._lamp_visibility(Pz[facing], n[facing])
         raw = np.where(facing, self.albedo_f * np.maximum(cos_i, 0.0) * vis / dist2, 0.0)
@@ -380,24 +370,7 @@ def simulate_room(out_dir, config: RoomConfig | None = None, *,
                   progress: Callable[[int, int], None] | None = None) -> SimulationResult:
     """Render the room capture into ``out_dir`` (as :func:`gnomon.simulate.simulate_two_plane`)."""
     config = config or RoomConfig()
-    config.validate()
-    t0 = time.perf_counter()
-    out = prepare_out_dir(out_dir)
-    scene = RoomScene(config)
-    out.mkdir(parents=True, exist_ok=True)
-    clear_previous(out)
-    paths = write_frames(scene, out, np.random.default_rng([config.seed, 3, 5]), progress)
-    gt_path, json_path = sensor.write_ground_truth(out, scene.ground_truth_arrays(), scene.summary())
-    log_path = out / "field_log.toml"
     header = (f"Synthetic capture written by `gnomon simulate room` (seed {config.seed}): the two-plane desk\n"
               "and wall with one bounce of interreflection, a lamp of real size, shot and read noise.\n"
-              "Ground truth: ground_truth.npz and ground_truth.json beside this file.\n"
-              + nuisance_text(config))
-    toml_io.dump(scene.field_log(), log_path, header=header)
-    return SimulationResult(
-        out_dir=Path(out), field_log=log_path, frames=paths, ground_truth=gt_path,
-        ground_truth_json=json_path, camera_distance_mm=scene.camera_distance,
-        lamp=(float(scene.S[0]), float(scene.S[1]), float(scene.S[2])),
-        regions={ROOM_OBJECT_NAMES[k]: v for k, v in scene.regions.items()},
-        swept_pixels=int(scene.swept.sum()), swept_fraction=float(scene.swept.mean()),
-        seconds=time.perf_counter() - t0, config=config)
+              "Ground truth: ground_truth.npz and ground_truth.json beside this file.\n")
+    return render_two_plane(out_dir, config, RoomScene, [config.seed, 3, 5], header, ROOM_OBJECT_NAMES, progress)
