@@ -5,7 +5,8 @@
 Renders ``gnomon simulate room`` (one bounce of interreflection between desk, wall
 and the four solids, a 3 mm lamp for every shadow, shot and read noise: 640×480, 150
 PNG frames; ``--small`` 400×300, 100 frames) into ``--capture`` unless a capture is
-already there, scans it in memory (two-plane mode, the field log as written) and
+already there, scans it in memory (two-plane mode, the field log as written, or with
+``--min-contrast DN``: 0 for the image noise's floor alone) and
 prints, against the capture's ``ground_truth.npz``:
 
 * false points: the share of output points on a pixel the shadow never crossed while
@@ -86,6 +87,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--capture", type=Path, default=Path("room_capture"), help="the room capture (rendered if absent)")
     ap.add_argument("--small", action="store_true", help="render 400x300, 100 frames")
     ap.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    ap.add_argument("--min-contrast", type=float, default=None, metavar="DN",
+                    help="scan with this [scan] min_contrast instead of the field log's (0: none, the noise's floor)")
     args = ap.parse_args(argv)
     log = args.capture / "field_log.toml"
     if not log.is_file():
@@ -94,6 +97,15 @@ def main(argv: list[str] | None = None) -> int:
         api.simulate("room", args.capture, **opts)
         print(f"rendered {args.capture} in {time.perf_counter() - t0:.1f} s")
     gt = dict(np.load(args.capture / "ground_truth.npz"))
+    if args.min_contrast is not None:
+        from gnomon.util import toml_io
+
+        table = toml_io.load(log)
+        table["scan"].pop("min_contrast", None)
+        if args.min_contrast > 0:
+            table["scan"]["min_contrast"] = args.min_contrast
+        log = args.capture / "field_log_min_contrast.toml"
+        toml_io.dump(table, log)
     t0 = time.perf_counter()
     scan = api.scan(log)
     seconds = time.perf_counter() - t0
