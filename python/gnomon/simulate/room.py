@@ -118,7 +118,8 @@ class RoomConfig(TwoPlaneConfig):
         if not (math.isfinite(self.read_noise_e) and 0 <= self.read_noise_e <= 1000):
             raise self.error(f"--read-noise {self.read_noise_e}: must be 0 to 1000 electrons")
         if self.markers != "checker" or self.marks != "measured":
-            raise self.error("the room has measured checker marks only")
+            raise self.error("--markers / --marks: the room has measured checker marks only (--markers checker "
+                             "--marks measured)")
 
 
 def _disc_samples(n: int) -> np.ndarray:
