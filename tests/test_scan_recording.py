@@ -113,7 +113,7 @@ def test_scan_recording_has_coverage_and_depth_under_the_camera(scanned) -> None
     assert "ViewCoordinates:xyz" in seen["/world"]
     assert "DepthImage:buffer" in seen["/world/camera/depth"]
     assert {"SegmentationImage:buffer", "AnnotationContext:context"} <= seen["/maps/coverage"]
-    assert len(COVERAGE_CLASSES) == 8
+    assert len(COVERAGE_CLASSES) == 9
 
 
 @pytest.mark.slow

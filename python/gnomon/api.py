@@ -68,7 +68,7 @@ class Scan:
 
     ``coverage`` (H, W) uint8 class per pixel (:data:`gnomon.outputs.images.COVERAGE_CLASSES`:
     no shadow seen, point, no depth, under-sampled point, cropped, ambiguous, edges
-    disagree, no neighbour at its depth); ``coverage.npy`` in the scan folder (None
+    disagree, no neighbour at its depth, no direct light); ``coverage.npy`` in the scan folder (None
     from :func:`load_scan` of a folder written before it existed).
 
     ``mesh`` (:class:`ScanMesh`), ``K`` (3, 3), ``dist`` lens distortion (OpenCV

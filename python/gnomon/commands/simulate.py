@@ -22,7 +22,10 @@ def register(subparsers) -> None:
             "(DIR/pencil/, DIR/pencil_log.toml). desk_lamp_right: the same scene and pixel grid with "
             "the lamp mirrored to the right of the camera (fuse the two scans). two_plane: a desk and "
             "a wall meeting in a corner, printed 2x2 checker markers on both, a lamp the field log "
-            "does not give (the shadow planes come from the lines on both planes). facade_sun: a pole's "
+            "does not give (the shadow planes come from the lines on both planes). "
+            "room: the two_plane scene with a cube and a can, one bounce of interreflection, "
+            "a lamp of real size for every shadow and shot + read noise (640x480, 150 PNG frames "
+            "by default); its truth marks the pixels the lamp never lights directly. facade_sun: a pole's "
             "shadow swept by the sun over a facade and the street (3 h 19 min). facade_day: the same over "
             "a whole day, night at both ends, six cloud dips and a lamp post's moving shadow besides the "
             "pole's. Writes DIR/frames/, "
@@ -71,6 +74,11 @@ def register(subparsers) -> None:
     p.add_argument("--mark-distance", action="store_true",
                    help="two_plane with --marks unmeasured: give the desk's first two marks' distance (mm) "
                    "instead of units \"relative\"")
+    p.add_argument("--full-well", type=float, default=None, metavar="ELECTRONS",
+                   help="room: electrons at full scale (shot noise; 0: none); default 1150 (3.5 DN at 220 DN)")
+    p.add_argument("--read-noise", type=float, default=None, metavar="ELECTRONS",
+                   help="room: read noise, electrons; default 3")
+    p.add_argument("--no-bounce", action="store_true", help="room: no interreflection (direct light and ambient)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -93,12 +101,28 @@ def _options(args: argparse.Namespace) -> dict:
             opts["clouds"] = args.clouds
         return opts
     opts.update(lamp_radius=args.lamp_radius, stick_radius=args.stick_radius)
-    if args.scene == "two_plane":
+    if args.scene in ("two_plane", "room"):
         opts["markers"] = args.markers
         opts["stick"] = args.stick
         opts.update(marks=args.marks, marks_off_px=args.marks_off_px, mark_distance=args.mark_distance)
     else:
         opts["pencil_photos"] = args.pencil_photos
+    if args.scene == "room":
+        opts = _room_options(args, opts)
+    return opts
+
+
+def _room_options(args: argparse.Namespace, opts: dict) -> dict:
+    """The room keeps its own defaults (640x480, PNG, shot noise, a 10 mm rod) where an option was not given."""
+    for key, default in (("width", 800), ("height", 600), ("noise", 1.5), ("jpeg_quality", 90),
+                         ("stick_radius", 2.0)):
+        if opts[key] == default:
+            del opts[key]
+    if args.full_well is not None:
+        opts["full_well"] = args.full_well
+    if args.read_noise is not None:
+        opts["read_noise_e"] = args.read_noise
+    opts["bounce"] = not args.no_bounce
     return opts
 
 

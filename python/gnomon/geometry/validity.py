@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from gnomon.capture.tracking import MIN_CONTRAST_SIGMAS
@@ -33,6 +34,8 @@ __all__ = [
     "SUN_ANGULAR_RADIUS_RAD",
     "PoleConsistency",
     "contrast_above_noise",
+    "DirectLight",
+    "direct_light",
     "LightEstimate",
     "MIN_LAMP_CONDITIONING",
     "global_event_frames",
@@ -120,6 +123,72 @@ def dip_in_frames(enter: np.ndarray, leave: np.ndarray, frames: np.ndarray | Non
     first = np.clip(np.floor(np.where(ok, enter, 0)), 0, n_frames - 1).astype(np.int64)
     last = np.clip(np.ceil(np.where(ok, leave, 0)), 0, n_frames - 1).astype(np.int64)
     return ok & (count[last + 1] - count[first] > 0)
+
+
+# A lamp's own light on a pixel is hidden whole by the stick (an umbra): its dip takes the lamp's share of the
+# pixel's lit level, ``(Imax − Imin)/Imax``, which over the directly lit surfaces of one capture varies only with
+# how much the lamp adds to the room's other light there (docs/method.md, "Points only where the light
+# reached"). A dip shallower than BOUNCE_SHARE of the capture's typical one (the median over the candidate
+# points) is light bounced off another surface the shadow crossed; up to MOSTLY_BOUNCE_SHARE the pixel is lit
+# mostly by bounced light and keeps its point only where both edges agree within EDGES_AGREE_SIGMAS.
+BOUNCE_SHARE = 0.3
+MOSTLY_BOUNCE_SHARE = 0.6
+EDGES_AGREE_SIGMAS = 3.0
+# Pixels (a disc of this radius) around a pixel the light does not reach within which a point's footprint (the
+# lens's blur, ~3σ of a 0.7 px PSF) may take in its lit neighbours' light and their dip.
+EDGE_OF_LIGHT_PX = 2
+
+
+@dataclass(frozen=True)
+class DirectLight:
+    """Masks (H, W) of the candidate points refused because the light's own shadow did not make their dip.
+
+    ``bounce_only``: the dip's share of the lit level is under ``BOUNCE_SHARE`` of the capture's typical
+    share (light bounced off a surface the shadow crossed); ``edge_of_light``: a pixel the light does not
+    reach (no dip, or a bounce-only one) lies within ``EDGE_OF_LIGHT_PX``: the pixel's footprint straddles
+    the edge of the lamp's light (an object's cast shadow, a face turning away), and its dip is its lit
+    neighbours', blurred in;
+    ``edges_disagree``: lit mostly by bounced light (a share under ``MOSTLY_BOUNCE_SHARE`` of the typical
+    one) and the two edges' depths differ by more than ``EDGES_AGREE_SIGMAS`` of their combined σ
+    (or one edge is missing)."""
+
+    bounce_only: np.ndarray
+    edge_of_light: np.ndarray
+    edges_disagree: np.ndarray
+
+    @property
+    def refused(self) -> np.ndarray:
+        return self.bounce_only | self.edge_of_light | self.edges_disagree
+
+
+def direct_light(candidates: np.ndarray, dip: np.ndarray, relative: np.ndarray,
+                 depths: list[np.ndarray], sigmas: list[np.ndarray]) -> DirectLight:
+    """Which candidate points (H, W) bool a light whose occluder hides it whole (a lamp and a stick) lit
+    directly, judged from each pixel's dip: ``dip`` (H, W) bool the pixel has one beyond the image noise,
+    ``relative`` its depth over the lit level ``(Imax − Imin)/Imax`` in linear irradiance, ``depths`` and
+    ``sigmas`` each edge's camera Z and σZ (see :class:`DirectLight`). The typical share is the median of
+    ``relative`` over the candidates with a dip."""
+    typical = relative[candidates & dip & np.isfinite(relative)]
+    if not typical.size:
+        return DirectLight(*(np.zeros(candidates.shape, dtype=bool),) * 3)
+    typical_share = float(np.median(typical))
+    with np.errstate(invalid="ignore"):
+        shallow = ~(relative >= BOUNCE_SHARE * typical_share)       # NaN: no level, shallow
+        mostly = ~(relative >= MOSTLY_BOUNCE_SHARE * typical_share)
+    unreached = ~dip | shallow
+    r = EDGE_OF_LIGHT_PX
+    dv, du = np.mgrid[-r:r + 1, -r:r + 1]
+    disc = (du * du + dv * dv <= r * r).astype(np.uint8)
+    edge = cv2.dilate(unreached.astype(np.uint8), disc, borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+    bounce_only = candidates & dip & shallow
+    edge_of_light = candidates & edge & ~bounce_only
+    if len(depths) == 2:
+        with np.errstate(invalid="ignore"):
+            agree = np.abs(depths[0] - depths[1]) <= EDGES_AGREE_SIGMAS * np.hypot(sigmas[0], sigmas[1])
+    else:  # one edge: nothing to check it against
+        agree = np.zeros(candidates.shape, dtype=bool)
+    disagree = candidates & mostly & ~shallow & ~agree & ~edge_of_light
+    return DirectLight(bounce_only, edge_of_light, disagree)
 
 
 def contrast_like_neighbours(contrast: np.ndarray, candidates: np.ndarray, *, size: int = 9,

@@ -146,6 +146,10 @@ class LightModel:
     # whatever :meth:`shadow_planes` adds to them): the live view (:mod:`gnomon.runs.live`) then measures the
     # lines and planes as the frames come; False for a light whose planes need the whole capture.
     planes_from_reference_lines: ClassVar[bool] = True
+    # True when the occluder hides the whole light from a pixel it shadows (a stick before a lamp: an umbra),
+    # so that a dip much shallower than the pixel's lit level is not the light's own shadow on it
+    # (gnomon.reconstruct.fused.screen_direct_light); False for the sun, whose pole may cast no umbra.
+    occluder_hides_light: ClassVar[bool] = False
 
     def skipped_frames(self, n_frames: int) -> np.ndarray:
         """(n_frames,) bool: capture frames the tracker must not see."""

@@ -21,6 +21,8 @@ __all__ = ["LampLight"]
 class LampLight(LightModel):
     """``position_world`` (3,): the lamp centre (world units); ``pose``: world → camera."""
 
+    occluder_hides_light = True
+
     kind = "lamp"
 
     def __init__(self, position_world: np.ndarray, pose: Pose):

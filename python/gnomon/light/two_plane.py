@@ -30,6 +30,8 @@ MEDIAN_TO_SIGMA = 0.6745
 class TwoPlaneLight(LightModel):
     """``pose``: world → camera (to report the estimated light position in the world frame)."""
 
+    occluder_hides_light = True
+
     kind = "two-plane"
 
     def __init__(self, pose: Pose):

@@ -29,13 +29,16 @@ COVERAGE_CLASSES: dict[int, tuple[str, tuple[int, int, int]]] = {
     5: ("ambiguous: two comparable dips", (145, 30, 180)),
     6: ("edges disagree", (245, 130, 48)),
     7: ("no neighbour at its depth", (70, 240, 240)),
+    8: ("no direct light", (150, 100, 40)),
 }
-NO_SHADOW, POINT, NO_DEPTH, UNDERSAMPLED, CROPPED, AMBIGUOUS, EDGES_DISAGREE, NO_NEIGHBOUR = range(8)
+(NO_SHADOW, POINT, NO_DEPTH, UNDERSAMPLED, CROPPED, AMBIGUOUS, EDGES_DISAGREE, NO_NEIGHBOUR,
+ NO_DIRECT_LIGHT) = range(9)
 
 
 def coverage_map(contrast_ok: np.ndarray, valid: np.ndarray, undersampled: np.ndarray | None = None,
                  cropped: np.ndarray | None = None, *, ambiguous: np.ndarray | None = None,
-                 conflict: np.ndarray | None = None, unsupported: np.ndarray | None = None) -> np.ndarray:
+                 conflict: np.ndarray | None = None, unsupported: np.ndarray | None = None,
+                 no_direct_light: np.ndarray | None = None) -> np.ndarray:
     """Class per pixel (H, W) uint8: see :data:`COVERAGE_CLASSES`.
 
     ``contrast_ok`` the shadow was seen (enough contrast), ``valid`` a point
@@ -43,7 +46,8 @@ def coverage_map(contrast_ok: np.ndarray, valid: np.ndarray, undersampled: np.nd
     frames, ``cropped`` points removed by ``[output] crop``. Why a pixel has
     no point, where known: ``ambiguous`` two comparable dips (no time),
     ``conflict`` the entering and leaving edges gave incompatible depths,
-    ``unsupported`` a depth no neighbour shares. All (H, W) bool; a pixel
+    ``unsupported`` a depth no neighbour shares, ``no_direct_light`` a dip the
+    light's own shadow did not make (bounced light, the edge of the light). All (H, W) bool; a pixel
     with a shadow time and none of these reasons is "shadow seen, no depth"
     (no shadow plane near its time, or the light refused it).
     """
@@ -54,6 +58,8 @@ def coverage_map(contrast_ok: np.ndarray, valid: np.ndarray, undersampled: np.nd
         c[unsupported & contrast_ok] = NO_NEIGHBOUR
     if conflict is not None:
         c[conflict & contrast_ok] = EDGES_DISAGREE
+    if no_direct_light is not None:
+        c[no_direct_light & contrast_ok] = NO_DIRECT_LIGHT
     c[valid] = POINT
     if undersampled is not None:
         c[valid & undersampled] = UNDERSAMPLED

@@ -15,15 +15,19 @@ import numpy as np
 from gnomon import _kernel
 from gnomon.capture.tracking import (
     TrackedSequence,
+    contrast_floor,
 )
 from gnomon.config.setup import ScanSetup
+from gnomon.errors import Remark
 from gnomon.geometry.crop import crop_mask
 from gnomon.geometry.surface import points_from_depth
 from gnomon.geometry.uncertainty import (
     MIN_FRAMES_PER_TRANSITION,
     undersampled,
 )
+from gnomon.geometry.validity import direct_light
 from gnomon.light.base import LightModel
+from gnomon.outputs.images import NO_DIRECT_LIGHT
 from gnomon.reconstruct.edges import EdgeResult, Levels
 from gnomon.reconstruct.fusion import beyond_trust
 
@@ -40,6 +44,9 @@ class FusedMaps:
     untrusted: np.ndarray  # (H, W) a kept point whose σ the depth-jump test cannot vouch for (counted, kept)
     # the median number of frames the shadow edge took to cross an under-sampled point (NaN: none is)
     transition_frames: float = float("nan")
+    # (H, W) points refused because the light's own shadow did not make their dip (screen_direct_light)
+    no_direct_light: np.ndarray | None = None
+    direct_light_refused: dict[str, int] | None = None  # those points by reason
 
 
 def fuse_edges(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump: float,
@@ -70,6 +77,37 @@ def fuse_edges(edges: list[EdgeResult], tracked: TrackedSequence, max_depth_jump
     crossing = np.concatenate(lengths) if lengths else np.zeros(0)
     transition = float(np.median(crossing)) if crossing.size else float("nan")
     return FusedMaps(depth, sigma, keep, conflict, shadow_time, under, unsupported, untrusted, transition)
+
+
+def screen_direct_light(fused: FusedMaps, edges: list[EdgeResult], tracked: TrackedSequence,
+                        levels: Levels) -> list[str]:
+    """Refuse, in place, the fused points whose dip the light's own shadow did not make
+    (:func:`gnomon.geometry.validity.direct_light`: bounced light only, the edge of the light, lit mostly by
+    bounced light with edges that disagree); for a light whose occluder hides it whole (a lamp). Returns
+    the note that counts them (``fused.direct_light_refused`` by reason)."""
+    relative, _ = levels.relative_depth
+    # a dip is there where it stands out of the image noise, even under the field log's min_contrast: a
+    # dim face the lamp lights at a grazing angle is reached by its light
+    with np.errstate(invalid="ignore"):
+        dip = tracked.times.contrast >= contrast_floor(None, tracked.noise_dn)
+    screen = direct_light(fused.keep, dip, relative, [e.depth for e in edges], [e.sigma for e in edges])
+    refused = screen.refused
+    fused.keep &= ~refused
+    fused.depth[refused] = np.nan
+    fused.sigma[refused] = np.nan
+    fused.undersampled &= fused.keep
+    fused.untrusted &= fused.keep
+    fused.no_direct_light = refused
+    counts = {"bounce_only": int(screen.bounce_only.sum()), "edge_of_light": int(screen.edge_of_light.sum()),
+              "mostly_bounce_edges_disagree": int(screen.edges_disagree.sum())}
+    fused.direct_light_refused = counts
+    if not refused.any():
+        return []
+    return [Remark(f"{int(refused.sum())} points refused: the light's own shadow did not make their dip "
+                   f"(light bounced off another surface: {counts['bounce_only']}; at the edge of the light, beside "
+                   f"a pixel it does not reach: {counts['edge_of_light']}; lit mostly by bounced light, the two "
+                   f"edges disagree: {counts['mostly_bounce_edges_disagree']}); coverage.npy class "
+                   f"{NO_DIRECT_LIGHT}")]
 
 
 def fusion_warnings(fused: FusedMaps, light: LightModel) -> list[str]:

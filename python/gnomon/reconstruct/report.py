@@ -52,7 +52,8 @@ def scan_report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence,
         },
         "noise": {"image_noise_dn": tracked.noise_dn,
                   "median_sigma_z": float(np.nanmedian(sigma)) if np.isfinite(sigma).any() else None},
-        "edges": edges_report(edges, keep),
+        # the edges as the fusion saw them: the points refused afterwards for want of direct light included
+        "edges": edges_report(edges, keep if fused.no_direct_light is None else keep | fused.no_direct_light),
         "coverage": {
             "pixels": cam.width * cam.height,
             "contrast_ok": int(times.valid.sum()),
@@ -63,6 +64,9 @@ def scan_report(setup: ScanSetup, source: FrameSource, tracked: TrackedSequence,
             # points (kept) whose σZ exceeds max_depth_jump·Z / (5·√2) (gnomon.reconstruct.fusion.beyond_trust)
             "sigma_beyond_jump": int(fused.untrusted.sum()),
             "undersampled": int(fused.undersampled.sum()),
+            # points refused because the light's own shadow did not make their dip, by reason
+            # (gnomon.reconstruct.fused.screen_direct_light; a lamp's light only)
+            **({"no_direct_light": fused.direct_light_refused} if fused.direct_light_refused is not None else {}),
             # pixels whose lit level is at the input's full scale (clipped: the shadow's edges
             # look steeper and its width narrower there)
             "saturated": int((times.imax >= len(tracked.lut) - 1).sum()),

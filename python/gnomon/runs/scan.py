@@ -60,7 +60,7 @@ from gnomon.reconstruct.edges import (
     min_contrast_dn,
     reconstruct_edges,
 )
-from gnomon.reconstruct.fused import crop_fused, fuse_edges, fusion_warnings
+from gnomon.reconstruct.fused import crop_fused, fuse_edges, fusion_warnings, screen_direct_light
 from gnomon.reconstruct.report import camera_report, report_outputs, scan_report
 from gnomon.recording.recorder import ScanRecording, playable_video, warm_rerun_import
 from gnomon.recording.scan_log import (
@@ -221,12 +221,14 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
             edges = reconstruct_edges(setup, tracked, ray_map, warnings, levels)
         with timed(timings, "fusion_and_mesh_s", cpu), stage("fusion and mesh"):
             fused = fuse_edges(edges, tracked, setup.max_depth_jump, levels)
+            if setup.light.occluder_hides_light:
+                warnings += screen_direct_light(fused, edges, tracked, levels)
             cropped = crop_fused(fused, setup, ray_map)
             points = surface_points(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, colours.result(),
                                     setup.max_depth_jump)
             coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
                                     ambiguous=tracked.times.ambiguous, conflict=fused.conflict,
-                                    unsupported=fused.unsupported)
+                                    unsupported=fused.unsupported, no_direct_light=fused.no_direct_light)
             if on_points is not None:
                 on_points(PointsReady(points, fused.shadow_time, fused.undersampled, coverage, None if recorder is None
                                       else points_part_recorder(timings, setup, edges, points, fused, frame_stride,

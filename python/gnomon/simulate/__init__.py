@@ -13,6 +13,10 @@ frames, ``.npz``). Scenes:
   fusion on the same pixel grid;
 * ``two_plane`` — :func:`simulate_two_plane` (:mod:`gnomon.simulate.two_plane_scene`):
   desk + wall, printed markers, a lamp the field log does not give;
+* ``room`` — :func:`simulate_room` (:mod:`gnomon.simulate.room`): the two_plane
+  scene lit as a room is (one bounce of interreflection, :mod:`gnomon.simulate.radiosity`;
+  a lamp of real size for every shadow; shot and read noise), with the pixels the
+  lamp never lights and those only bounced light changes in its truth;
 * ``facade_sun`` — :func:`simulate_facade_sun` (:mod:`gnomon.simulate.facade_sun`):
   a pole's shadow swept by the sun (pvlib) over ground and a building facade;
 * ``facade_day`` — the same facade over a whole day, night at both ends
@@ -31,9 +35,10 @@ from gnomon.simulate.desk_lamp import (
     simulate_desk_lamp,
 )
 from gnomon.simulate.facade_sun import FacadeSunConfig, FacadeSunResult, FacadeSunScene, simulate_facade_sun
+from gnomon.simulate.room import RoomConfig, RoomScene, simulate_room
 from gnomon.simulate.two_plane_scene import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
 
-SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "facade_day")
+SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "room", "facade_sun", "facade_day")
 
 __all__ = [
     "SCENES",
@@ -42,12 +47,15 @@ __all__ = [
     "FacadeSunScene",
     "simulate_facade_sun",
     "DeskLampConfig",
+    "RoomConfig",
+    "RoomScene",
     "DeskLampScene",
     "SimulationResult",
     "SweepConfig",
     "TwoPlaneConfig",
     "TwoPlaneScene",
     "simulate_desk_lamp",
+    "simulate_room",
     "simulate_two_plane",
 ]
 

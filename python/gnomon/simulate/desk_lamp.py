@@ -469,13 +469,19 @@ class DeskLampScene:
             albedo = np.where(self.object_id_f == oid, a, albedo)
         return albedo
 
-    def _light(self) -> None:
+    def _lamp_geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """On the padded grid: the surface points (0 where none), the vectors to the lamp's centre, their
+        squared lengths, the cosine of incidence and whether the surface faces the lamp."""
         P, n, hit = self.points_f, self.normals_f, self.hit_f
         Pz = np.where(hit[..., None], P, 0.0)
         to_s = self.S - Pz
         dist2 = np.einsum("...i,...i->...", to_s, to_s)
         cos_i = np.einsum("...i,...i->...", n, to_s) / np.sqrt(dist2)
-        facing = hit & (cos_i > 0.0)
+        return Pz, to_s, dist2, cos_i, hit & (cos_i > 0.0)
+
+    def _light(self) -> None:
+        n, hit = self.normals_f, self.hit_f
+        Pz, to_s, dist2, cos_i, facing = self._lamp_geometry()
         # Cast shadows: a ray from just above the surface towards S, blocked by an object.
         blocked = np.zeros_like(hit)
         idx = np.nonzero(facing)

@@ -17,7 +17,7 @@ from gnomon.util.progress import Progress
 __all__ = ["SCENES", "simulate"]
 
 #: Scenes :func:`simulate` (and `gnomon simulate`) can render.
-SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "facade_sun", "facade_day", "chessboard")
+SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "room", "facade_sun", "facade_day", "chessboard")
 
 
 def _scene_config(scene: str, options: dict[str, Any]) -> tuple[Any, Any]:
@@ -35,6 +35,10 @@ def _scene_config(scene: str, options: dict[str, Any]) -> tuple[Any, Any]:
         from gnomon.simulate.two_plane_scene import TwoPlaneConfig, simulate_two_plane
 
         make, render = TwoPlaneConfig, simulate_two_plane
+    elif scene == "room":
+        from gnomon.simulate.room import RoomConfig, simulate_room
+
+        make, render = RoomConfig, simulate_room
     else:
         from gnomon.simulate.facade_sun import FacadeSunConfig, simulate_facade_sun
 

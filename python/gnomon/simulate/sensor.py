@@ -141,3 +141,19 @@ def encode_image(img: np.ndarray, config: Any) -> bytes:
     if not ok:  # pragma: no cover
         raise RuntimeError("cv2.imencode failed")
     return buf.tobytes()
+
+
+def encode_shot_noise(L_blurred: np.ndarray, gamma: float, full_well: float, read_noise_e: float, noise_dn: float,
+                      rng: np.random.Generator) -> np.ndarray:
+    """A sensor's noise, then gamma and quantisation: linear (blurred) radiance in [0, 1] → u8.
+
+    The linear signal is ``L · full_well`` electrons; shot noise (a Gaussian of the Poisson variance, the
+    signal itself) and read noise (``read_noise_e`` electrons) are added before the gamma encoding
+    ``DN = 255 · L^(1/gamma)``, which stretches them in the dark; then ``noise_dn`` (a Gaussian in DN, as
+    :func:`encode_dn`) and rounding. ``full_well = 0``: no shot or read noise."""
+    L = np.clip(L_blurred, 0.0, 1.0, dtype=np.float32)
+    if full_well > 0:
+        e = L * np.float32(full_well)
+        sigma_e = np.sqrt(e + np.float32(read_noise_e) ** 2)
+        L = np.clip((e + sigma_e * rng.standard_normal(L.shape, dtype=np.float32)) / np.float32(full_well), 0.0, 1.0)
+    return encode_dn(L, gamma, noise_dn, rng)

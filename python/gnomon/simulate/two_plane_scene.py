@@ -664,25 +664,32 @@ def simulate_two_plane(out_dir, config: TwoPlaneConfig | None = None, *,
     ``ground_truth.json`` and, last, ``field_log.toml``, each atomically.
     """
     config = config or TwoPlaneConfig()
-    config.validate()
-    t0 = time.perf_counter()
-    out = prepare_out_dir(out_dir)
-    scene = TwoPlaneScene(config)
-    out.mkdir(parents=True, exist_ok=True)
-    clear_previous(out)
-    paths = write_frames(scene, out, np.random.default_rng([config.seed, 3, 2]), progress)
-    gt_path, json_path = sensor.write_ground_truth(out, scene.ground_truth_arrays(), scene.summary())
-    log_path = out / "field_log.toml"
     header = (f"Synthetic capture written by `gnomon simulate two_plane` (seed {config.seed}).\n"
               "Ground truth: ground_truth.npz and ground_truth.json beside this file (the lamp is\n"
               "only there: the shadow planes come from the lines on the desk and the wall).\n"
-              "Plane coordinates: point + a·x_axis + b·(normal × x_axis).\n"
-              + nuisance_text(config))
-    toml_io.dump(scene.field_log(), log_path, header=header)
+              "Plane coordinates: point + a·x_axis + b·(normal × x_axis).\n")
+    return render_two_plane(out_dir, config, TwoPlaneScene, [config.seed, 3, 2], header, OBJECT_NAMES, progress)
+
+
+def render_two_plane(out_dir, config: TwoPlaneConfig, scene_class: type[TwoPlaneScene], noise_key: list[int],
+                     header: str, object_names: dict[int, str],
+                     progress: Callable[[int, int], None] | None) -> SimulationResult:
+    """Render a scene of this family (``scene_class`` of ``config``; its sensor noise drawn from ``noise_key``)
+    into ``out_dir``: frames, ground truth, and last the field log under ``header`` (the nuisance line added)."""
+    config.validate()
+    t0 = time.perf_counter()
+    out = prepare_out_dir(out_dir)
+    scene = scene_class(config)
+    out.mkdir(parents=True, exist_ok=True)
+    clear_previous(out)
+    paths = write_frames(scene, out, np.random.default_rng(noise_key), progress)
+    gt_path, json_path = sensor.write_ground_truth(out, scene.ground_truth_arrays(), scene.summary())
+    log_path = out / "field_log.toml"
+    toml_io.dump(scene.field_log(), log_path, header=header + nuisance_text(config))
     return SimulationResult(
         out_dir=Path(out), field_log=log_path, frames=paths, ground_truth=gt_path,
         ground_truth_json=json_path, camera_distance_mm=scene.camera_distance,
         lamp=(float(scene.S[0]), float(scene.S[1]), float(scene.S[2])),
-        regions={OBJECT_NAMES[k]: v for k, v in scene.regions.items()},
+        regions={object_names[k]: v for k, v in scene.regions.items()},
         swept_pixels=int(scene.swept.sum()), swept_fraction=float(scene.swept.mean()),
         seconds=time.perf_counter() - t0, config=config)
