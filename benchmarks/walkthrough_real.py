@@ -1,32 +1,37 @@
-"""The README's walk-through on a public real capture, as a newcomer runs it: no field log typed, no file
-edited (a script, not a test).
+"""The README's walk-through on public real captures, as a newcomer runs it: no field log typed, no file
+edited but the marks `gnomon init` asks for (a script, not a test).
 
-    PYTHONPATH=python python benchmarks/walkthrough_real.py MIRROR_DIR [--out DIR]
+    PYTHONPATH=python python benchmarks/walkthrough_real.py [--brandonhung DIR] [--afiretony DIR] [--out DIR]
 
-MIRROR_DIR is a checkout of BrandonHung343/15-463-HW-6 (never committed here, never downloaded by tests):
-``data/frog/v2`` (200 frames 1024x768 of the CMU course's frog set-up, a second sweep the other benchmarks
-do not use: benchmarks/real_captures.py scans ``data/frog``'s first, 166 frames) and ``data/calib`` (its
-10 photos of a chessboard of 8x6 inner corners). The commands, each timed:
+The checkouts are never committed here and never downloaded by tests. For each capture, in its own folder,
+with copies of its frames and board photos, each command timed:
 
-    gnomon calibrate camera calib --board 8x6 --square 25 --out camera.toml   # the square: any (scale-free)
+    gnomon calibrate camera board --board 8x6 --square 25 --out camera.toml   # the square: any (scale-free)
     gnomon init frames --camera camera.toml       # the marks found in the first frame, units "relative"
     gnomon regions field_log.toml                 # the object cut out, the masks switched on in the log
     gnomon scan field_log.toml --out scan
 
-Scored like benchmarks/real_captures.py's frog (its outlines of the boxes' faces: the camera did not move
-between the two sweeps, the marks are within 4 px of the first's; the frog, turned, and its shadows
-outlined anew below), inside each plane's four marks, in mm:
-the relative unit (the desk's distance from the camera) is turned into mm with the course's measured
-rectangle of the desk marks (558.8 mm long; used for the report only, the scan never sees it). Printed:
-each plane's planarity (median / RMS distance to its marks' plane, mm and per mille of the desk's
-distance) and coverage of its bare swept pixels, the object's coverage, the false points, the desk-wall
-angle, and each fitted rectangle's proportions against the measured ones (the marks' evidence).
+A command that refuses (exit code 2) ends that capture; its one line is printed as the outcome.
+
+* ``--brandonhung``: BrandonHung343/15-463-HW-6, ``data/frog/v2`` (200 frames 1024x768 of the CMU course's
+  frog set-up, a second sweep the other benchmarks do not use: benchmarks/real_captures.py scans the first)
+  with ``data/calib``. Scored like benchmarks/real_captures.py's frog (its outlines of the boxes' faces: the
+  camera did not move between the sweeps, the marks are within 4 px of the first's; the frog, turned, and its
+  shadows outlined anew below), inside each plane's four marks, in mm: the relative unit (the desk's
+  distance from the camera) turned into mm with the course's measured desk rectangle (558.8 mm long; the
+  scan never sees it). Printed: each plane's planarity (median / RMS distance to its marks' plane, mm and
+  per mille of the desk's distance) and coverage of its bare swept pixels, the object's coverage, the false
+  points, the desk-wall angle, and each fitted rectangle's proportions against the measured ones.
+* ``--afiretony``: afiretony/Computational-Photography, a student's own 1080p captures (see AFIRETONY).
+  No outline of the objects: each plane scored inside the mask `gnomon regions` proposed (the bare plane
+  the scan used), per mille of the desk's distance, with the desk-wall angle.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -34,7 +39,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,8 +59,13 @@ V2_SHADOWS = [[(190, 498), (270, 505), (330, 518), (400, 540), (470, 598), (420,
               [(560, 600), (640, 594), (702, 600), (706, 662), (650, 672), (580, 652), (558, 630)]]
 
 
+class Refused(Exception):
+    """A command exited with code 2: its one line is the capture's outcome."""
+
+
 def gnomon(args: list[str], cwd: Path) -> float:
-    """Run ``gnomon ARGS`` in ``cwd`` as a user does (a process); its wall time in seconds."""
+    """Run ``gnomon ARGS`` in ``cwd`` as a user does (a process); its wall time in seconds. Exit code 2 raises
+    :class:`Refused` with the command's error line."""
     print("$ gnomon " + " ".join(args), flush=True)
     t = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "gnomon", *args], cwd=cwd, env=_env(), text=True,
@@ -64,6 +73,8 @@ def gnomon(args: list[str], cwd: Path) -> float:
     elapsed = time.perf_counter() - t
     tail = [line for line in (done.stdout + done.stderr).splitlines() if not line.startswith(("tracking:", "scan:"))]
     print("\n".join("  " + line for line in tail[-12:]), flush=True)
+    if done.returncode == 2:
+        raise Refused(next((line for line in tail if line.startswith("gnomon: error")), tail[-1] if tail else ""))
     if done.returncode != 0:
         raise SystemExit(f"gnomon {args[0]} failed with code {done.returncode}")
     return elapsed
@@ -91,36 +102,99 @@ def in_mm(scan: Path, scale: float, into: Path) -> Path:
     return into
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("mirror", type=Path)
-    ap.add_argument("--out", type=Path, default=Path("walkthrough_real"))
-    args = ap.parse_args(argv)
-    work = args.out / "frog_v2"
+def walk(work: Path, frames: Path, board: Path, board_size: str, added: dict[str, list] | None = None) -> dict:
+    """The README's four commands in ``work`` on copies of ``frames`` and ``board`` (its photos); ``added``: the
+    marks a user types after `init` asks for them (plane name -> pixels). Returns each command's time, or
+    where it was refused."""
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
-    shutil.copytree(args.mirror / "data" / "frog" / "v2", work / "frames")
-    shutil.copytree(args.mirror / "data" / "calib", work / "calib", ignore=shutil.ignore_patterns("*.npz"))
-    times = {
-        "calibrate camera": gnomon(["calibrate", "camera", "calib", "--board", "8x6", "--square", "25", "--out",
-                                    "camera.toml", "--quiet"], work),
-        "init": gnomon(["init", "frames", "--camera", "camera.toml"], work),
-        "regions": gnomon(["regions", "field_log.toml", "--quiet"], work),
-        "scan": gnomon(["scan", "field_log.toml", "--out", "scan", "--quiet"], work),
-    }
+    shutil.copytree(frames, work / "frames")
+    shutil.copytree(board, work / "board", ignore=shutil.ignore_patterns("*.npz"))
+    times: dict[str, float] = {}
+    try:
+        times["calibrate camera"] = gnomon(["calibrate", "camera", "board", "--board", board_size, "--square", "25",
+                                            "--out", "camera.toml", "--quiet"], work)
+        times["init"] = gnomon(["init", "frames", "--camera", "camera.toml"], work)
+        for plane, pixels in (added or {}).items():
+            add_marks(work / "field_log.toml", plane, pixels)
+        times["regions"] = gnomon(["regions", "field_log.toml", "--quiet"], work)
+        times["scan"] = gnomon(["scan", "field_log.toml", "--out", "scan", "--quiet"], work)
+    except Refused as refused:
+        return {"times": times, "refused": str(refused)}
     print("commands' wall time: " + ", ".join(f"{k} {v:.1f} s" for k, v in times.items())
           + f"; {sum(times.values()):.1f} s in all")
+    return {"times": times, "refused": ""}
+
+
+def add_marks(log: Path, plane: str, pixels: list) -> None:
+    """What a user types when `init` asks for a plane's missing mark: ``{ id = N, pixel = [u, v] }`` lines
+    appended to that plane's markers."""
+    text = log.read_text()
+    head = text.index(f'name = "{plane}"')
+    end = text.index("\n]", text.index("markers = [", head))
+    last_id = max(int(x) for x in re.findall(r"id = (\d+)", text))
+    lines = "".join(f",\n  {{ id = {last_id + 1 + k}, pixel = [{u:.1f}, {v:.1f}] }}" for k, (u, v) in enumerate(pixels))
+    log.write_text(text[:end] + lines + text[end:])
+
+
+def planes_of(work: Path) -> dict:
     report = json.loads((work / "scan" / "report.json").read_text())
-    planes = {p["plane"]: p for p in report["reference_planes"]}
-    measured = FROG_RECT[1] / FROG_RECT[0]
+    return {p["plane"]: p for p in report["reference_planes"]}
+
+
+def print_planes(planes: dict, measured: float | None) -> None:
+    """Each plane's marks' rectangle, its proportions (against the measured ones), its normal's σ, and the
+    desk-wall angle."""
     for name, p in planes.items():
         a, b = sorted(p["rectangle"], reverse=True)
-        print(f"{name}: its marks' rectangle {a:.4f} x {b:.4f} (relative units): proportions {b / a:.4f}, "
-              f"measured {measured:.4f} ({100 * (b / a / measured - 1):+.2f} %); normal ± {p['std_normal_deg']:.2f}°")
+        against = f", measured {measured:.4f} ({100 * (b / a / measured - 1):+.2f} %)" if measured else ""
+        print(f"{name}: its marks' rectangle {a:.4f} x {b:.4f} (relative units): proportions {b / a:.4f}{against}; "
+              f"normal ± {p['std_normal_deg']:.2f}°")
+    print(f"desk-wall angle {planes['wall']['angle_to_first_deg']:.2f}°")
+
+
+def score_regions(work: Path) -> None:
+    """Without outlines of the object: each plane's points inside the mask `gnomon regions` proposed (the
+    bare plane the scan used), their distance to the plane of the marks and to their own best plane, per
+    mille of the desk's distance (the relative unit), and whether the RMS stays within 2x the median-based
+    spread (no band of wrong depth); the mask's coverage."""
+    import cv2
+
+    from gnomon.camera.calibration import load_camera_file
+
+    planes = planes_of(work)
+    depth = np.load(work / "scan" / "depth.npy").astype(np.float64)
+    rays = load_camera_file(work / "camera.toml").ray_map().astype(np.float64)
+    points = rays * (depth / rays[..., 2])[..., None]
+    for name, p in planes.items():
+        mask = cv2.imread(str(work / "regions" / f"{name}_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
+        sel = mask & np.isfinite(depth)
+        q = points[sel]
+        d = q @ np.array(p["normal_cam"]) - p["offset_cam"]
+        c = q.mean(axis=0)
+        n = np.linalg.svd(q - c, full_matrices=False)[2][2]
+        own = (q - c) @ n
+        med, rms = np.median(np.abs(d)), np.sqrt(np.mean(d ** 2))
+        print(f"  {name}: planarity (per mille of the desk's distance) to its marks' plane median {1000 * med:.2f}, "
+              f"RMS {1000 * rms:.2f}; to its own best plane median {1000 * np.median(np.abs(own)):.2f}, RMS "
+              f"{1000 * np.sqrt(np.mean(own ** 2)):.2f}; RMS / (1.4826 median) {rms / (1.4826 * med):.2f}; points on "
+              f"{100 * sel.sum() / max(mask.sum(), 1):.1f} % of the {int(mask.sum())} mask pixels")
+
+
+def frog_v2(mirror: Path, out: Path) -> None:
+    """BrandonHung343/15-463-HW-6: data/frog/v2 with data/calib, scored as real_captures.py scores the frog."""
+    import cv2
+
+    work = out / "frog_v2"
+    result = walk(work, mirror / "data" / "frog" / "v2", mirror / "data" / "calib", "8x6")
+    if result["refused"]:
+        print(f"frog v2: refused: {result['refused']}")
+        return
+    planes = planes_of(work)
+    print_planes(planes, FROG_RECT[1] / FROG_RECT[0])
     scale = FROG_RECT[0] / max(planes["desk"]["rectangle"])
     print(f"mm per relative unit (the desk marks' measured 558.8 mm): {scale:.1f}; the wall's marks' long side "
           f"then {scale * max(planes['wall']['rectangle']):.1f} mm (measured 558.8)")
-    print(f"desk-wall angle {planes['wall']['angle_to_first_deg']:.2f}°")
     # the bare planes scored: inside each plane's four marks, as the image shows them (independent of the
     # regions the scan used), less the object, its shadows, the marks and the boxes' faces (score_scan)
     shape = np.load(work / "scan" / "depth.npy").shape
@@ -136,8 +210,41 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {p.name} planarity per mille of the desk's distance ({scale:.0f} mm): median "
               f"{1000 * p.median_abs / scale:.2f}, RMS {1000 * p.rms / scale:.2f}; RMS / (1.4826 median) "
               f"{p.rms / (1.4826 * p.median_abs):.2f}")
-    return 0
 
+
+# afiretony/Computational-Photography assignments/assgn6/data: a student's own captures (1080p phone video, a
+# desk and a wall sheet with four printed 2x2 checkers each, spacing never measured), each with the board photos
+# of its folder name or, where none is named, calib-own (both 1080p, 8x6 inner corners). ADDED: the marks
+# `init` asks for (not clean checkers), clicked on the first frame and refined by eye to their centre.
+AFIRETONY = {"cup": ("cup/v1", "calib-cup"), "dog v1": ("dog/v1", "calib-own"), "dog v3": ("dog/v3", "calib-own"),
+             "green": ("green/v1", "calib-own")}
+ADDED = {"dog v1": {"desk": [(365.7, 987.3)]}}
+
+
+def afiretony(mirror: Path, out: Path) -> None:
+    data = mirror / "assignments" / "assgn6" / "data"
+    for name, (frames, board) in AFIRETONY.items():
+        print(f"== {name}")
+        work = out / name.replace(" ", "_")
+        result = walk(work, data / frames, data / board, "8x6", ADDED.get(name))
+        if result["refused"]:
+            print(f"{name}: refused: {result['refused']}")
+            continue
+        print_planes(planes_of(work), None)
+        score_regions(work)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--brandonhung", type=Path, help="checkout of BrandonHung343/15-463-HW-6")
+    ap.add_argument("--afiretony", type=Path, help="checkout of afiretony/Computational-Photography")
+    ap.add_argument("--out", type=Path, default=Path("walkthrough_real"))
+    args = ap.parse_args(argv)
+    if args.brandonhung:
+        frog_v2(args.brandonhung, args.out)
+    if args.afiretony:
+        afiretony(args.afiretony, args.out)
+    return 0
 
 if __name__ == "__main__":
     raise SystemExit(main())
