@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from gnomon.config.setup import ScanSetup
-from gnomon.geometry.plane_times import off_plane_pieces, predicted_times
+from gnomon.geometry.plane_times import off_plane_pieces, plane_points, times_at_points
 from gnomon.geometry.reference_lines import ReferencePlane, measure_reference_lines
 
 __all__ = ["MIN_PIECE_PX", "OffPlane", "hold_regions", "off_plane"]
@@ -63,12 +63,15 @@ def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, 
         v, u = np.nonzero(mask)
         if u.size == 0:
             break
-        rays = ray_map[v, u][None]
+        ok, xy = plane_points(reference.plane, ray_map[v, u])  # the region's points, for every edge's lines
         worst = np.full(u.size, -np.inf)
         for times in maps:
             lines = measure_reference_lines(times, n_frames, dataclasses.replace(reference, mask=mask), camera)
+            predicted = np.full(u.size, np.nan)
+            if np.count_nonzero(lines.found) >= 2:
+                predicted[ok] = times_at_points(lines, xy)
             with np.errstate(invalid="ignore"):
-                worst = np.fmax(worst, np.abs(times[v, u] - predicted_times(lines, rays)[0]))
+                worst = np.fmax(worst, np.abs(times[v, u] - predicted))
         worst[~np.isfinite(worst)] = np.nan
         residual = np.full(mask.shape, np.nan)
         residual[v, u] = worst

@@ -200,7 +200,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
         if recorder is not None:
             recorder.submit(lambda rec: record_registration(rec, registration))
     with timed(timings, "regions_s", cpu):  # the regions held to their planes, then planes tied at corners
-        maps = edge_time_maps(tracked, setup.edge)
+        levels = Levels(tracked)  # each edge's times prepared once, for the regions and the edges
+        maps = edge_time_maps(tracked, setup.edge, levels)
         setup = hold_regions(setup, maps, tracked.n_frames, ray_map, warnings)
         setup = tie_planes(setup, maps, tracked.n_frames, warnings)
     check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
@@ -213,11 +214,12 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
                                f"pixel by pixel and tracked (frames {tracked.levelled[:8]}{more})", tracked.levelled))
     warnings += setup.light.choose_dips(tracked, ray_map, setup.planes, setup.max_depth_jump,
                                         min_contrast_dn(setup.tracker.min_contrast, tracked.noise_dn))
+    if setup.light.chooses_dips:  # the times were rewritten: prepared anew
+        levels = Levels(tracked)
     # The colours need only the tracked times (final from here on): combined on a thread meanwhile.
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-colour") as colour_pool:
         colours = colour_pool.submit(lit_colours, colour, tracked)
         with timed(timings, "planes_and_triangulation_s", cpu), stage("shadow planes and triangulation"):
-            levels = Levels(tracked)
             edges = reconstruct_edges(setup, tracked, ray_map, warnings, levels)
         with timed(timings, "fusion_and_mesh_s", cpu), stage("fusion and mesh"):
             fused = fuse_edges(edges, tracked, setup.max_depth_jump, levels)
