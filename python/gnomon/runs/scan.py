@@ -85,6 +85,9 @@ class ScanOptions:
     view: bool = False  # stream to a viewer
     progress: bool = True
     frame_stride: int = 10  # frames kept in the recording
+    # The recording also holds the mesh and the maps at full size (by default: the points at full size, the
+    # maps at the stored frames' size, no mesh; mesh.ply and the .npy files hold them).
+    rrd_full: bool = False
     # The mesh's files (gnomon.outputs.formats, mesh.ply always); None: the field log's
     # [output] mesh_formats (default mesh.ply only).
     mesh_formats: tuple[str, ...] | None = None
@@ -322,7 +325,7 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
         full = source.video is not None and (opts.rrd or opts.view) and playable_video(source.video)
         name, scale = f"scan {setup.inputs.field_log.name}", 1.0 if full else 0.5
-        with recording(staging, opts, name, image_scale=scale) as recorder:
+        with recording(staging, opts, name, image_scale=scale, full=opts.rrd_full) as recorder:
             # The points' files and recording start as soon as the points are final, while the mesh is built.
             with Writers() as writers:
                 result, record = reconstruct(setup, source, recorder, progress=opts.progress,
