@@ -320,7 +320,9 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
     if opts.rrd or opts.view:
         warm_rerun_import()
     stage = Stages("scan", enabled=opts.progress)
-    with stage("set-up (field log, camera, reference planes)"):
+    setup_timing: dict[str, float] = {}
+    setup_cpu: dict[str, float] = {}
+    with stage("set-up (field log, camera, reference planes)"), timed(setup_timing, "setup_s", setup_cpu):
         setup, source = prepare_scan(field_log, opts.mesh_formats, opts.cloud_formats, opts.crs)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
         full = source.video is not None and (opts.rrd or opts.view) and playable_video(source.video)
@@ -331,6 +333,9 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
                 result, record = reconstruct(setup, source, recorder, progress=opts.progress,
                                              frame_stride=opts.frame_stride, track=opts.track or track_source,
                                              on_points=_point_outputs(staging, setup, writers, recorder))
+                # the set-up's own stage (reading the field log, the camera, the planes from their marks)
+                result.report["timings_s"].update(setup_timing)
+                result.report["cpu_timings_s"].update(setup_cpu)
                 if recorder is not None and record is not None:
                     recorder.submit(record)
                     recorder.close_soon()  # encoded and written while the mesh files are
