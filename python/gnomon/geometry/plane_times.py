@@ -14,6 +14,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from gnomon import _kernel
 from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines
 
 __all__ = ["MAX_SPEED_RATIO", "monotone_sweep", "off_plane_pieces", "plane_points", "predicted_times",
@@ -100,17 +101,16 @@ def plane_points(plane: PlaneInCamera, ray_map: np.ndarray) -> tuple[np.ndarray,
     return ok, plane.to_plane_coords(pts[ok])
 
 
-def times_at_points(lines: ReferenceLines, xy: np.ndarray) -> np.ndarray:
+def times_at_points(lines: ReferenceLines, xy: np.ndarray, *, kernel: bool = True) -> np.ndarray:
     """(K,) :func:`predicted_times` at the points ``xy`` (K, 2) of the lines' plane (its coordinates,
     :func:`plane_points`): frames, NaN where the lines do not bracket the point.
 
-    The bisection runs over the points between the first and the last line only, each step one
-    signed distance per point (``x·n_x + y·n_y − offset`` of the step's line)."""
-    out = np.full(len(xy), np.nan)
+    The bisection runs in the kernel (``_kernel.line_times``, points in parallel; element for element
+    :func:`_times_at_points_numpy`, the definition, which ``kernel=False`` runs)."""
     plane = lines.plane
     found = np.flatnonzero(lines.found)
     if len(found) < 2:
-        return out
+        return np.full(len(xy), np.nan)
     centres = plane.to_plane_coords(lines.point[found])
     d3 = lines.direction[found]
     d2 = np.stack([d3 @ plane.e1, d3 @ plane.e2], axis=1)
@@ -118,8 +118,22 @@ def times_at_points(lines: ReferenceLines, xy: np.ndarray) -> np.ndarray:
     keep = monotone_sweep(found, centres, normals)
     found, centres, normals = found[keep], centres[keep], normals[keep]
     if len(found) < 2:
-        return out
+        return np.full(len(xy), np.nan)
     offsets = np.einsum("ij,ij->i", centres, normals)
+    steps = int(np.ceil(np.log2(len(found)))) + 1  # halve [0, N − 1] down to one pair
+    if kernel:
+        return _kernel.line_times(np.ascontiguousarray(xy, dtype=np.float64),
+                                  np.ascontiguousarray(np.column_stack([normals, offsets])), found.astype(np.int64),
+                                  steps)
+    return _times_at_points_numpy(xy, normals, offsets, found, steps)
+
+
+def _times_at_points_numpy(xy: np.ndarray, normals: np.ndarray, offsets: np.ndarray, found: np.ndarray,
+                           steps: int) -> np.ndarray:
+    """:func:`times_at_points`' bisection in numpy over the points between the first and the last line:
+    ``normals`` (N, 2) and ``offsets`` (N,) the lines (signed distance ``x·n_x + y·n_y − offset``, > 0
+    ahead of the line), ``found`` (N,) their frames, ``steps`` bisection steps."""
+    out = np.full(len(xy), np.nan)
     nx, ny = np.ascontiguousarray(normals[:, 0]), np.ascontiguousarray(normals[:, 1])
     x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
     last = len(found) - 1
@@ -129,10 +143,9 @@ def times_at_points(lines: ReferenceLines, xy: np.ndarray) -> np.ndarray:
 
     inside = np.flatnonzero((signed(0) > 0) & (signed(last) <= 0))  # ahead of the first line, passed by the last
     x, y = x[inside], y[inside]
-
     lo = np.zeros(len(inside), dtype=np.intp)
     hi = np.full(len(inside), last, dtype=np.intp)
-    for _ in range(int(np.ceil(np.log2(len(found)))) + 1):
+    for _ in range(steps):
         mid = (lo + hi) // 2
         ahead = signed(mid) > 0
         lo = np.where(ahead, mid, lo)

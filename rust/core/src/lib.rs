@@ -8,7 +8,7 @@
 //! * [`triangulate`]: camera rays ∩ interpolated shadow planes ([`triangulate_depth`]: their Z only);
 //!   [`depth_sigma`]: their σZ;
 //! * [`grid_faces`], [`clean_faces`], [`obj_text`]: the mesh on the pixel grid, its clean-up, its OBJ text;
-//! * [`isochrone_crossings`], [`frame_lines`]: where the shadow-time map crosses each frame, each
+//! * [`isochrone_crossings`], [`frame_lines`], [`line_times`]: where the shadow-time map crosses each frame, each
 //!   frame's robust shadow line on a reference plane;
 //! * [`retime_rows`], [`retime_rows_sigma`]: a fast sweep's shadow times between the isochrones (and their σ);
 //!   [`average_across`]: the re-timed times averaged across the sweep;
@@ -43,7 +43,7 @@ pub use camera::ray_map;
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
 pub use intensity::NORMALISED_SCALE;
-pub use lines::{frame_lines, isochrone_crossings, Crossings, FrameLines, LineParams};
+pub use lines::{frame_lines, isochrone_crossings, line_times, Crossings, FrameLines, LineParams};
 pub use live::{FinishedPixel, WatchParams};
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, triangles, CleanMesh};
 pub use noise::{clipped_fit_step, noise_samples, pairwise_sum, ClipFit, NoiseSamples};
