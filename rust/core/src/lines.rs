@@ -469,32 +469,38 @@ pub fn line_times(
     let last = n - 1;
     let signed =
         |x: f64, y: f64, k: usize| x * lines[3 * k] + y * lines[3 * k + 1] - lines[3 * k + 2];
-    Ok(xy
-        .par_chunks(2)
-        .map(|p| {
-            let (x, y) = (p[0], p[1]);
-            if !(signed(x, y, 0) > 0.0 && signed(x, y, last) <= 0.0) {
-                return f64::NAN;
-            }
-            let (mut lo, mut hi) = (0usize, last);
-            for _ in 0..steps {
-                let mid = (lo + hi) / 2;
-                if signed(x, y, mid) > 0.0 {
-                    lo = mid;
-                } else {
-                    hi = mid;
-                }
-            }
-            let (s_lo, s_hi) = (signed(x, y, lo), signed(x, y, hi));
-            let frac = s_lo / (s_lo - s_hi);
-            let t = frames[lo] as f64 + (frames[hi] - frames[lo]) as f64 * frac;
-            if hi == lo + 1 && t.is_finite() {
-                t
+    let time = |x: f64, y: f64| -> f64 {
+        if !(signed(x, y, 0) > 0.0 && signed(x, y, last) <= 0.0) {
+            return f64::NAN;
+        }
+        let (mut lo, mut hi) = (0usize, last);
+        for _ in 0..steps {
+            let mid = (lo + hi) / 2;
+            if signed(x, y, mid) > 0.0 {
+                lo = mid;
             } else {
-                f64::NAN
+                hi = mid;
             }
-        })
-        .collect())
+        }
+        let (s_lo, s_hi) = (signed(x, y, lo), signed(x, y, hi));
+        let frac = s_lo / (s_lo - s_hi);
+        let t = frames[lo] as f64 + (frames[hi] - frames[lo]) as f64 * frac;
+        if hi == lo + 1 && t.is_finite() {
+            t
+        } else {
+            f64::NAN
+        }
+    };
+    const CHUNK: usize = 8192; // points per task
+    let mut out = vec![f64::NAN; xy.len() / 2];
+    out.par_chunks_mut(CHUNK)
+        .zip(xy.par_chunks(2 * CHUNK))
+        .for_each(|(out, xy)| {
+            for (t, p) in out.iter_mut().zip(xy.chunks_exact(2)) {
+                *t = time(p[0], p[1]);
+            }
+        });
+    Ok(out)
 }
 
 #[cfg(test)]
