@@ -15,6 +15,7 @@ them, up to ``ROUNDS`` times. Each plane that loses pixels gets a warning with t
 from __future__ import annotations
 
 import dataclasses
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -94,9 +95,11 @@ def hold_regions(setup: ScanSetup, maps: list[np.ndarray], n_frames: int, ray_ma
     """``setup`` with each plane's region held to the plane (:func:`off_plane`) on the edges' time ``maps``
     (:func:`gnomon.reconstruct.edges.edge_time_maps`), a warning per plane that lost pixels: how many,
     where the largest piece lies, and what to do."""
+    # the planes are independent: one thread each (numpy, OpenCV and the kernel release the GIL)
+    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="gnomon-regions") as pool:
+        helds = list(pool.map(lambda ref: off_plane(ref, maps, n_frames, setup.camera, ray_map), setup.planes))
     planes = []
-    for reference in setup.planes:
-        held = off_plane(reference, maps, n_frames, setup.camera, ray_map)
+    for reference, held in zip(setup.planes, helds, strict=True):
         if held.left_out and held.pieces:
             area, (u0, v0, u1, v1) = held.pieces[0]
             warnings.append(
