@@ -183,8 +183,12 @@ def _prepared_edge(times: np.ndarray, slope: np.ndarray, tracked: TrackedSequenc
 def edge_times(tracked: TrackedSequence, levels: Levels | None = None,
                 across: int = ACROSS_HALF_ROWS) -> tuple[EdgeTimes, EdgeTimes]:
     t, levels = tracked.times, levels or Levels(tracked)
-    return (edge_time("enter", t.enter, t.enter_slope, tracked, levels, across),
-            edge_time("leave", t.leave, t.leave_slope, tracked, levels, across))
+    levels.imax, levels.imin, levels.sigma_at_threshold  # noqa: B018 - computed once, before the threads share them
+    # the two edges on a thread each (numpy and the kernel release the GIL)
+    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="gnomon-edge") as pool:
+        enter = pool.submit(edge_time, "enter", t.enter, t.enter_slope, tracked, levels, across)
+        leave = pool.submit(edge_time, "leave", t.leave, t.leave_slope, tracked, levels, across)
+        return enter.result(), leave.result()
 
 
 def edge_time_maps(tracked: TrackedSequence, edge: str = "both", levels: Levels | None = None) -> list[np.ndarray]:
