@@ -371,6 +371,21 @@ def line_times(
     NaN where none brackets the point. Element for element
     :func:`gnomon.geometry.plane_times._times_at_points_numpy`; points in parallel."""
 
+def deblock_interpolate(
+    times: npt.NDArray[np.float32],
+    value: npt.NDArray[np.float64],
+    size: int,
+    u0: int,
+    v0: int,
+    span_max: float,
+) -> npt.NDArray[np.float32]:
+    """A compressed video's shadow times ``times`` (H, W) float32 (frames, NaN = none) interpolated bilinearly
+    between the centres of its ``size``-pixel codec blocks (the first whole block at column ``u0``, row ``v0``),
+    ``value`` (blocks down, blocks across) each block's time (NaN: it does not count): a pixel between four
+    finite centres spanning at most ``span_max`` frames, with a time of its own, takes their interpolation,
+    every other keeps its time. Element for element :func:`gnomon.capture.deblock._interpolate_numpy`; rows
+    in parallel."""
+
 def fuse_supported(
     depths: npt.NDArray[np.float32],
     sigmas: npt.NDArray[np.float32],

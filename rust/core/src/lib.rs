@@ -17,6 +17,7 @@
 //! * [`noise_samples`], [`clipped_fit_step`]: the image-noise estimate's samples and the steps of its
 //!   clipped fit, in numpy's float32 order;
 //! * [`ray_map`]: the unit ray of every pixel of OpenCV's 5-coefficient camera (Newton);
+//! * [`deblock_interpolate`]: a compressed video's shadow times between its codec blocks' centres;
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
 //! Pure Rust, no Python types; every function on user data returns
@@ -24,6 +25,7 @@
 
 pub mod camera;
 pub mod crossing;
+pub mod deblock;
 pub mod error;
 pub mod geometry;
 pub mod intensity;
@@ -40,6 +42,7 @@ pub mod tracker;
 pub mod triangulate;
 
 pub use camera::ray_map;
+pub use deblock::{deblock_interpolate, BlockLayout};
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
 pub use intensity::NORMALISED_SCALE;
