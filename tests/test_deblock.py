@@ -16,6 +16,17 @@ def _sweep(h: int = 240, w: int = 320) -> tuple[np.ndarray, np.ndarray]:
     return np.where(disc, t + 6.0, t), disc
 
 
+def _coded(truth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The map a codec makes of ``truth``: each 8×8 block (the grid starting at column 3, row 5) takes its
+    mean time, as a strongly compressed block darkens as a whole, plus 0.005 frame of noise."""
+    h, w = truth.shape
+    blocky = truth.copy()
+    for r in range(5, h - 7, 8):
+        for c in range(3, w - 7, 8):
+            blocky[r:r + 8, c:c + 8] = truth[r:r + 8, c:c + 8].mean()
+    return blocky + rng.normal(0.0, 0.005, blocky.shape)
+
+
 def test_block_constant_times_are_interpolated_between_block_centres() -> None:
     """The map a codec makes of that sweep: each 8×8 block (grid starting at column 3, row 5) takes its mean
     time, as a strongly compressed block darkens as a whole, with 0.005 frame of noise. The grid is found
@@ -26,11 +37,7 @@ def test_block_constant_times_are_interpolated_between_block_centres() -> None:
     rng = np.random.default_rng(5)
     truth, disc = _sweep()
     h, w = truth.shape
-    blocky = truth.copy()
-    for r in range(5, h - 7, 8):
-        for c in range(3, w - 7, 8):
-            blocky[r:r + 8, c:c + 8] = truth[r:r + 8, c:c + 8].mean()
-    blocky += rng.normal(0.0, 0.005, blocky.shape)
+    blocky = _coded(truth, rng)
     grid = block_grid(blocky)
     assert grid is not None and (grid.size, grid.u0, grid.v0) == (8, 3, 5)
     out = deblock_times(blocky, grid)
@@ -56,11 +63,7 @@ def test_the_kernel_interpolates_float32_maps_as_numpy_does_bit_for_bit() -> Non
     rng = np.random.default_rng(8)
     truth, _ = _sweep()
     h, w = truth.shape
-    blocky = truth.copy()
-    for r in range(5, h - 7, 8):
-        for c in range(3, w - 7, 8):
-            blocky[r:r + 8, c:c + 8] = truth[r:r + 8, c:c + 8].mean()
-    blocky += rng.normal(0.0, 0.005, blocky.shape)
+    blocky = _coded(truth, rng)
     blocky[rng.random(blocky.shape) < 0.002] = np.nan  # pixels without a time
     blocky32 = blocky.astype(np.float32)
     grid = block_grid(blocky32)
