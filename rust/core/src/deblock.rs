@@ -86,7 +86,8 @@ pub fn deblock_interpolate(
                 }
                 let hi = corners.iter().copied().fold(f64::NEG_INFINITY, f64::max);
                 let lo = corners.iter().copied().fold(f64::INFINITY, f64::min);
-                if !(hi - lo <= span_max) {
+                let within = hi - lo <= span_max; // false for a NaN span_max too
+                if !within {
                     continue;
                 }
                 let interp = c00 * (1.0 - fu) * (1.0 - fv)
