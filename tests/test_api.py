@@ -111,7 +111,7 @@ def test_the_cli_scan_is_the_api_scan(tiny_capture, tmp_path, monkeypatch, capsy
     assert args == (tiny_capture, out)
     assert kwargs == {"rrd": False, "rrd_path": None, "view": False, "progress": False, "frame_stride": 3,
                       "tiles": None, "scheduler": None, "workers": None, "mesh_formats": None,
-                      "cloud_formats": None, "crs": None}
+                      "cloud_formats": None, "crs": None, "rrd_full": False}
     assert s.folder == out and not (out / "scan.rrd").exists()
     v = plyfile.PlyData.read(str(out / "points.ply"))["vertex"].data
     np.testing.assert_array_equal(s.points, np.stack([v["x"], v["y"], v["z"]], axis=1))

@@ -312,6 +312,22 @@ def test_maps_keep_values_and_nan(scan, key, expected, colormap):
     assert cmap == names[colormap].value
 
 
+def test_a_recording_not_full_has_no_mesh_and_its_maps_at_the_frames_size(tmp_path):
+    """A scan's default recording (``full=False``): the points as they are, no mesh, each map at the stored
+    frames' size (half here): the nearest pixel, i.e. every second row and column."""
+    path = tmp_path / "lite.rrd"
+    write_scan(path, full=False, image_scale=0.5)
+    data = load(path)
+    assert "/" + ENTITY["mesh"] not in data and "/" + ENTITY["points"] in data
+    assert len(one(data, ENTITY["points"], "Points3D:positions")) == len(XYZ)
+    for key, expected in (("shadow_time", SHADOW_TIME), ("depth", DEPTH), ("sigma", SIGMA_MAP)):
+        fmt = one(data, ENTITY[key], "DepthImage:format")[0]
+        assert (fmt["width"], fmt["height"]) == (W // 2, H // 2)
+        buf = np.frombuffer(bytes(one(data, ENTITY[key], "DepthImage:buffer")[0]), np.float32).reshape(H // 2, W // 2)
+        assert np.array_equal(buf, expected[::2, ::2], equal_nan=True)
+    assert rrd_verify(path).returncode == 0
+
+
 def test_warnings_and_metrics(scan):
     _, _, data = scan
     texts = rows(data, ENTITY["log"], "TextLog:text")

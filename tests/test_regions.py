@@ -222,6 +222,32 @@ def test_predicted_times_ignore_lines_off_the_sweep() -> None:
     assert 1 not in kept and 2 not in kept and 30 not in kept and len(kept) == 40
 
 
+def test_the_kernel_times_the_points_as_numpy_does_bit_for_bit() -> None:
+    """times_at_points: the kernel's bisection (``_kernel.line_times``) equals the numpy definition element for
+    element, on lines of turning directions and uneven frames and on points inside, before and beyond them."""
+    from gnomon.geometry.plane_times import times_at_points
+    from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines
+
+    rng = np.random.default_rng(11)
+    n_frames = 120
+    plane = PlaneInCamera(np.array([0.0, 0.0, 1.0]), 800.0, np.array([0.0, 0.0, 800.0]),
+                          np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    point = np.full((n_frames, 3), np.nan)
+    direction = np.full((n_frames, 3), np.nan)
+    frames = np.sort(rng.choice(np.arange(3, 117), 77, replace=False))
+    for k, t in enumerate(frames):  # a sweep along x whose lines turn by up to 20°
+        a = np.radians(90.0 + 20.0 * np.sin(k / 9.0))
+        point[t], direction[t] = [6.0 * k - 230.0 + rng.normal(0, 0.3), 0.0, 800.0], [np.cos(a), np.sin(a), 0.0]
+    lines = ReferenceLines("p", plane, point, direction, np.zeros(n_frames), np.zeros(n_frames, dtype=int),
+                           [np.zeros((0, 2))] * n_frames, np.zeros(n_frames, dtype=bool),
+                           [np.zeros((0, 3))] * n_frames)
+    xy = rng.uniform([-300.0, -150.0], [300.0, 150.0], (20_000, 2))
+    got = times_at_points(lines, xy)
+    want = times_at_points(lines, xy, kernel=False)
+    assert np.isfinite(want).mean() > 0.5 and np.isnan(want).any()  # both kinds of points are there
+    assert got.tobytes() == want.tobytes()
+
+
 def _fast_sweep_with_a_fold(fold_deg: float) -> dict:
     """A wall z = 1000 mm (camera frame) whose last 30 rows are folded towards the camera by ``fold_deg``
     about a horizontal hinge (like the frog capture's wall board, folded at its edge), swept by the shadow

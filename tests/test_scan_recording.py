@@ -41,9 +41,10 @@ def test_export_gives_points_ply_bit_for_bit(scanned, capsys) -> None:
 def test_summary_lists_the_layout(scanned, capsys) -> None:
     s = summarize(scanned / "scan" / "scan.rrd").to_dict()
     entities = set(s["entities"])
-    for e in ("world/camera", "world/camera/image", "world/camera/image/edges", "world/points", "world/mesh",
+    for e in ("world/camera", "world/camera/image", "world/camera/image/edges", "world/points",
               "world/light", "world/shadow_plane", "maps/shadow_time", "maps/depth", "maps/sigma"):
         assert "/" + e in entities, (e, sorted(entities))
+    assert "/world/mesh" not in entities  # by default mesh.ply has it (gnomon scan --rrd-full records it)
     assert any(e.startswith("/world/planes/") for e in entities)
     report = json.loads((scanned / "scan" / "report.json").read_text())
     assert s["point_count"] == report["coverage"]["points"]
@@ -163,3 +164,29 @@ def test_warnings_sit_at_their_frames_and_the_metrics_are_a_table(tmp_path) -> N
     assert not any("illumination dips" in w for w in report["warnings"])
     assert all(found[w] == [0] for w in report["warnings"])
     assert summary and f"| coverage/points | {report['coverage']['points']} |" in summary[-1]
+
+
+@pytest.mark.slow
+def test_rrd_full_records_the_mesh_and_full_size_maps(scanned, tmp_path) -> None:
+    """--rrd-full: the mesh (mesh.ply's vertices and faces) and the maps at the frames' full size; the default
+    recording's maps are at its stored frames' size (half)."""
+    from rerun.chunk import RrdReader
+
+    def maps_and_mesh(rrd):
+        sizes, mesh = {}, None
+        for chunk in RrdReader(rrd).stream():
+            batch = chunk.to_record_batch()
+            if chunk.entity_path == "/maps/depth" and "DepthImage:format" in batch.schema.names:
+                fmt = batch.column("DepthImage:format").to_pylist()[-1][0]
+                sizes["depth"] = (fmt["width"], fmt["height"])
+            if chunk.entity_path == "/world/mesh" and "Mesh3D:triangle_indices" in batch.schema.names:
+                mesh = len(batch.column("Mesh3D:triangle_indices").to_pylist()[-1])
+        return sizes, mesh
+
+    assert main(["scan", str(scanned / "capture" / "field_log.toml"), "--out", str(tmp_path / "full"), "--quiet",
+                 "--rrd-full"]) == 0
+    sizes, faces = maps_and_mesh(tmp_path / "full" / "scan.rrd")
+    assert sizes["depth"] == (400, 300)
+    assert faces == len(ply.read_ply(tmp_path / "full" / "mesh.ply")["faces"])
+    default_sizes, default_mesh = maps_and_mesh(scanned / "scan" / "scan.rrd")
+    assert default_sizes["depth"] == (200, 150) and default_mesh is None

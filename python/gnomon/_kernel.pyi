@@ -359,6 +359,33 @@ def frame_lines(
     count (N,), extent (N,), inliers (K,))``, NaN / 0 / False off the accepted lines; frames in
     parallel."""
 
+def line_times(
+    xy: npt.NDArray[np.float64],
+    lines: npt.NDArray[np.float64],
+    frames: npt.NDArray[np.int64],
+    steps: int,
+) -> npt.NDArray[np.float64]:
+    """When a plane's shadow lines pass each of its points ``xy`` (K, 2) (plane coordinates): ``lines`` (N, 3)
+    ``(n_x, n_y, offset)`` in sweep order (signed distance ``x·n_x + y·n_y − offset`` > 0 ahead of a line),
+    ``frames`` (N,) theirs, ``steps`` bisection steps; the time interpolated between the bracketing pair,
+    NaN where none brackets the point. Element for element
+    :func:`gnomon.geometry.plane_times._times_at_points_numpy`; points in parallel."""
+
+def deblock_interpolate(
+    times: npt.NDArray[np.float32],
+    value: npt.NDArray[np.float64],
+    size: int,
+    u0: int,
+    v0: int,
+    span_max: float,
+) -> npt.NDArray[np.float32]:
+    """A compressed video's shadow times ``times`` (H, W) float32 (frames, NaN = none) interpolated bilinearly
+    between the centres of its ``size``-pixel codec blocks (the first whole block at column ``u0``, row ``v0``),
+    ``value`` (blocks down, blocks across) each block's time (NaN: it does not count): a pixel between four
+    finite centres spanning at most ``span_max`` frames, with a time of its own, takes their interpolation,
+    every other keeps its time. Element for element :func:`gnomon.capture.deblock._interpolate_numpy`; rows
+    in parallel."""
+
 def fuse_supported(
     depths: npt.NDArray[np.float32],
     sigmas: npt.NDArray[np.float32],

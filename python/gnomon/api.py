@@ -204,7 +204,7 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
          rrd_path: str | os.PathLike | None = None, view: bool = False, progress: bool = False,
          frame_stride: int = 10, tiles: str | None = None, scheduler: str | None = None,
          workers: int | None = None, mesh_formats: tuple[str, ...] | None = None,
-         cloud_formats: tuple[str, ...] | None = None, crs: str | None = None) -> Scan:
+         cloud_formats: tuple[str, ...] | None = None, crs: str | None = None, rrd_full: bool = False) -> Scan:
     """Scan the capture a field log describes; return the result, and write it if ``out`` is given.
 
     ``field_log`` the capture's TOML field log (format: field_logs/README.md;
@@ -215,7 +215,8 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
     ``rrd`` also write the rerun recording (default: when ``out`` is given),
     to ``rrd_path`` (default ``out/scan.rrd``); ``view`` also stream it to a
     rerun viewer started here (where a display exists; the file is written
-    either way); ``frame_stride`` keep every n-th frame image in it.
+    either way); ``frame_stride`` keep every n-th frame image in it; ``rrd_full`` the mesh and the maps
+    at full size in it too (by default the points at full size, the maps at the frames' stored size).
     ``progress`` a progress bar on stderr. ``mesh_formats`` the mesh's files among
     ``("ply", "obj", "stl")`` (mesh.ply always; default: the field log's ``[output] mesh_formats``,
     else mesh.ply only). ``cloud_formats`` survey point clouds among ``("las", "laz")`` (``()``: none;
@@ -248,7 +249,7 @@ def scan(field_log: str | os.PathLike, out: str | os.PathLike | None = None, *, 
             opts = ScanOptions(rrd=True if rrd is None else bool(rrd), progress=progress,
                                rrd_path=None if rrd_path is None else Path(rrd_path), view=view,
                                frame_stride=frame_stride, track=track, mesh_formats=formats,
-                               cloud_formats=_formats(cloud_formats, "cloud"), crs=crs)
+                               cloud_formats=_formats(cloud_formats, "cloud"), crs=crs, rrd_full=bool(rrd_full))
             return _from_result(run_scan(log, Path(out), opts), Path(out))
         setup, source = prepare_scan(log, formats, _formats(cloud_formats, "cloud"), crs)
         result = scan_in_memory(setup, source, None, progress=progress, frame_stride=frame_stride,

@@ -561,7 +561,9 @@ def _refine(camera, obj, pixels, rvec, tvec):
     """The pose (rvec, tvec) minimising the pixel residuals, from a closed-form start; the fit (its
     residuals and their Jacobian at the solution, for the pose's covariance)."""
     def fun(p):
-        return np.nan_to_num(_pixel_residuals(camera, p[:3], p[3:], obj, pixels).ravel(), nan=1e6)
+        r = _pixel_residuals(camera, p[:3], p[3:], obj, pixels).ravel()
+        # np.nan_to_num's call costs more than the projection: only when a residual is not finite
+        return r if np.isfinite(r).all() else np.nan_to_num(r, nan=1e6)
 
     sol = levenberg_marquardt(fun, np.concatenate([rvec, tvec]))
     return sol.x[:3], sol.x[3:], sol

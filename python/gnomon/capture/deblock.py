@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gnomon import _kernel
+
 __all__ = ["BlockGrid", "block_grid", "deblock_times"]
 
 # Codec block sizes looked for (pixels).
@@ -112,9 +114,8 @@ def deblock_times(times: np.ndarray, grid: BlockGrid) -> np.ndarray:
     h, w = t.shape
     b = grid.size
     nby, nbx = (h - grid.v0) // b, (w - grid.u0) // b
-    out = t.astype(np.float32)
     if nby < 2 or nbx < 2:
-        return out
+        return t.astype(np.float32)
     blocks = t[grid.v0:grid.v0 + nby * b, grid.u0:grid.u0 + nbx * b].reshape(nby, b, nbx, b)
     with np.errstate(invalid="ignore"):
         lo, hi = blocks.min(axis=(1, 3)), blocks.max(axis=(1, 3))
@@ -124,8 +125,22 @@ def deblock_times(times: np.ndarray, grid: BlockGrid) -> np.ndarray:
     steps = np.concatenate([np.abs(np.diff(value, axis=0)).ravel(), np.abs(np.diff(value, axis=1)).ravel()])
     steps = steps[np.isfinite(steps) & (steps > 0)]
     if steps.size == 0:
-        return out
+        return t.astype(np.float32)
     span_max = MAX_SPAN_STEPS * float(np.median(steps))
+    if isinstance(times, np.ndarray) and times.dtype == np.float32:  # the kernel: rows in parallel, the same values
+        return _kernel.deblock_interpolate(np.ascontiguousarray(times), np.ascontiguousarray(value), b, grid.u0,
+                                           grid.v0, span_max)
+    return _interpolate_numpy(t, value, grid, span_max)
+
+
+def _interpolate_numpy(t: np.ndarray, value: np.ndarray, grid: BlockGrid, span_max: float) -> np.ndarray:
+    """:func:`deblock_times`' interpolation in numpy (the definition; the kernel's ``deblock_interpolate`` gives
+    the same on float32 maps): ``t`` (H, W) float64 times, ``value`` (blocks down, blocks across) each block's
+    time (NaN: it does not count), ``span_max`` the largest spread of four centres interpolated between."""
+    h, w = t.shape
+    b = grid.size
+    nby, nbx = value.shape
+    out = t.astype(np.float32)
     # Pixel → position in block-centre units: centre of block j at u0 + j·b + (b − 1)/2.
     u = (np.arange(w) - grid.u0 - (b - 1) / 2.0) / b
     v = (np.arange(h) - grid.v0 - (b - 1) / 2.0) / b

@@ -24,7 +24,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Synthesise grey frames of a sweeping shadow, time the Rust tracker and the numpy "
         "tracker on them, and measure the kernel's peak memory (RSS of a fresh process) for 100 and "
         "for --frames frames. With --scan FIELD_LOG: time decoding that capture's frames alone, one "
-        "tracking pass alone (decoding and the kernel tracker, nothing after), then its whole scan, in one run.",
+        "tracking pass alone (decoding and the kernel tracker, nothing after), then its whole scan (with each "
+        "stage's share and the ratio to that floor) and the same scan without its recording, in one run.",
     )
     p.add_argument("--frames", type=int, default=1000, metavar="N", help="frames for the kernel (default 1000)")
     p.add_argument("--numpy-frames", type=int, default=30, metavar="M",
@@ -35,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-width", type=int, default=32, help="tracker dip width W, frames (default 32)")
     p.add_argument("--scan", metavar="FIELD_LOG",
                    help="instead: time decoding this capture's frames alone, decoding and tracking alone, then its "
-                   "whole scan")
+                   "whole scan and the same scan without its recording")
     p.add_argument("--scan-out", metavar="DIR", help="output folder of the --scan run (default: a temporary one)")
     p.add_argument("--mesh-formats", type=mesh_formats_option, default=None, metavar="LIST",
                    help="with --scan: the mesh's files, as gnomon scan --mesh-formats ('all': every format)")
@@ -83,7 +84,7 @@ def _run_scan(args: argparse.Namespace) -> int:
     from gnomon.runs.bench import format_scan_table, run_scan_bench
 
     with tempfile.TemporaryDirectory(prefix="gnomon-bench-") as tmp:
-        result = run_scan_bench(args.scan, args.scan_out or tmp, args.mesh_formats)
+        result = run_scan_bench(args.scan, args.scan_out or f"{tmp}/scan", args.mesh_formats, f"{tmp}/no-rrd")
     print(format_scan_table(result))
     if args.json:
         write_text(args.json, json.dumps(result.to_dict(), indent=2) + "\n")

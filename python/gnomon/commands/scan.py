@@ -34,6 +34,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="a sun scan's survey files in this coordinate reference system (e.g. EPSG:2056; anything "
                    "pyproj reads); default: the field log's [output] crs, else the site's UTM zone")
     add_recording_arguments(p)
+    p.add_argument("--rrd-full", action="store_true",
+                   help="the recording also holds the mesh and the maps at full size (larger and slower to write; "
+                   "by default it has the points at full size, the maps at its frames' size and no mesh)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     tiles = p.add_argument_group("tiled scan on Dask (pip install \"gnomon[dask]\"; see docs/batch.md)")
     tiles.add_argument("--tiles", default=None, metavar="RxC",
@@ -73,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     s = api.scan(args.field_log, out, rrd=not args.no_rrd, rrd_path=args.rrd, view=args.view,
                  progress=not args.quiet, frame_stride=args.frame_stride, tiles=args.tiles,
                  scheduler=args.scheduler, workers=args.workers, mesh_formats=args.mesh_formats,
-                 cloud_formats=args.cloud_formats, crs=args.crs)
+                 cloud_formats=args.cloud_formats, crs=args.crs, rrd_full=args.rrd_full)
     if args.tiles is not None:
         info = s.report["tracking"]
         peaks = [p for p in info["worker_peak_rss_bytes"] if p is not None]

@@ -679,8 +679,8 @@ def resolve_reference_planes(log: FieldLog, source: FrameSource) -> tuple[FieldL
     factors: dict[str, float] = {}
 
     def others(name: str) -> dict[str, float]:  # the other marked planes' focal factors, each alone
-        for plane, pp in measured:
-            if plane.name not in factors and plane.markers:
+        for plane, pp in measured:  # (each computed once, and only when another plane asks for it)
+            if plane.name != name and plane.name not in factors and plane.markers:
                 factors[plane.name] = alone_focal_factor(log, plane, pp)
         return {n: k for n, k in factors.items() if n != name and np.isfinite(k)}
 

@@ -14,9 +14,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from gnomon.geometry.reference_lines import ReferenceLines
+from gnomon import _kernel
+from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines
 
-__all__ = ["MAX_SPEED_RATIO", "monotone_sweep", "off_plane_pieces", "predicted_times"]
+__all__ = ["MAX_SPEED_RATIO", "monotone_sweep", "off_plane_pieces", "plane_points", "predicted_times",
+           "times_at_points"]
 
 # A plane's lines are one sweep where consecutive lines move less than this times their median speed (per frame).
 MAX_SPEED_RATIO = 8.0
@@ -79,17 +81,36 @@ def predicted_times(lines: ReferenceLines, ray_map: np.ndarray) -> np.ndarray:
     such run, :func:`monotone_sweep`). The pair of consecutive frames with a line whose lines
     bracket the point is found by bisection, and the point's signed distances
     to them interpolated linearly; pixels the lines never pass (or whose ray
-    misses the plane) are NaN.
+    misses the plane) are NaN. :func:`plane_points` and :func:`times_at_points` are its two halves,
+    for a caller that predicts several edges' times at the same pixels.
     """
     h, w = ray_map.shape[:2]
-    plane = lines.plane
-    found = np.flatnonzero(lines.found)
     out = np.full(h * w, np.nan)
-    if len(found) < 2:
+    if np.count_nonzero(lines.found) < 2:
         return out.reshape(h, w)
+    ok, xy = plane_points(lines.plane, ray_map)
+    out[ok] = times_at_points(lines, xy)
+    return out.reshape(h, w)
+
+
+def plane_points(plane: PlaneInCamera, ray_map: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the rays ``ray_map`` (..., 3) (camera frame) meet ``plane``: the flat indices of the rays
+    that meet it (in front of the camera) and their points in the plane's coordinates (K, 2)."""
     pts = plane.intersect(ray_map.reshape(-1, 3).astype(np.float64))
     ok = np.flatnonzero(np.isfinite(pts[:, 0]))
-    xy = plane.to_plane_coords(pts[ok])
+    return ok, plane.to_plane_coords(pts[ok])
+
+
+def times_at_points(lines: ReferenceLines, xy: np.ndarray, *, kernel: bool = True) -> np.ndarray:
+    """(K,) :func:`predicted_times` at the points ``xy`` (K, 2) of the lines' plane (its coordinates,
+    :func:`plane_points`): frames, NaN where the lines do not bracket the point.
+
+    The bisection runs in the kernel (``_kernel.line_times``, points in parallel; element for element
+    :func:`_times_at_points_numpy`, the definition, which ``kernel=False`` runs)."""
+    plane = lines.plane
+    found = np.flatnonzero(lines.found)
+    if len(found) < 2:
+        return np.full(len(xy), np.nan)
     centres = plane.to_plane_coords(lines.point[found])
     d3 = lines.direction[found]
     d2 = np.stack([d3 @ plane.e1, d3 @ plane.e2], axis=1)
@@ -97,28 +118,45 @@ def predicted_times(lines: ReferenceLines, ray_map: np.ndarray) -> np.ndarray:
     keep = monotone_sweep(found, centres, normals)
     found, centres, normals = found[keep], centres[keep], normals[keep]
     if len(found) < 2:
-        return out.reshape(h, w)
+        return np.full(len(xy), np.nan)
     offsets = np.einsum("ij,ij->i", centres, normals)
+    steps = int(np.ceil(np.log2(len(found)))) + 1  # halve [0, N − 1] down to one pair
+    if kernel:
+        return _kernel.line_times(np.ascontiguousarray(xy, dtype=np.float64),
+                                  np.ascontiguousarray(np.column_stack([normals, offsets])), found.astype(np.int64),
+                                  steps)
+    return _times_at_points_numpy(xy, normals, offsets, found, steps)
 
-    def signed(k: np.ndarray) -> np.ndarray:  # > 0: the point is ahead of line k (not yet reached)
-        return np.einsum("ij,ij->i", xy, normals[k]) - offsets[k]
 
-    s_first, s_last = signed(np.zeros(len(xy), dtype=int)), signed(np.full(len(xy), len(found) - 1))
-    inside = (s_first > 0) & (s_last <= 0)  # ahead of the first line and passed by the last
-    lo = np.zeros(len(xy), dtype=int)
-    hi = np.full(len(xy), len(found) - 1)
-    for _ in range(int(np.ceil(np.log2(len(found)))) + 1):
+def _times_at_points_numpy(xy: np.ndarray, normals: np.ndarray, offsets: np.ndarray, found: np.ndarray,
+                           steps: int) -> np.ndarray:
+    """:func:`times_at_points`' bisection in numpy over the points between the first and the last line:
+    ``normals`` (N, 2) and ``offsets`` (N,) the lines (signed distance ``x·n_x + y·n_y − offset``, > 0
+    ahead of the line), ``found`` (N,) their frames, ``steps`` bisection steps."""
+    out = np.full(len(xy), np.nan)
+    nx, ny = np.ascontiguousarray(normals[:, 0]), np.ascontiguousarray(normals[:, 1])
+    x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
+    last = len(found) - 1
+
+    def signed(k: np.ndarray | int) -> np.ndarray:  # > 0: the point is ahead of line k (not yet reached)
+        return x * nx[k] + y * ny[k] - offsets[k]
+
+    inside = np.flatnonzero((signed(0) > 0) & (signed(last) <= 0))  # ahead of the first line, passed by the last
+    x, y = x[inside], y[inside]
+    lo = np.zeros(len(inside), dtype=np.intp)
+    hi = np.full(len(inside), last, dtype=np.intp)
+    for _ in range(steps):
         mid = (lo + hi) // 2
         ahead = signed(mid) > 0
-        lo = np.where(inside & ahead, mid, lo)
-        hi = np.where(inside & ~ahead, mid, hi)
+        lo = np.where(ahead, mid, lo)
+        hi = np.where(ahead, hi, mid)
     s_lo, s_hi = signed(lo), signed(hi)
     with np.errstate(invalid="ignore", divide="ignore"):
         frac = s_lo / (s_lo - s_hi)
     t = found[lo] + (found[hi] - found[lo]) * frac
-    good = inside & (hi == lo + 1) & np.isfinite(t)
-    out[ok[good]] = t[good]
-    return out.reshape(h, w)
+    good = (hi == lo + 1) & np.isfinite(t)
+    out[inside[good]] = t[good]
+    return out
 
 
 def off_plane_pieces(residual: np.ndarray, region: np.ndarray, tolerance: float,

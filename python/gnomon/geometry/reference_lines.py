@@ -286,10 +286,10 @@ def mask_crossings(times: np.ndarray, mask: np.ndarray, n_frames: int,
     inside), so holes (markers, an object) and several disjoint areas are one
     region. Returns (frame (K,), pixel (K, 2) as u, v).
     """
-    rows, cols = np.nonzero(mask)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))  # the mask's bounding box
     if rows.size == 0:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-    v0, v1, u0, u1 = rows.min(), rows.max() + 1, cols.min(), cols.max() + 1
+    v0, v1, u0, u1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
     sub = np.where(mask[v0:v1, u0:u1], times[v0:v1, u0:u1], np.nan)
     f, u, v = isochrone_crossings(sub, n_frames, unique)
     return f, np.stack([u + u0, v + v0], axis=1)

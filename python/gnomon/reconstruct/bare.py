@@ -15,12 +15,13 @@ them, up to ``ROUNDS`` times. Each plane that loses pixels gets a warning with t
 from __future__ import annotations
 
 import dataclasses
+from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
 
 from gnomon.config.setup import ScanSetup
-from gnomon.geometry.plane_times import off_plane_pieces, predicted_times
+from gnomon.geometry.plane_times import off_plane_pieces, plane_points, times_at_points
 from gnomon.geometry.reference_lines import ReferencePlane, measure_reference_lines
 
 __all__ = ["MIN_PIECE_PX", "OffPlane", "hold_regions", "off_plane"]
@@ -63,12 +64,15 @@ def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, 
         v, u = np.nonzero(mask)
         if u.size == 0:
             break
-        rays = ray_map[v, u][None]
+        ok, xy = plane_points(reference.plane, ray_map[v, u])  # the region's points, for every edge's lines
         worst = np.full(u.size, -np.inf)
         for times in maps:
             lines = measure_reference_lines(times, n_frames, dataclasses.replace(reference, mask=mask), camera)
+            predicted = np.full(u.size, np.nan)
+            if np.count_nonzero(lines.found) >= 2:
+                predicted[ok] = times_at_points(lines, xy)
             with np.errstate(invalid="ignore"):
-                worst = np.fmax(worst, np.abs(times[v, u] - predicted_times(lines, rays)[0]))
+                worst = np.fmax(worst, np.abs(times[v, u] - predicted))
         worst[~np.isfinite(worst)] = np.nan
         residual = np.full(mask.shape, np.nan)
         residual[v, u] = worst
@@ -91,9 +95,11 @@ def hold_regions(setup: ScanSetup, maps: list[np.ndarray], n_frames: int, ray_ma
     """``setup`` with each plane's region held to the plane (:func:`off_plane`) on the edges' time ``maps``
     (:func:`gnomon.reconstruct.edges.edge_time_maps`), a warning per plane that lost pixels: how many,
     where the largest piece lies, and what to do."""
+    # the planes are independent: one thread each (numpy, OpenCV and the kernel release the GIL)
+    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="gnomon-regions") as pool:
+        helds = list(pool.map(lambda ref: off_plane(ref, maps, n_frames, setup.camera, ray_map), setup.planes))
     planes = []
-    for reference in setup.planes:
-        held = off_plane(reference, maps, n_frames, setup.camera, ray_map)
+    for reference, held in zip(setup.planes, helds, strict=True):
         if held.left_out and held.pieces:
             area, (u0, v0, u1, v1) = held.pieces[0]
             warnings.append(

@@ -47,7 +47,7 @@ from gnomon.geometry.validity import (
 )
 from gnomon.light import EdgePlanes, EdgeTimes, ReferenceGeometry
 from gnomon.light.base import LightModel, Screening
-from gnomon.reconstruct.retiming import ACROSS_HALF_ROWS, retime_with_sigma
+from gnomon.reconstruct.retiming import ACROSS_HALF_ROWS, RowRetiming, average_across_sweep, retime_rows
 
 # Quality gates: share of the sweep's frames with a measured shadow plane (error below / warning
 # below), and the longest gap (frames) to a plane over which a pixel's depth may be interpolated.
@@ -92,12 +92,34 @@ class EdgeResult:
     unmodelled_sigma_t: float = 0.0
 
 
+@dataclass(frozen=True)
+class PreparedEdge:
+    """One edge's times before its averaging across the sweep (:meth:`Levels.edge`): ``times`` (H, W,
+    frames; a compressed video's de-blocked) and their σ ``sigma``; for a fast sweep also its re-timing
+    (:func:`~gnomon.reconstruct.retiming.retime_rows`), else None."""
+
+    times: np.ndarray
+    sigma: np.ndarray
+    retiming: RowRetiming | None
+
+
 class Levels:
     """Per-pixel levels of the tracked dips in linear irradiance, each computed once per scan (both
-    edges, the screening and the fusion use them)."""
+    edges, the screening and the fusion use them), and each edge's times as :func:`edge_time` prepares
+    them before its averaging across the sweep (the regions' maps and the edges share them).
+
+    For the tracked times as they are: a light that rewrites them (``choose_dips``) needs a new one."""
 
     def __init__(self, tracked: TrackedSequence):
         self.tracked = tracked
+        self._edges: dict[str, PreparedEdge] = {}
+
+    def edge(self, name: str, times: np.ndarray, slope: np.ndarray) -> PreparedEdge:
+        """The edge ``name``'s :class:`PreparedEdge` (``times`` and ``slope`` (H, W) the tracker's), computed
+        once per edge."""
+        if name not in self._edges:
+            self._edges[name] = _prepared_edge(times, slope, self.tracked, self)
+        return self._edges[name]
 
     @cached_property
     def imax(self) -> np.ndarray:
@@ -135,27 +157,41 @@ def edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: TrackedS
     the isochrones (:mod:`gnomon.reconstruct.retiming`), each re-timed σ from the σ of the pixels its crossings
     were interpolated between, and the re-timed times averaged across the sweep over ±``across`` rows
     (:func:`gnomon.reconstruct.retiming.average_across_sweep`)."""
-    levels = levels or Levels(tracked)
+    prepared = (levels or Levels(tracked)).edge(name, times, slope)
+    r = prepared.retiming
+    if r is None:
+        return EdgeTimes(name, prepared.times, slope, prepared.sigma)
+    retimed = r.times if across <= 0 or r.retimed is None else average_across_sweep(r.times, r.retimed,
+                                                                                  r.along_rows, across)
+    return EdgeTimes(name, retimed, slope, r.sigma)
+
+
+def _prepared_edge(times: np.ndarray, slope: np.ndarray, tracked: TrackedSequence, levels: Levels) -> PreparedEdge:
+    """:meth:`Levels.edge`: the times' σ, a compressed video's times de-blocked, a fast sweep re-timed."""
     sigma = pixel_time_sigma(slope, tracked, levels)
     grid = block_grid(times)
     if grid is not None:  # compressed video: times constant over the codec's blocks (gnomon.capture.deblock)
         times = deblock_times(times, grid)
     fast = undersampled(slope, levels.imax, levels.imin)
     timed = np.isfinite(times)
+    retiming = None
     if timed.any() and fast[timed].mean() > RETIME_UNDERSAMPLED_SHARE:
-        retimed, retimed_sigma = retime_with_sigma(times, tracked.n_frames, sigma, across=across)
-        return EdgeTimes(name, retimed, slope, retimed_sigma)
-    return EdgeTimes(name, times, slope, sigma)
+        retiming = retime_rows(times, tracked.n_frames, sigma)
+    return PreparedEdge(times, sigma, retiming)
 
 
 def edge_times(tracked: TrackedSequence, levels: Levels | None = None,
                 across: int = ACROSS_HALF_ROWS) -> tuple[EdgeTimes, EdgeTimes]:
     t, levels = tracked.times, levels or Levels(tracked)
-    return (edge_time("enter", t.enter, t.enter_slope, tracked, levels, across),
-            edge_time("leave", t.leave, t.leave_slope, tracked, levels, across))
+    levels.imax, levels.imin, levels.sigma_at_threshold  # noqa: B018 - computed once, before the threads share them
+    # the two edges on a thread each (numpy and the kernel release the GIL)
+    with ThreadPoolExecutor(max_workers=2, thread_name_prefix="gnomon-edge") as pool:
+        enter = pool.submit(edge_time, "enter", t.enter, t.enter_slope, tracked, levels, across)
+        leave = pool.submit(edge_time, "leave", t.leave, t.leave_slope, tracked, levels, across)
+        return enter.result(), leave.result()
 
 
-def edge_time_maps(tracked: TrackedSequence, edge: str = "both") -> list[np.ndarray]:
+def edge_time_maps(tracked: TrackedSequence, edge: str = "both", levels: Levels | None = None) -> list[np.ndarray]:
     """The shadow-time maps (H, W, frames, NaN = none) the scan measures its lines and depths on.
 
     The tracker's entering and leaving times after the same corrections as the
@@ -167,9 +203,9 @@ def edge_time_maps(tracked: TrackedSequence, edge: str = "both") -> list[np.ndar
     isochrone that bends off the plane; without the scan's averaging of the
     re-timed times across the sweep (:func:`gnomon.reconstruct.retiming.average_across_sweep`),
     which runs along the isochrones and would smooth the very bends the regions
-    look for.
+    look for. ``levels``: the scan's :class:`Levels`, whose edges' times the scan then reuses.
     """
-    enter, leave = edge_times(tracked, across=0)
+    enter, leave = edge_times(tracked, levels, across=0)
     if edge == "both":
         return [enter.times, leave.times]
     return [enter.times if edge == "enter" else leave.times]

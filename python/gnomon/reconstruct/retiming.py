@@ -38,8 +38,8 @@ import numpy as np
 
 from gnomon import _kernel
 
-__all__ = ["ACROSS_BEND_FRAMES", "ACROSS_HALF_ROWS", "MAX_GAP_PX", "RetimedTimes", "average_across_sweep",
-           "retime_between_isochrones", "retime_with_sigma"]
+__all__ = ["ACROSS_BEND_FRAMES", "ACROSS_HALF_ROWS", "MAX_GAP_PX", "RetimedTimes", "RowRetiming",
+           "average_across_sweep", "retime_between_isochrones", "retime_rows", "retime_with_sigma"]
 
 # Crossings of consecutive frames farther apart than this (pixels) are not interpolated between.
 MAX_GAP_PX = 40.0
@@ -176,15 +176,37 @@ def retime_with_sigma(times: np.ndarray, n_frames: int, sigma_t: np.ndarray, max
     (:func:`average_across_sweep`); their σ is left as it was (an upper bound: the rows' crossing
     errors are partly shared, by the codec's blocks and the occluder's own edge).
     """
+    r = retime_rows(times, n_frames, sigma_t, max_gap, where)
+    if across > 0 and r.retimed is not None:
+        return average_across_sweep(r.times, r.retimed, r.along_rows, across), r.sigma
+    return r.times, r.sigma
+
+
+@dataclass(frozen=True)
+class RowRetiming:
+    """:func:`retime_rows`' result: ``times`` and ``sigma`` (H, W) float32 (frames), ``retimed`` (H, W) bool
+    the pixels re-timed (None when the map has no sweep to re-time along: ``times`` are the input's),
+    ``along_rows`` the sweep's axis (:func:`_sweep_axis`)."""
+
+    times: np.ndarray
+    sigma: np.ndarray
+    retimed: np.ndarray | None
+    along_rows: bool
+
+
+def retime_rows(times: np.ndarray, n_frames: int, sigma_t: np.ndarray, max_gap: float = MAX_GAP_PX,
+                where: np.ndarray | None = None) -> RowRetiming:
+    """:func:`retime_with_sigma` before the averaging across the sweep, with what that averaging needs:
+    a caller that wants the times both with and without it (``gnomon.reconstruct.edges``) re-times once."""
     t = np.asarray(times, dtype=np.float64)
     s = np.asarray(sigma_t, dtype=np.float64)
     if t.ndim != 2 or t.size == 0:
-        return t.astype(np.float32), s.astype(np.float32)
+        return RowRetiming(t.astype(np.float32), s.astype(np.float32), None, True)
     if s.shape != t.shape:
         raise ValueError(f"sigma_t has shape {s.shape}, the times {t.shape}")
     along_rows, sense = _sweep_axis(t)
     if sense == 0 or (t.shape[1] if along_rows else t.shape[0]) < 2:
-        return t.astype(np.float32), s.astype(np.float32)
+        return RowRetiming(t.astype(np.float32), s.astype(np.float32), None, along_rows)
     index = np.arange(t.size).reshape(t.shape)
     wanted = np.ones(t.shape, dtype=np.uint8) if where is None else np.asarray(where, dtype=np.uint8)
 
@@ -198,10 +220,7 @@ def retime_with_sigma(times: np.ndarray, n_frames: int, sigma_t: np.ndarray, max
 
     new, done, sigma = _kernel.retime_rows_sigma(orient(t), orient(index), orient(wanted), s.ravel(), int(n_frames),
                                                  float(max_gap), MIN_GAP_PX, BACKSTEP)
-    new = back(new)
-    if across > 0:
-        new = average_across_sweep(new, back(done), along_rows, across)
-    return new, back(sigma)
+    return RowRetiming(back(new), back(sigma), back(done), along_rows)
 
 
 def average_across_sweep(times: np.ndarray, retimed: np.ndarray, along_rows: bool, half: int = ACROSS_HALF_ROWS,

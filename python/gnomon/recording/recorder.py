@@ -59,10 +59,14 @@ Entities (paths as stored; rerun shows them with a leading ``/``)
         are the caller's float32 values, unchanged: reading them back gives
         the same bits as ``points.ply``.
     ``world/mesh``
-        static ``Mesh3D`` (positions, triangles, vertex colours).
+        static ``Mesh3D`` (positions, triangles, vertex colours), in a ``full``
+        recording only (a scan's: ``gnomon scan --rrd-full``; by default the
+        points show the surface and mesh.ply holds the mesh).
     ``maps/shadow_time``, ``maps/depth``, ``maps/sigma``
         static float32 ``DepthImage`` s with colour maps (turbo, viridis,
-        inferno) over the finite range; NaN (no value) is kept as NaN.
+        inferno) over the finite range; NaN (no value) is kept as NaN. At the
+        stored images' size (``image_scale``, nearest pixel) unless the
+        recording is ``full`` (the scan's .npy files hold them at full size).
     ``maps/coverage``
         static ``SegmentationImage`` (uint8 class per pixel) with its
         ``AnnotationContext`` naming the classes (:data:`gnomon.outputs.images.COVERAGE_CLASSES`).
@@ -313,6 +317,8 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
 
     ``frame_stride`` store every n-th frame image (index % stride == 0);
     ``image_scale`` (0, 1] downscale of stored images; ``jpeg_quality`` 1..100.
+    ``full``: the maps at full size (else at the stored images' size) and the mesh (else none: a
+    scan's default, whose points show the surface).
     """
 
     def __init__(
@@ -328,6 +334,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         viewer_port: int = 9876,
         viewer_url: str | None = None,
         log_notes: bool = True,
+        full: bool = True,
     ) -> None:
         if int(frame_stride) < 1:
             raise ValueError(f"frame_stride must be >= 1, got {frame_stride}")
@@ -340,6 +347,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         self.frame_stride = int(frame_stride)
         self.image_scale = float(image_scale)
         self.jpeg_quality = int(jpeg_quality)
+        self.full = bool(full)
         self.viewer_spawned = False
         self.notes: list[str] = []  # why a viewer asked for did not start
         self._summary: dict[str, float] = {}  # the static metrics logged so far (the Metrics view's table)
@@ -452,6 +460,12 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
 
     def _display_size(self, w: int, h: int) -> tuple[int, int]:
         return max(1, int(round(w * self.image_scale))), max(1, int(round(h * self.image_scale)))
+
+    def _to_display_size(self, image: np.ndarray) -> np.ndarray:
+        """A per-pixel map (H, W) of the camera's image resampled (nearest) to the stored images' size."""
+        h, w = image.shape
+        dsize = self._display_size(*(self._camera_size or (w, h)))
+        return image if dsize == (w, h) else cv2.resize(image, dsize, interpolation=cv2.INTER_NEAREST)
 
     # ------------------------------------------------------------------ camera and frames
 
@@ -785,8 +799,9 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         self._rec.log(entity, *archetypes, static=True)
 
     def log_mesh(self, vertices: np.ndarray, faces: np.ndarray, rgb: np.ndarray | None = None) -> None:
-        """The mesh at ``world/mesh`` (static): float32 (N, 3), int (M, 3) triangles, uint8 (N, 3)."""
-        if not self.enabled:
+        """The mesh at ``world/mesh`` (static): float32 (N, 3), int (M, 3) triangles, uint8 (N, 3); nothing
+        unless the recording is ``full``."""
+        if not self.enabled or not self.full:
             return
         rr = _rr()
         v = np.ascontiguousarray(np.asarray(vertices, dtype=np.float32).reshape(-1, 3))
@@ -809,7 +824,8 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         depth: np.ndarray | None = None,
         sigma: np.ndarray | None = None,
     ) -> None:
-        """Per-pixel maps (H, W) float32, NaN = no value, as colour-mapped depth images (static)."""
+        """Per-pixel maps (H, W) float32, NaN = no value, as colour-mapped depth images (static); unless the
+        recording is ``full``, resampled (nearest) to the stored images' size."""
         if not self.enabled:
             return
         rr = _rr()
@@ -824,6 +840,8 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
             a = np.ascontiguousarray(np.asarray(arr, dtype=np.float32))
             if a.ndim != 2:
                 raise ValueError(f"{key} map must be (H, W), got {a.shape}")
+            if not self.full:
+                a = self._to_display_size(a)
             rng = _finite_range(a)
             self._rec.log(
                 ENTITY[key],
@@ -843,10 +861,7 @@ class ScanRecording(AbstractContextManager["ScanRecording"]):
         d: np.ndarray = np.asarray(depth, dtype=np.float32)
         if d.ndim != 2:
             raise ValueError(f"depth must be (H, W), got {d.shape}")
-        h, w = d.shape
-        dsize = self._display_size(*(self._camera_size or (w, h)))
-        if dsize != (w, h):
-            d = cv2.resize(d, dsize, interpolation=cv2.INTER_NEAREST)
+        d = self._to_display_size(d)
         self._rec.log(
             ENTITY["camera_depth"],
             rr.DepthImage(np.ascontiguousarray(d), meter=1.0, colormap="viridis", depth_range=_finite_range(d)),

@@ -83,7 +83,8 @@ def record_points_part(recorder, surface: Surface | SurfacePoints, shadow_time: 
 
 
 def record_mesh_part(recorder, surface: Surface, warnings: list[str], metrics: dict) -> None:
-    """The mesh, the warnings and the metrics."""
+    """The mesh (a ``full`` recording's: :meth:`~gnomon.recording.recorder.ScanRecording.log_mesh`), the
+    warnings and the metrics."""
     recorder.log_mesh(surface.mesh.vertices, surface.mesh.faces, surface.vertex_rgb)
     for w in warnings:  # a Remark (a fact, nothing to do) as information, the others as warnings
         recorder.log_warning(w, level="INFO" if isinstance(w, Remark) else "WARN")

@@ -124,31 +124,32 @@ class RecordingWorker:
 
 
 def open_recorder(staging: Path, opts: RecordingChoice, name: str, filename: str = "scan.rrd", *,
-                  image_scale: float = 0.5) -> ScanRecording | None:
+                  image_scale: float = 0.5, full: bool = True) -> ScanRecording | None:
     """The run's recording (into ``staging``), or None when neither a file nor a viewer is wanted.
 
-    ``image_scale`` 1 when the input video is stored as it is (its frames keep their size).
+    ``image_scale`` 1 when the input video is stored as it is (its frames keep their size); ``full``
+    :class:`~gnomon.recording.recorder.ScanRecording`'s (the maps at full size, a scan's mesh).
     """
     if not (opts.rrd or opts.view):
         return None
     return ScanRecording(staging / filename if opts.rrd else None, recording_name=name,
                          spawn_viewer=opts.view, frame_stride=opts.frame_stride, image_scale=image_scale,
-                         log_notes=False)  # the scan's warnings report them
+                         log_notes=False, full=full)  # the scan's warnings report them
 
 
 @contextmanager
 def recording(staging: Path, opts: RecordingChoice, name: str, *,
-               image_scale: float = 0.5) -> Iterator[RecordingWorker | None]:
+               image_scale: float = 0.5, full: bool = True) -> Iterator[RecordingWorker | None]:
     """open_recorder on a :class:`RecordingWorker` (a viewer's recorder is opened here, for its notes),
     finished on success and aborted on failure."""
     if not (opts.rrd or opts.view):
         yield None
         return
     if opts.view:
-        recorder = open_recorder(staging, opts, name, image_scale=image_scale)
+        recorder = open_recorder(staging, opts, name, image_scale=image_scale, full=full)
         worker = RecordingWorker(recorder) if recorder is not None else None
     else:
-        worker = RecordingWorker(lambda: open_recorder(staging, opts, name, image_scale=image_scale))
+        worker = RecordingWorker(lambda: open_recorder(staging, opts, name, image_scale=image_scale, full=full))
     try:
         yield worker
     except BaseException:

@@ -243,6 +243,26 @@ class ScanBench:
     track: Throughput | None = None
     """Decoding and tracking alone: one pass of the scan's own reader and kernel tracker (its settings,
     one dip width) over the frames, and nothing after it: what no scan of the capture can go below."""
+    no_rrd_seconds: float | None = None
+    no_rrd_cpu_seconds: float | None = None
+    """The same scan without its recording (``gnomon scan --no-rrd``), run after it: the recording's cost
+    is the difference (its thread, rerun's own threads and its import, which the first scan pays)."""
+
+    @property
+    def floor_ratio(self) -> tuple[float, float] | None:
+        """Whole scan over the decode+track floor: (wall, CPU), None without the floor."""
+        if self.track is None or self.track.seconds <= 0 or self.track.cpu_seconds <= 0:
+            return None
+        return self.scan_seconds / self.track.seconds, self.scan_cpu_seconds / self.track.cpu_seconds
+
+    @property
+    def recording_share(self) -> tuple[float, float] | None:
+        """The recording's share of the whole scan, (wall, CPU): one minus the scan without it over the
+        scan with it; None without that scan."""
+        if self.no_rrd_seconds is None or self.no_rrd_cpu_seconds is None or self.scan_seconds <= 0:
+            return None
+        return (1.0 - self.no_rrd_seconds / self.scan_seconds,
+                1.0 - self.no_rrd_cpu_seconds / self.scan_cpu_seconds if self.scan_cpu_seconds > 0 else 0.0)
 
     @property
     def ratio(self) -> float:
@@ -258,14 +278,18 @@ class ScanBench:
         d = asdict(self)
         d["ratio"] = self.ratio
         d["cpu_ratio"] = self.cpu_ratio
+        d["floor_ratio"] = self.floor_ratio
+        d["recording_share"] = self.recording_share
         return d
 
 
-def run_scan_bench(field_log: str, out_dir: str, mesh_formats: tuple[str, ...] | None = None) -> ScanBench:
+def run_scan_bench(field_log: str, out_dir: str, mesh_formats: tuple[str, ...] | None = None,
+                   no_rrd_dir: str | None = None) -> ScanBench:
     """Time decoding the frames of ``field_log``'s capture alone (the scan's own
-    reader: its decoding threads, grey conversion), then the whole default scan
+    reader: its decoding threads, grey conversion), one tracking pass alone, then the whole default scan
     into ``out_dir`` (outputs and recording included; ``mesh_formats`` the mesh's
-    files, default the field log's)."""
+    files, default the field log's) and, with ``no_rrd_dir``, the same scan without its recording into
+    that folder."""
     from gnomon.capture.frames import FrameSource, decode_workers
     from gnomon.config.fieldlog import load_field_log
     from gnomon.runs.scan import ScanOptions, run_scan
@@ -286,9 +310,16 @@ def run_scan_bench(field_log: str, out_dir: str, mesh_formats: tuple[str, ...] |
     scan_s, scan_cpu = time.perf_counter() - t0, time.process_time() - c0
     stages = {k: float(v) for k, v in result.report.get("timings_s", {}).items()}
     stages_cpu = {k: float(v) for k, v in result.report.get("cpu_timings_s", {}).items()}
-    return ScanBench(str(field_log), decode.frames, int(shape[1]), int(shape[0]), decode, scan_s, scan_cpu,
-                     stages, _load_average(), stages_cpu, list(result.setup.mesh_formats), threads, one_thread,
-                     track)
+    bench = ScanBench(str(field_log), decode.frames, int(shape[1]), int(shape[0]), decode, scan_s, scan_cpu,
+                      stages, _load_average(), stages_cpu, list(result.setup.mesh_formats), threads, one_thread,
+                      track)
+    del result
+    if no_rrd_dir is not None:
+        t0, c0 = time.perf_counter(), time.process_time()
+        run_scan(field_log, no_rrd_dir, ScanOptions(rrd=False, mesh_formats=mesh_formats))
+        bench.no_rrd_seconds, bench.no_rrd_cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
+        bench.load_average = _load_average()
+    return bench
 
 
 def _decode_pass(source) -> tuple[Throughput, tuple[int, int]]:
@@ -313,7 +344,21 @@ def _track_pass(log, source) -> Throughput:
     return Throughput(tracked.n_frames, time.perf_counter() - t0, time.process_time() - c0)
 
 
+# The scan's stages in their order (report.json's timings_s; those on the recording's thread marked).
+SCAN_STAGES = (("setup_s", "set-up (field log, camera, marks)"), ("tracking_s", "decode + track"),
+               ("ray_map_s", "ray map (what tracking left)"), ("regions_s", "regions held to their planes"),
+               ("planes_and_triangulation_s", "shadow planes, triangulation"),
+               ("fusion_and_mesh_s", "fusion, points, mesh"), ("outputs_s", "output files (after the mesh)"),
+               ("recording_points_s", "recording: points (its thread)"),
+               ("recording_s", "recording: the rest (its thread)"),
+               ("recording_wait_s", "waiting for the recording"))
+
+
 def format_scan_table(r: ScanBench) -> str:
+    """The bench's figures: decode, the floor, the whole scan against it (and without the recording), and
+    each stage's wall and CPU seconds with their share of the whole scan's."""
+    floor = r.floor_ratio
+    share = r.recording_share
     lines = [
         (f"gnomon bench --scan {r.field_log}: {r.frames} frames {r.width}x{r.height}, "
          f"kernel SIMD path {_kernel.simd_path()}, load average {r.load_average:.1f}"),
@@ -327,12 +372,22 @@ def format_scan_table(r: ScanBench) -> str:
            "decoded frames, nothing after: the floor of any scan)"]
           if r.track is not None and r.decode.seconds > 0 else []),
         (f"  whole scan    {r.scan_seconds:8.2f} s wall {r.scan_cpu_seconds:8.2f} s CPU: "
-         f"{r.ratio:.2f}x the decode-alone wall time, {r.cpu_ratio:.2f}x its CPU time"
+         + (f"{floor[0]:.2f}x the floor's wall time, {floor[1]:.2f}x its CPU time; " if floor is not None else "")
+         + f"{r.ratio:.2f}x the decode-alone wall time, {r.cpu_ratio:.2f}x its CPU time"
          + (f" (mesh formats {', '.join(r.mesh_formats)})" if r.mesh_formats else "")),
-        f"    {'stage':<28} {'wall s':>8} {'CPU s':>8}",
-        *(f"    {name:<28} {sec:8.2f} {r.stages_cpu[name]:8.2f}" if name in r.stages_cpu
-          else f"    {name:<28} {sec:8.2f}" for name, sec in r.stages.items()),
+        *([f"  no recording  {r.no_rrd_seconds:8.2f} s wall {r.no_rrd_cpu_seconds:8.2f} s CPU (--no-rrd): the "
+           f"recording is {100 * share[0]:.0f} % of the whole scan's wall time, {100 * share[1]:.0f} % of its CPU"]
+          if share is not None and r.no_rrd_seconds is not None and r.no_rrd_cpu_seconds is not None else []),
+        f"    {'stage':<36} {'wall s':>8} {'share':>6} {'CPU s':>8} {'share':>6}",
     ]
+    named = dict(SCAN_STAGES)
+    order = [k for k, _ in SCAN_STAGES if k in r.stages] + [k for k in r.stages if k not in named and k != "total_s"]
+    for key in order:
+        sec, cpu = r.stages[key], r.stages_cpu.get(key)
+        wall = f"{sec:8.2f} {100 * sec / r.scan_seconds:5.0f}%" if r.scan_seconds > 0 else f"{sec:8.2f} {'':>6}"
+        cpu_part = (f" {cpu:8.2f} {100 * cpu / r.scan_cpu_seconds:5.0f}%" if cpu is not None and r.scan_cpu_seconds > 0
+                    else "")
+        lines.append(f"    {named.get(key, key):<36} {wall}{cpu_part}")
     return "\n".join(lines)
 
 

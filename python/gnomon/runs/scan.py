@@ -85,6 +85,9 @@ class ScanOptions:
     view: bool = False  # stream to a viewer
     progress: bool = True
     frame_stride: int = 10  # frames kept in the recording
+    # The recording also holds the mesh and the maps at full size (by default: the points at full size, the
+    # maps at the stored frames' size, no mesh; mesh.ply and the .npy files hold them).
+    rrd_full: bool = False
     # The mesh's files (gnomon.outputs.formats, mesh.ply always); None: the field log's
     # [output] mesh_formats (default mesh.ply only).
     mesh_formats: tuple[str, ...] | None = None
@@ -200,7 +203,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
         if recorder is not None:
             recorder.submit(lambda rec: record_registration(rec, registration))
     with timed(timings, "regions_s", cpu):  # the regions held to their planes, then planes tied at corners
-        maps = edge_time_maps(tracked, setup.edge)
+        levels = Levels(tracked)  # each edge's times prepared once, for the regions and the edges
+        maps = edge_time_maps(tracked, setup.edge, levels)
         setup = hold_regions(setup, maps, tracked.n_frames, ray_map, warnings)
         setup = tie_planes(setup, maps, tracked.n_frames, warnings)
     check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
@@ -213,11 +217,12 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
                                f"pixel by pixel and tracked (frames {tracked.levelled[:8]}{more})", tracked.levelled))
     warnings += setup.light.choose_dips(tracked, ray_map, setup.planes, setup.max_depth_jump,
                                         min_contrast_dn(setup.tracker.min_contrast, tracked.noise_dn))
+    if setup.light.chooses_dips:  # the times were rewritten: prepared anew
+        levels = Levels(tracked)
     # The colours need only the tracked times (final from here on): combined on a thread meanwhile.
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-colour") as colour_pool:
         colours = colour_pool.submit(lit_colours, colour, tracked)
         with timed(timings, "planes_and_triangulation_s", cpu), stage("shadow planes and triangulation"):
-            levels = Levels(tracked)
             edges = reconstruct_edges(setup, tracked, ray_map, warnings, levels)
         with timed(timings, "fusion_and_mesh_s", cpu), stage("fusion and mesh"):
             fused = fuse_edges(edges, tracked, setup.max_depth_jump, levels)
@@ -317,17 +322,22 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
     if opts.rrd or opts.view:
         warm_rerun_import()
     stage = Stages("scan", enabled=opts.progress)
-    with stage("set-up (field log, camera, reference planes)"):
+    setup_timing: dict[str, float] = {}
+    setup_cpu: dict[str, float] = {}
+    with stage("set-up (field log, camera, reference planes)"), timed(setup_timing, "setup_s", setup_cpu):
         setup, source = prepare_scan(field_log, opts.mesh_formats, opts.cloud_formats, opts.crs)
     with staged_outputs(Path(out_dir), opts.rrd_path) as staging:
         full = source.video is not None and (opts.rrd or opts.view) and playable_video(source.video)
         name, scale = f"scan {setup.inputs.field_log.name}", 1.0 if full else 0.5
-        with recording(staging, opts, name, image_scale=scale) as recorder:
+        with recording(staging, opts, name, image_scale=scale, full=opts.rrd_full) as recorder:
             # The points' files and recording start as soon as the points are final, while the mesh is built.
             with Writers() as writers:
                 result, record = reconstruct(setup, source, recorder, progress=opts.progress,
                                              frame_stride=opts.frame_stride, track=opts.track or track_source,
                                              on_points=_point_outputs(staging, setup, writers, recorder))
+                # the set-up's own stage (reading the field log, the camera, the planes from their marks)
+                result.report["timings_s"].update(setup_timing)
+                result.report["cpu_timings_s"].update(setup_cpu)
                 if recorder is not None and record is not None:
                     recorder.submit(record)
                     recorder.close_soon()  # encoded and written while the mesh files are

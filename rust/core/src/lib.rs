@@ -8,7 +8,7 @@
 //! * [`triangulate`]: camera rays ∩ interpolated shadow planes ([`triangulate_depth`]: their Z only);
 //!   [`depth_sigma`]: their σZ;
 //! * [`grid_faces`], [`clean_faces`], [`obj_text`]: the mesh on the pixel grid, its clean-up, its OBJ text;
-//! * [`isochrone_crossings`], [`frame_lines`]: where the shadow-time map crosses each frame, each
+//! * [`isochrone_crossings`], [`frame_lines`], [`line_times`]: where the shadow-time map crosses each frame, each
 //!   frame's robust shadow line on a reference plane;
 //! * [`retime_rows`], [`retime_rows_sigma`]: a fast sweep's shadow times between the isochrones (and their σ);
 //!   [`average_across`]: the re-timed times averaged across the sweep;
@@ -17,6 +17,7 @@
 //! * [`noise_samples`], [`clipped_fit_step`]: the image-noise estimate's samples and the steps of its
 //!   clipped fit, in numpy's float32 order;
 //! * [`ray_map`]: the unit ray of every pixel of OpenCV's 5-coefficient camera (Newton);
+//! * [`deblock_interpolate`]: a compressed video's shadow times between its codec blocks' centres;
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
 //! Pure Rust, no Python types; every function on user data returns
@@ -24,6 +25,7 @@
 
 pub mod camera;
 pub mod crossing;
+pub mod deblock;
 pub mod error;
 pub mod geometry;
 pub mod intensity;
@@ -40,10 +42,11 @@ pub mod tracker;
 pub mod triangulate;
 
 pub use camera::ray_map;
+pub use deblock::{deblock_interpolate, BlockLayout};
 pub use error::KernelError;
 pub use geometry::{Plane, Ray};
 pub use intensity::NORMALISED_SCALE;
-pub use lines::{frame_lines, isochrone_crossings, Crossings, FrameLines, LineParams};
+pub use lines::{frame_lines, isochrone_crossings, line_times, Crossings, FrameLines, LineParams};
 pub use live::{FinishedPixel, WatchParams};
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, triangles, CleanMesh};
 pub use noise::{clipped_fit_step, noise_samples, pairwise_sum, ClipFit, NoiseSamples};

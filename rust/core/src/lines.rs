@@ -425,6 +425,84 @@ pub fn isochrone_crossings(
     Ok(out)
 }
 
+/// When a plane's shadow lines pass each of its points: the bracketing pair of lines by bisection,
+/// the time interpolated between their frames by the point's signed distances to them.
+///
+/// * `xy`: `K·2` points in the plane's coordinates, `(x, y)` per point;
+/// * `lines`: `N·3` lines `(n_x, n_y, offset)` in the order they sweep the plane (`N ≥ 2`, a line's
+///   signed distance `x·n_x + y·n_y − offset` is positive ahead of it, where it has not yet passed);
+/// * `frames`: the `N` frames of the lines (increasing);
+/// * `steps`: bisection steps (`⌈log2 N⌉ + 1` halve `[0, N − 1]` to one pair).
+///
+/// A point ahead of the first line and passed by the last is bracketed by bisection (`mid = (lo +
+/// hi) / 2`, `lo = mid` while it is ahead of line `mid`, else `hi = mid`) and gets
+/// `frames[lo] + (frames[hi] − frames[lo])·s_lo / (s_lo − s_hi)`; any other point, or one whose
+/// bisection did not end on neighbours, or whose time is not finite, NaN. Each distance is
+/// `(x·n_x + y·n_y) − offset` in f64, without fused multiply-adds: element for element numpy's
+/// `gnomon.geometry.plane_times._times_at_points_numpy`. Points in parallel.
+pub fn line_times(
+    xy: &[f64],
+    lines: &[f64],
+    frames: &[i64],
+    steps: usize,
+) -> Result<Vec<f64>, KernelError> {
+    let n = frames.len();
+    if n < 2 {
+        return Err(KernelError::parameter(
+            "frames",
+            format!("{n} lines: at least 2 are needed"),
+        ));
+    }
+    if lines.len() != 3 * n {
+        return Err(KernelError::LengthMismatch {
+            what: "lines",
+            expected: 3 * n,
+            got: lines.len(),
+        });
+    }
+    if xy.len() % 2 != 0 {
+        return Err(KernelError::parameter(
+            "xy",
+            format!("{} values are not (x, y) pairs", xy.len()),
+        ));
+    }
+    let last = n - 1;
+    let signed =
+        |x: f64, y: f64, k: usize| x * lines[3 * k] + y * lines[3 * k + 1] - lines[3 * k + 2];
+    let time = |x: f64, y: f64| -> f64 {
+        if !(signed(x, y, 0) > 0.0 && signed(x, y, last) <= 0.0) {
+            return f64::NAN;
+        }
+        let (mut lo, mut hi) = (0usize, last);
+        for _ in 0..steps {
+            let mid = (lo + hi) / 2;
+            if signed(x, y, mid) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let (s_lo, s_hi) = (signed(x, y, lo), signed(x, y, hi));
+        let frac = s_lo / (s_lo - s_hi);
+        let t = frames[lo] as f64 + (frames[hi] - frames[lo]) as f64 * frac;
+        if hi == lo + 1 && t.is_finite() {
+            t
+        } else {
+            f64::NAN
+        }
+    };
+    const CHUNK: usize = 8192; // points per task
+    let mut out = vec![f64::NAN; xy.len() / 2];
+    out.par_chunks_mut(CHUNK)
+        .zip(xy.par_chunks(2 * CHUNK))
+        .for_each(|(out, xy)| {
+            for (t, p) in out.iter_mut().zip(xy.chunks_exact(2)) {
+                *t = time(p[0], p[1]);
+            }
+        });
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -575,5 +653,23 @@ mod tests {
         assert!(frame_lines(&[f64::NAN, 0.0], &[0, 1], &PARAMS).is_err());
         let bad = LineParams { k: 0.0, ..PARAMS };
         assert!(frame_lines(&xy, &[0, 30], &bad).is_err());
+    }
+
+    #[test]
+    fn line_times_interpolate_between_the_bracketing_lines() {
+        // vertical lines x = 2, 4, 6, 8 at frames 10, 11, 13, 14, sweeping towards +x: ahead of a line (not
+        // yet reached) is x > x₀, so n = (1, 0), offset x₀
+        let xs = [2.0, 4.0, 6.0, 8.0];
+        let lines: Vec<f64> = xs.iter().flat_map(|&x0: &f64| [1.0, 0.0, x0]).collect();
+        let frames = [10, 11, 13, 14];
+        let xy = [3.0, 0.0, 5.0, 7.0, 8.0, 1.0, 1.0, 0.0, 9.0, 0.0];
+        let got = line_times(&xy, &lines, &frames, 3).unwrap();
+        assert_eq!(got[0], 10.5);
+        assert_eq!(got[1], 12.0);
+        assert_eq!(got[2], 14.0);
+        assert!(got[3].is_nan() && got[4].is_nan()); // before the first line, past the last
+        assert!(line_times(&xy, &lines[..9], &frames, 3).is_err());
+        assert!(line_times(&xy[..3], &lines, &frames, 3).is_err());
+        assert!(line_times(&xy, &lines[..3], &frames[..1], 3).is_err());
     }
 }

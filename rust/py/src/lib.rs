@@ -11,6 +11,7 @@ use pyo3::prelude::*;
 
 mod arrays;
 mod camera;
+mod deblock;
 mod errors;
 mod lines;
 mod live;
@@ -43,7 +44,8 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
         surface::stl_records, retime::retime_rows, retime::retime_rows_sigma,
         retime::average_across, triangulate::triangulate_depth, surface::world_points,
         camera::ray_map, surface::lit_median, noise::clipped_fit_step, noise::noise_samples,
-        surface::fuse_supported, tracker::simd_path, tracker::simd_paths,
+        surface::fuse_supported, tracker::simd_path, tracker::simd_paths, lines::line_times,
+        deblock::deblock_interpolate,
     }
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

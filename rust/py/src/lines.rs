@@ -1,7 +1,7 @@
 //! The shadow-time map's isochrones and each frame's shadow line on a reference plane (see
 //! `gnomon-core`'s `lines`).
 
-use numpy::IntoPyArray;
+use numpy::{IntoPyArray, PyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
@@ -56,4 +56,20 @@ pub(crate) fn frame_lines<'py>(
             flags(&out.inliers).into_pyarray(py).into_any(),
         ],
     )
+}
+
+/// When a plane's shadow lines pass each of its points (see `gnomon_core::line_times`): times (K,)
+/// in frames, NaN where the lines do not bracket the point.
+#[pyfunction]
+#[pyo3(signature = (xy, lines, frames, steps))]
+pub(crate) fn line_times<'py>(
+    py: Python<'py>, xy: &Bound<'py, PyAny>, lines: &Bound<'py, PyAny>, frames: &Bound<'py, PyAny>,
+    steps: usize,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let xy = borrow::<f64, 2>(xy, "xy", [Any("K"), Exactly(2)])?;
+    let lines = borrow::<f64, 2>(lines, "lines", [Any("N"), Exactly(3)])?;
+    let frames = borrow::<i64, 1>(frames, "frames", [Any("N")])?;
+    let out =
+        on_slices!(py, [xy, lines, frames] => gnomon_core::line_times(xy, lines, frames, steps))?;
+    Ok(out.into_pyarray(py))
 }
