@@ -1,0 +1,192 @@
+"""Several views of one object registered and fused: the stages on plain values.
+
+:func:`register_views` places every view in the reference frame (the first view's world frame):
+desk scans by features and ICP over every pair; georeferenced (sun) scans by their georeference
+first, then ICP, each station's move by ICP compared with what its georeference's stated
+uncertainty allows. Then a pose graph over all accepted pairs. :func:`fuse_surface` sums the
+views' points into one σ-weighted voxel grid and makes the surface.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gnomon.errors import GnomonError
+from gnomon.fuse.georeference import StationPrior, station_priors
+from gnomon.fuse.posegraph import EdgeResidual, edge_residual, loop_closure, optimise_poses, spanning_poses
+from gnomon.fuse.registration import Cloud, PairRegistration, agreement, coarse_alignment, features, icp, rotation_angle_deg
+from gnomon.fuse.surface import FusedMesh, FusedPoints, VoxelFusion, holes, poisson_surface
+from gnomon.fuse.views import View, split_setup
+
+__all__ = ["FuseSettings", "Registration", "register_views", "fuse_surface"]
+
+
+@dataclass(frozen=True)
+class FuseSettings:
+    """How views are registered and fused. Lengths relative to the camera's distance from the object.
+
+    ``coarse_voxel``: the feature grid of the coarse alignment (0.4 %); ``voxel``: the fusion's grid
+    (None: the scans' median point spacing); ``min_overlap``: the share of a view's object points a
+    pair must bring to within their σ of the other view to count as overlapping (0.15);
+    ``setup_fraction``: a plane holding this share of a view's points is the set-up (0.15);
+    ``max_icp_points``: each view's points used by ICP (an even subsample beyond it);
+    ``consistency_deg`` / ``consistency``: how far (degrees / share of the distance) a pair may disagree
+    with the poses of the spanning tree before it is aligned again from them, or left out.
+    """
+
+    coarse_voxel: float = 0.004
+    voxel: float | None = None
+    min_overlap: float = 0.15
+    setup_fraction: float = 0.15
+    max_icp_points: int = 10000
+    icp_iterations: int = 40
+    consistency_deg: float = 0.5
+    consistency: float = 0.005
+
+
+@dataclass
+class Registration:
+    """Every view's pose (4, 4: its world frame → the reference frame, view 0's), the accepted pairs,
+    the pairs left out (too little overlap; disagreeing with the loop), each pair's residual against the
+    adjusted poses, the loop's closure before adjustment, the scale
+    (camera's median distance to the object, world units) and the stations' georeference checks."""
+
+    poses: list[np.ndarray]
+    pairs: dict[tuple[int, int], PairRegistration]
+    rejected: dict[tuple[int, int], PairRegistration]
+    inconsistent: dict[tuple[int, int], PairRegistration]
+    residuals: list[EdgeResidual]
+    loop: dict | None
+    distance: float
+    spacing: float
+    stations: list[dict] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def _subsample(n: int, m: int) -> np.ndarray:
+    return np.arange(n) if n <= m else np.linspace(0, n - 1, m).round().astype(np.int64)
+
+
+def register_views(views: list[View], settings: FuseSettings | None = None) -> Registration:
+    """Register the views (see the module); a view joined to no other is a one-line :class:`GnomonError`."""
+    s = settings or FuseSettings()
+    t0 = time.perf_counter()
+    for v in views:
+        split_setup(v, setup_fraction=s.setup_fraction)
+        if v.object_mask.sum() < 100:
+            raise GnomonError(f"{v.folder}: only {int(v.object_mask.sum())} points off the set-up's planes; "
+                              "nothing to register (is the object in view?)")
+    distance = float(np.median([v.distance for v in views]))
+    full = [Cloud.of(*v.object_points()) for v in views]
+    spacing = float(np.median(np.concatenate(
+        [c.tree.query(c.points[_subsample(len(c.points), 2000)], k=2)[0][:, 1] for c in full])))
+    clouds = []
+    for c in full:
+        k = _subsample(len(c.points), s.max_icp_points)
+        clouds.append(Cloud.of(c.points[k], c.normals[k], c.sigma[k]))
+    t1 = time.perf_counter()
+    voxel = s.coarse_voxel * distance
+    priors = station_priors(views) if views[0].site is not None else None
+    feats = [features(c.points, c.normals, voxel) for c in full] if priors is None else []
+
+    def refine(i: int, j: int, T0: np.ndarray) -> PairRegistration:
+        return icp(clouds[i], clouds[j], T0, max_distance=3.0 * voxel, min_distance=3.0 * spacing,
+                   sigma_floor=0.1 * spacing, iterations=s.icp_iterations)
+
+    candidates: dict[tuple[int, int], PairRegistration] = {}
+    for i, j in itertools.combinations(range(len(views)), 2):
+        if priors is not None:
+            T0 = np.linalg.inv(priors[j].pose) @ priors[i].pose
+        else:
+            T0 = coarse_alignment(feats[i], feats[j], voxel)
+        candidates[(i, j)] = refine(i, j, T0)
+    pairs = {k: p for k, p in candidates.items() if p.overlap >= s.min_overlap}
+    rejected = {k: p for k, p in candidates.items() if p.overlap < s.min_overlap}
+    def score(k: int, pose: np.ndarray, placed: list[int], placed_poses: list[np.ndarray]) -> float:
+        return sum(agreement(clouds[k], clouds[m], np.linalg.inv(Pm) @ pose, 3.0 * spacing, 0.1 * spacing)
+                   for m, Pm in zip(placed, placed_poses, strict=True))
+
+    poses, missing = spanning_poses(len(views), pairs, score)
+    if missing:
+        k = missing[0]
+        best = max((p.overlap for (i, j), p in rejected.items() if k in (i, j)), default=0.0)
+        raise GnomonError(f"{views[k].folder}: does not overlap the other scans after registration (at best "
+                          f"{best:.0%} of its object points meet another scan's surface, {s.min_overlap:.0%} "
+                          "needed); is it a scan of the same object? Scan it again from a place between two "
+                          "of the others")
+    # Loop consistency: a pair that disagrees with the tree's poses (a symmetric shape aligned the wrong way
+    # round, say) is aligned again from the tree's poses; the better-overlapping one is kept if it agrees.
+    inconsistent: dict[tuple[int, int], PairRegistration] = {}
+    centres = [c.points.mean(axis=0) for c in clouds]
+    for (i, j), p in list(candidates.items()):
+        res = edge_residual(i, j, p.transform, poses, centres[i])
+        if res.rotation_deg <= s.consistency_deg and res.displacement <= s.consistency * distance:
+            continue
+        again = refine(i, j, np.linalg.inv(poses[j]) @ poses[i])
+        res2 = edge_residual(i, j, again.transform, poses, centres[i])
+        pairs.pop((i, j), None)
+        rejected.pop((i, j), None)
+        if (again.overlap >= s.min_overlap and res2.rotation_deg <= s.consistency_deg
+                and res2.displacement <= s.consistency * distance):
+            pairs[(i, j)] = again
+        else:
+            inconsistent[(i, j)] = p
+    t2 = time.perf_counter()
+    if len(pairs) > len(views) - 1:
+        poses = optimise_poses(poses, pairs)
+    t3 = time.perf_counter()
+    residuals = [edge_residual(i, j, p.transform, poses, centres[i]) for (i, j), p in pairs.items()]
+    loop = loop_closure(len(views), pairs, centres[0]) if len(views) > 2 else None
+    reg = Registration(poses, pairs, rejected, inconsistent, residuals, loop, distance, spacing,
+                       seconds={"prepare": t1 - t0, "pairs": t2 - t1, "pose_graph": t3 - t2})
+    if priors is not None:
+        _check_stations(reg, priors, views)
+    return reg
+
+
+def _check_stations(reg: Registration, priors: list[StationPrior], views: list[View]) -> None:
+    """Each station's move by ICP against its georeference's stated σ (a warning with the numbers beyond 3σ)."""
+    for k, (prior, pose) in enumerate(zip(priors, reg.poses, strict=True)):
+        if k == 0:
+            reg.stations.append({"view": k, "moved": 0.0, "turned_deg": 0.0, "sigma_position": prior.sigma_position,
+                                 "sigma_heading_deg": prior.sigma_heading_deg})
+            continue
+        # The reference station is held; what ICP changes is station k relative to it.
+        E = pose @ np.linalg.inv(prior.pose)
+        c = prior.pose[:3, :3] @ views[k].points[views[k].object_mask].mean(axis=0) + prior.pose[:3, 3]
+        moved = float(np.linalg.norm(E[:3, :3] @ c + E[:3, 3] - c))
+        turned = rotation_angle_deg(E)
+        ref = priors[0]
+        sig_pos = float(np.hypot(prior.sigma_position, ref.sigma_position))
+        sig_head = float(np.hypot(prior.sigma_heading_deg, ref.sigma_heading_deg))
+        reg.stations.append({"view": k, "moved": moved, "turned_deg": turned, "sigma_position": sig_pos,
+                             "sigma_heading_deg": sig_head})
+        if moved > 3.0 * sig_pos or turned > 3.0 * sig_head:
+            reg.warnings.append(
+                f"{views[k].folder}: ICP moved this station by {moved:.3g} {views[k].units} and turned it by "
+                f"{turned:.3g}° from where its georeference put it, beyond 3σ of what the two stations' "
+                f"georeferences state (σ {sig_pos:.3g} {views[k].units}, {sig_head:.3g}°): check [site] "
+                "latitude, longitude, altitude and heading of both scans (or their stated σ); the model "
+                "follows ICP")
+
+
+def fuse_surface(views: list[View], reg: Registration, voxel: float | None = None) -> tuple[FusedPoints, FusedMesh]:
+    """The views' object points, in the reference frame, fused on one grid; the surface and its holes."""
+    h = float(voxel) if voxel is not None else reg.spacing
+    grid = VoxelFusion(h)
+    for k, (v, pose) in enumerate(zip(views, reg.poses, strict=True)):
+        m = v.object_mask
+        P = v.points[m] @ pose[:3, :3].T + pose[:3, 3]
+        N = v.normals[m] @ pose[:3, :3].T
+        grid.add(k, P, N, v.sigma[m], None if v.rgb is None else v.rgb[m])
+    fused = grid.result()
+    mesh = poisson_surface(fused, h)
+    ref = views[0]
+    band = 3.0 * max(0.002 * ref.distance, 5.0 * float(np.median(ref.sigma)))
+    mesh.holes = holes(mesh, [(p.normal, p.offset) for p in ref.planes], band)
+    return fused, mesh
