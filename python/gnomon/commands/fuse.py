@@ -33,9 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from gnomon.errors import GnomonError
-    from gnomon.fuse.model import FuseSettings
-    from gnomon.runs.fuse import FUSE_MESH_FORMATS, fuse_scans
-    from gnomon.runs.scan import ScanOptions
+    from gnomon.fuse.run import FUSE_MESH_FORMATS, fuse_scans
     from gnomon.util import validate
 
     out = validate.check_output_folder(args.out)
@@ -51,8 +49,7 @@ def run(args: argparse.Namespace) -> int:
         raise GnomonError(f"--mesh-formats {args.mesh_formats}: unknown {', '.join(sorted(unknown))} "
                           f"(one of {', '.join(FUSE_MESH_FORMATS)}, or all)")
     voxel = None if args.voxel is None else validate.number(args.voxel, "--voxel", positive=True)
-    result = fuse_scans(args.scans, args.out, settings=FuseSettings(voxel=voxel), mesh_formats=formats,
-                        options=ScanOptions(rrd=not args.no_rrd, progress=False))
+    result = fuse_scans(args.scans, args.out, voxel=voxel, mesh_formats=formats, rrd=not args.no_rrd)
     r = result.report
     m = r["model"]
     holes = m["holes"]

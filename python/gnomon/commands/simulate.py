@@ -20,7 +20,10 @@ def register(subparsers) -> None:
             "desk_lamp: a desk with a sphere, a box and a cylinder, a point-like lamp left of the "
             "camera, a stick whose shadow sweeps the view, plus pencil photos for lamp calibration "
             "(DIR/pencil/, DIR/pencil_log.toml). desk_lamp_right: the same scene and pixel grid with "
-            "the lamp mirrored to the right of the camera (fuse the two scans). two_plane: a desk and "
+            "the lamp mirrored to the right of the camera (fuse the two scans). desk_turns: one object (a box with a "
+            "barrel roof, a chimney and a sphere) turned on the desk by 360/--views degrees between views, one "
+            "desk_lamp capture per view in DIR/view_K/ and DIR/turns.json with every view's exact pose (for "
+            "gnomon fuse). two_plane: a desk and "
             "a wall meeting in a corner, printed 2x2 checker markers on both, a lamp the field log "
             "does not give (the shadow planes come from the lines on both planes). facade_sun: a pole's "
             "shadow swept by the sun over a facade and the street (3 h 19 min). facade_day: the same over "
@@ -71,6 +74,7 @@ def register(subparsers) -> None:
     p.add_argument("--mark-distance", action="store_true",
                    help="two_plane with --marks unmeasured: give the desk's first two marks' distance (mm) "
                    "instead of units \"relative\"")
+    p.add_argument("--views", type=int, default=4, help="desk_turns: how many places (2-12)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -97,6 +101,8 @@ def _options(args: argparse.Namespace) -> dict:
         opts["markers"] = args.markers
         opts["stick"] = args.stick
         opts.update(marks=args.marks, marks_off_px=args.marks_off_px, mark_distance=args.mark_distance)
+    elif args.scene == "desk_turns":
+        opts["views"] = args.views
     else:
         opts["pencil_photos"] = args.pencil_photos
     return opts
@@ -116,6 +122,12 @@ def run(args: argparse.Namespace) -> int:
     if args.scene == "chessboard":
         print(f"wrote 12 chessboard views (9x6 inner corners, 25 mm squares) and the true camera to {args.out} "
               f"in {seconds:.1f} s; try: gnomon calibrate camera {args.out} --board 9x6 --square 25")
+        return 0
+    if args.scene == "desk_turns":
+        turns = json.loads((field_log / "turns.json").read_text())
+        angles = ", ".join(f"{v['angle_deg']:g}" for v in turns["views"])
+        print(f"wrote {len(turns['views'])} captures of the object turned by {angles} deg and {field_log / 'turns.json'} in "
+              f"{seconds:.1f} s; scan each view_K/field_log.toml, then: gnomon fuse SCAN_0 SCAN_1 ... --out MODEL")
         return 0
     truth = json.loads((field_log.parent / "ground_truth.json").read_text())
     extra = ""

@@ -20,7 +20,7 @@ from gnomon.fuse.georeference import StationPrior, station_priors
 from gnomon.fuse.posegraph import EdgeResidual, edge_residual, loop_closure, optimise_poses, spanning_poses
 from gnomon.fuse.registration import Cloud, PairRegistration, agreement, coarse_alignment, features, icp, rotation_angle_deg
 from gnomon.fuse.surface import FusedMesh, FusedPoints, VoxelFusion, holes, poisson_surface
-from gnomon.fuse.views import View, split_setup
+from gnomon.fuse.views import View, free_space_share, split_setup
 
 __all__ = ["FuseSettings", "Registration", "register_views", "fuse_surface"]
 
@@ -35,17 +35,23 @@ class FuseSettings:
     ``setup_fraction``: a plane holding this share of a view's points is the set-up (0.15);
     ``max_icp_points``: each view's points used by ICP (an even subsample beyond it);
     ``consistency_deg`` / ``consistency``: how far (degrees / share of the distance) a pair may disagree
-    with the poses of the spanning tree before it is aligned again from them, or left out.
+    with the poses of the spanning tree before it is aligned again from them, or left out;
+    ``free_space``: how far (share of the distance) in front of what a view saw another view's point must
+    lie to count against a placement (1 %: the views' own errors and silhouettes stay below it);
+    ``max_see_through``: a pair putting more than this share of either view's points there is left out
+    (10 %; measured on the simulated figure: right alignments ≤ 5 %, wrong ones 19–71 %).
     """
 
     coarse_voxel: float = 0.004
     voxel: float | None = None
     min_overlap: float = 0.15
     setup_fraction: float = 0.15
-    max_icp_points: int = 10000
+    max_icp_points: int = 6000
     icp_iterations: int = 40
     consistency_deg: float = 0.5
     consistency: float = 0.005
+    free_space: float = 0.01
+    max_see_through: float = 0.1
 
 
 @dataclass
@@ -105,11 +111,32 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
         else:
             T0 = coarse_alignment(feats[i], feats[j], voxel)
         candidates[(i, j)] = refine(i, j, T0)
-    pairs = {k: p for k, p in candidates.items() if p.overlap >= s.min_overlap}
-    rejected = {k: p for k, p in candidates.items() if p.overlap < s.min_overlap}
+    margin = s.free_space * distance
+
+    def see_through(i: int, j: int, T: np.ndarray) -> float:
+        """The larger share of either view's points (i's moved by T into j's frame) in space the other saw
+        through: a wrong alignment of a nearly symmetric shape puts one view's sides there."""
+        Ti = np.linalg.inv(T)
+        return max(free_space_share(views[j], clouds[i].points @ T[:3, :3].T + T[:3, 3], margin),
+                   free_space_share(views[i], clouds[j].points @ Ti[:3, :3].T + Ti[:3, 3], margin))
+
+    def acceptable(i: int, j: int, p: PairRegistration) -> bool:
+        return p.overlap >= s.min_overlap and see_through(i, j, p.transform) <= s.max_see_through
+
+    pairs = {k: p for k, p in candidates.items() if acceptable(*k, p)}
+    rejected = {k: p for k, p in candidates.items() if k not in pairs}
     def score(k: int, pose: np.ndarray, placed: list[int], placed_poses: list[np.ndarray]) -> float:
-        return sum(agreement(clouds[k], clouds[m], np.linalg.inv(Pm) @ pose, 3.0 * spacing, 0.1 * spacing)
-                   for m, Pm in zip(placed, placed_poses, strict=True))
+        """How well view k at ``pose`` agrees with the placed views: its points on their surfaces, less
+        its points in space they saw through and theirs in space it saw through."""
+        total = 0.0
+        for m, Pm in zip(placed, placed_poses, strict=True):
+            T = np.linalg.inv(Pm) @ pose  # k → m
+            total += agreement(clouds[k], clouds[m], T, 3.0 * spacing, 0.1 * spacing)
+            Pk = clouds[k].points @ T[:3, :3].T + T[:3, 3]
+            Ti = np.linalg.inv(T)
+            total -= free_space_share(views[m], Pk, margin)
+            total -= free_space_share(views[k], clouds[m].points @ Ti[:3, :3].T + Ti[:3, 3], margin)
+        return total
 
     poses, missing = spanning_poses(len(views), pairs, score)
     if missing:
@@ -131,7 +158,7 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
         res2 = edge_residual(i, j, again.transform, poses, centres[i])
         pairs.pop((i, j), None)
         rejected.pop((i, j), None)
-        if (again.overlap >= s.min_overlap and res2.rotation_deg <= s.consistency_deg
+        if (acceptable(i, j, again) and res2.rotation_deg <= s.consistency_deg
                 and res2.displacement <= s.consistency * distance):
             pairs[(i, j)] = again
         else:

@@ -86,7 +86,7 @@ def features(points: np.ndarray, normals: np.ndarray, voxel: float) -> tuple[Any
     return down, fpfh
 
 
-def coarse_alignment(src: tuple[Any, Any], dst: tuple[Any, Any], voxel: float, *, iterations: int = 20000,
+def coarse_alignment(src: tuple[Any, Any], dst: tuple[Any, Any], voxel: float, *, iterations: int = 5000,
                      seed: int = 0) -> np.ndarray:
     """A source → target transform (4, 4) from two views' :func:`features` matched by RANSAC, without
     any hint (inlier distance 1.5 voxels)."""
@@ -117,11 +117,13 @@ def icp(src: Cloud, dst: Cloud, T0: np.ndarray, *, max_distance: float, min_dist
         iterations: int = 40, tolerance: float = 1e-6) -> PairRegistration:
     """σ-weighted point-to-plane ICP of ``src`` onto ``dst`` from ``T0`` (source → target).
 
-    The partner search radius shrinks from ``max_distance`` to ``min_distance`` (world units) over
-    the first iterations; the weights are described in the module's docstring.
+    The partner search radius halves from ``max_distance`` to ``min_distance`` (world units), each
+    time the pose has settled at the radius (or after 8 steps); the weights are described in the
+    module's docstring.
     """
     T = np.asarray(T0, dtype=np.float64).copy()
     radius = max_distance
+    settle = 0
     H = np.zeros((6, 6))
     it = 0
     ok = np.zeros(len(src.points), bool)
@@ -148,10 +150,12 @@ def icp(src: Cloud, dst: Cloud, T0: np.ndarray, *, max_distance: float, min_dist
             break
         T = se3_exp(x) @ T
         step = float(np.linalg.norm(x[:3]) + np.linalg.norm(x[3:]) / max(radius, 1e-12))
-        if radius > min_distance:
-            radius = max(min_distance, radius * 0.7)
-        elif step < tolerance:
+        # Settle at each radius before narrowing it: a narrow search too early keeps a wrong partner set.
+        if radius > min_distance and (step < 1e-3 or settle >= 8):
+            radius, settle = max(min_distance, radius * 0.5), 0
+        elif radius <= min_distance and step < tolerance:
             break
+        settle += 1
     used = w > 0
     rms = float(np.sqrt(np.mean(r[used] ** 2))) if used.any() else float("inf")
     rms_sigma = float(np.sqrt(np.mean((r[used] ** 2) / var[used]))) if used.any() else float("inf")

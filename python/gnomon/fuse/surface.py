@@ -6,7 +6,7 @@
    ``σ = (Σ 1/σ²)^(-1/2)`` and which views saw it. The grid holds only occupied voxels and takes the
    views one at a time, so memory grows with the object's surface, not with the number of views.
 2. **The surface.** Screened Poisson reconstruction (Open3D, Kazhdan & Hoppe 2013) of the fused
-   points, at the octree depth whose cell is at most ``cell`` voxels (1.5); where no fused point lies within
+   points, at the octree depth whose cell is at most ``cell`` voxels (3: on the simulated figure, 0.116 mm RMS against 0.099 mm at 1.5 voxels, in a third of the time); where no fused point lies within
    ``trim`` voxels of the surface it is cut away (Poisson closes every surface; only what a view
    saw is kept), and pieces of less than ``min_piece`` of the faces are dropped.
 3. **σ per vertex**: the σ of the inverse-variance mean of the fused points within 2 voxels.
@@ -113,13 +113,14 @@ class VoxelFusion:
 
 
 def poisson_surface(fused: FusedPoints, voxel: float, *, trim: float = 2.0, min_piece: float = 0.01,
-                    threads: int = 0, cell: float = 1.5) -> FusedMesh:
+                    threads: int = 0, cell: float = 3.0) -> FusedMesh:
     """Screened Poisson surface of the fused points, cut to what was seen (see the module)."""
     o3d = open3d()
     P = fused.points
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
     pcd.normals = o3d.utility.Vector3dVector(fused.normals)
-    extent = float(np.max(P.max(axis=0) - P.min(axis=0)))
+    lo, hi = np.percentile(P, [0.5, 99.5], axis=0)  # the object's size, not a stray point's
+    extent = float(np.max(hi - lo))
     depth = max(6, min(12, math.ceil(math.log2(1.1 * extent / (cell * voxel)))))
     mesh, _ = o3d.geometry.TriangleMesh.create_from_point_cloud_poisson(pcd, depth=depth, scale=1.1,
                                                                          linear_fit=False, n_threads=threads)

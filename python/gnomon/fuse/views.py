@@ -17,13 +17,14 @@ from typing import Any
 
 import numpy as np
 
-from gnomon.camera.models import Pose
+from gnomon.camera.calibration import camera_from_table
+from gnomon.camera.models import CameraModel, Pose
 from gnomon.errors import GnomonError
 from gnomon.fuse.o3d import open3d
 from gnomon.outputs import ply
 from gnomon.outputs.publish import recover
 
-__all__ = ["View", "SetupPlane", "read_view", "check_views", "split_setup"]
+__all__ = ["View", "SetupPlane", "read_view", "check_views", "free_space_share", "split_setup"]
 
 
 @dataclass
@@ -54,6 +55,9 @@ class View:
     camera_centre: np.ndarray  # (3,) world
     site: dict[str, Any] | None
     report: dict[str, Any]
+    camera: CameraModel | None = None  # the scan's camera and pose, and its depth map (camera Z, NaN: none)
+    pose: Pose | None = None
+    depth: np.ndarray | None = None
     object_mask: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     planes: list[SetupPlane] = field(default_factory=list)
     distance: float = float("nan")
@@ -92,9 +96,39 @@ def read_view(folder: str | Path) -> View:
     S = np.asarray(data["sigma"], dtype=np.float64)
     good = np.isfinite(P).all(axis=1) & np.isfinite(N).all(axis=1) & np.isfinite(S) & (S > 0)
     rgb = data.get("rgb")
-    centre = Pose.from_rvec_tvec(rvec, tvec).camera_centre_world
+    pose = Pose.from_rvec_tvec(rvec, tvec)
+    camera, depth = None, None
+    if (f / "depth.npy").is_file():
+        table = {k: v for k, v in report["camera"].items() if k != "pose"}
+        camera = camera_from_table(table, f"{f / 'report.json'}: camera")
+        try:
+            depth = np.load(f / "depth.npy", allow_pickle=False)
+        except (ValueError, EOFError, OSError) as exc:
+            raise GnomonError(f"{f / 'depth.npy'}: not a readable .npy map ({exc})") from None
+        if depth.shape != (camera.height, camera.width):
+            raise GnomonError(f"{f / 'depth.npy'}: shape {depth.shape} does not match the "
+                              f"{camera.width}x{camera.height} camera")
     return View(f, units, P[good], N[good], S[good], None if rgb is None else np.asarray(rgb)[good],
-                centre, report.get("site"), report)
+                pose.camera_centre_world, report.get("site"), report, camera, pose, depth)
+
+
+def free_space_share(view: View, points_world: np.ndarray, margin: float) -> float:
+    """The share of points (this view's world frame) that lie more than ``margin`` in front of the surface
+    this view saw along their pixel's ray: space the view saw through, where a correctly placed point of
+    another view cannot be. 0 without a depth map."""
+    if view.camera is None or view.pose is None or view.depth is None or not len(points_world):
+        return 0.0
+    Xc = view.pose.world_to_camera(points_world)
+    front = Xc[:, 2] > 0
+    uv = np.full((len(Xc), 2), -1.0)
+    uv[front] = view.camera.project(Xc[front])
+    u, v = np.rint(uv[:, 0]).astype(np.int64), np.rint(uv[:, 1]).astype(np.int64)
+    inside = front & (u >= 0) & (v >= 0) & (u < view.camera.width) & (v < view.camera.height)
+    seen = np.full(len(Xc), np.nan)
+    seen[inside] = view.depth[v[inside], u[inside]]
+    with np.errstate(invalid="ignore"):
+        through = Xc[:, 2] < seen - margin
+    return float(np.count_nonzero(through)) / len(Xc)
 
 
 def check_views(views: list[View]) -> None:

@@ -1,4 +1,4 @@
-"""`gnomon fuse SCAN... --out MODEL`: several scans of one object made into one model.
+"""`gnomon fuse SCAN... --out MODEL` and ``gnomon.fuse(...)``: several scans of one object made into one model.
 
 The stages, in order: read the scan folders (:func:`gnomon.fuse.views.read_view`) and check that
 they can go together; register them (:func:`gnomon.fuse.model.register_views`); fuse their points
@@ -10,6 +10,7 @@ first station's site; a desk object's in the first scan's world frame.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from dataclasses import dataclass
@@ -30,16 +31,24 @@ from gnomon.outputs.obj import write_obj
 from gnomon.outputs.publish import staged_outputs
 from gnomon.outputs.scan_files import json_default
 from gnomon.outputs.stl import write_stl
-from gnomon.recording.worker import open_recorder
-from gnomon.runs.scan import ScanOptions
+from gnomon.recording.worker import RecordingChoice, open_recorder
 from gnomon.util import atomic
 
-__all__ = ["FuseResult", "FUSE_OUTPUTS", "FUSE_MESH_FORMATS", "fuse_scans"]
+__all__ = ["FuseResult", "FUSE_OUTPUTS", "FUSE_MESH_FORMATS", "Recording", "fuse_scans"]
 
 #: The mesh formats a fused model can be written in (mesh.ply always).
 FUSE_MESH_FORMATS = ("ply", "obj", "stl")
 #: Every file a fusion publishes into its folder.
 FUSE_OUTPUTS = ("mesh.ply", "mesh.obj", "mesh.stl", "points.ply", "report.json", "fuse.rrd")
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Whether a fusion writes ``OUT/fuse.rrd`` (a :class:`gnomon.recording.worker.RecordingChoice`)."""
+
+    rrd: bool = True
+    view: bool = False
+    frame_stride: int = 10
 
 
 @dataclass
@@ -125,10 +134,20 @@ def _report(views: list[View], reg: Registration, fused: FusedPoints, mesh: Fuse
     }
 
 
-def fuse_scans(scans: list[str | Path], out_dir: str | Path | None, *, settings: FuseSettings | None = None,
-               mesh_formats: tuple[str, ...] = ("ply",), options: ScanOptions | None = None) -> FuseResult:
-    """Fuse scan folders into one model; write it into ``out_dir`` (None: in memory only)."""
-    opts = options or ScanOptions(progress=False)
+def fuse_scans(scans: list[str | Path], out_dir: str | Path | None = None, *, voxel: float | None = None,
+               mesh_formats: tuple[str, ...] = ("ply",), rrd: bool = True, settings: FuseSettings | None = None,
+               recording: RecordingChoice | None = None) -> FuseResult:
+    """Fuse scan folders (2 or more) into one model; write it into ``out_dir`` (None: in memory only).
+
+    ``voxel`` the fusion's grid (world units; default the scans' median point spacing), ``mesh_formats``
+    of :data:`FUSE_MESH_FORMATS`, ``rrd`` write ``fuse.rrd``; ``settings`` all of
+    :class:`~gnomon.fuse.model.FuseSettings` (its ``voxel`` is overridden by ``voxel``). Bad input (a
+    folder that is not a scan, units that differ, a scan that overlaps none of the others) raises a
+    :class:`GnomonError` naming it, and nothing is written.
+    """
+    opts = recording or Recording(rrd=rrd)
+    if voxel is not None:
+        settings = dataclasses.replace(settings or FuseSettings(), voxel=float(voxel))
     open3d()  # the one-line install hint before anything is read
     t0 = time.perf_counter()
     for f in mesh_formats:
