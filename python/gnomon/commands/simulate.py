@@ -126,8 +126,9 @@ def run(args: argparse.Namespace) -> int:
     if args.scene == "desk_turns":
         turns = json.loads((field_log / "turns.json").read_text())
         angles = ", ".join(f"{v['angle_deg']:g}" for v in turns["views"])
-        print(f"wrote {len(turns['views'])} captures of the object turned by {angles} deg and {field_log / 'turns.json'} in "
-              f"{seconds:.1f} s; scan each view_K/field_log.toml, then: gnomon fuse SCAN_0 SCAN_1 ... --out MODEL")
+        print(f"wrote {len(turns['views'])} captures of the object turned by {angles} deg and "
+              f"{field_log / 'turns.json'} in {seconds:.1f} s; scan each view_K/field_log.toml, then: "
+              "gnomon fuse SCAN_0 SCAN_1 ... --out MODEL")
         return 0
     truth = json.loads((field_log.parent / "ground_truth.json").read_text())
     extra = ""

@@ -25,8 +25,8 @@ if TYPE_CHECKING:
     from gnomon.fuse.model import Registration as Registration
     from gnomon.fuse.model import fuse_surface as fuse_surface
     from gnomon.fuse.model import register_views as register_views
-    from gnomon.fuse.views import View as View
     from gnomon.fuse.run import fuse_scans as fuse_scans
+    from gnomon.fuse.views import View as View
     from gnomon.fuse.views import read_view as read_view
 
 #: Each name this package gives and the module it lives in (imported on first use).

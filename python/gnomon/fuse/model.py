@@ -18,7 +18,15 @@ import numpy as np
 from gnomon.errors import GnomonError
 from gnomon.fuse.georeference import StationPrior, station_priors
 from gnomon.fuse.posegraph import EdgeResidual, edge_residual, loop_closure, optimise_poses, spanning_poses
-from gnomon.fuse.registration import Cloud, PairRegistration, agreement, coarse_alignment, features, icp, rotation_angle_deg
+from gnomon.fuse.registration import (
+    Cloud,
+    PairRegistration,
+    agreement,
+    coarse_alignment,
+    features,
+    icp,
+    rotation_angle_deg,
+)
 from gnomon.fuse.surface import FusedMesh, FusedPoints, VoxelFusion, holes, poisson_surface
 from gnomon.fuse.views import View, free_space_share, split_setup
 
@@ -39,7 +47,10 @@ class FuseSettings:
     ``free_space``: how far (share of the distance) in front of what a view saw another view's point must
     lie to count against a placement (1 %: the views' own errors and silhouettes stay below it);
     ``max_see_through``: a pair putting more than this share of either view's points there is left out
-    (10 %; measured on the simulated figure: right alignments ≤ 5 %, wrong ones 19–71 %).
+    (10 %; measured on the simulated figure: right alignments ≤ 5 %, wrong ones 19–71 %);
+    ``station_grids``: georeferenced stations are aligned from their georeference and from features on
+    these multiples of ``coarse_voxel`` each, the best-agreeing kept; ``retry_grids``: a view no pair
+    joins to the others is aligned again on these, one after the other.
     """
 
     coarse_voxel: float = 0.004
@@ -52,6 +63,8 @@ class FuseSettings:
     consistency: float = 0.005
     free_space: float = 0.01
     max_see_through: float = 0.1
+    station_grids: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0)
+    retry_grids: tuple[float, ...] = (1.5, 2.0, 3.0)
 
 
 @dataclass
@@ -83,7 +96,11 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
     s = settings or FuseSettings()
     t0 = time.perf_counter()
     for v in views:
-        split_setup(v, setup_fraction=s.setup_fraction)
+        if v.site is None:
+            split_setup(v, setup_fraction=s.setup_fraction)
+        else:  # a building: its facades and the ground are the survey, not a set-up to leave out
+            v.object_mask = np.ones(len(v.points), dtype=bool)
+            v.distance = float(np.median(np.linalg.norm(v.points - v.camera_centre, axis=1)))
         if v.object_mask.sum() < 100:
             raise GnomonError(f"{v.folder}: only {int(v.object_mask.sum())} points off the set-up's planes; "
                               "nothing to register (is the object in view?)")
@@ -97,21 +114,16 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
         clouds.append(Cloud.of(c.points[k], c.normals[k], c.sigma[k]))
     t1 = time.perf_counter()
     voxel = s.coarse_voxel * distance
+    margin = s.free_space * distance
     priors = station_priors(views) if views[0].site is not None else None
-    feats = [features(c.points, c.normals, voxel) for c in full] if priors is None else []
+    # Feature grids: the desk's; a building's also coarser ones (its windows repeat: the balconies,
+    # ledges and corners that tell one window from the next are larger than the desk's details).
+    grids = [voxel] if priors is None else [voxel * f for f in s.station_grids]
+    feats = {g: [features(c.points, c.normals, g) for c in full] for g in grids}
 
     def refine(i: int, j: int, T0: np.ndarray) -> PairRegistration:
         return icp(clouds[i], clouds[j], T0, max_distance=3.0 * voxel, min_distance=3.0 * spacing,
                    sigma_floor=0.1 * spacing, iterations=s.icp_iterations)
-
-    candidates: dict[tuple[int, int], PairRegistration] = {}
-    for i, j in itertools.combinations(range(len(views)), 2):
-        if priors is not None:
-            T0 = np.linalg.inv(priors[j].pose) @ priors[i].pose
-        else:
-            T0 = coarse_alignment(feats[i], feats[j], voxel)
-        candidates[(i, j)] = refine(i, j, T0)
-    margin = s.free_space * distance
 
     def see_through(i: int, j: int, T: np.ndarray) -> float:
         """The larger share of either view's points (i's moved by T into j's frame) in space the other saw
@@ -120,11 +132,23 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
         return max(free_space_share(views[j], clouds[i].points @ T[:3, :3].T + T[:3, 3], margin),
                    free_space_share(views[i], clouds[j].points @ Ti[:3, :3].T + Ti[:3, 3], margin))
 
+    def feature_grid(g: float) -> list:
+        if g not in feats:
+            feats[g] = [features(c.points, c.normals, g) for c in full]
+        return feats[g]
+
+    def align(i: int, j: int, grid_list: list[float], prior: bool) -> PairRegistration:
+        """ICP from the coarse alignments on these grids (and the georeference), the best-agreeing result."""
+        starts = [coarse_alignment(feature_grid(g)[i], feature_grid(g)[j], g,
+                                   iterations=5000 if priors is None else 50000) for g in grid_list]
+        if prior and priors is not None:
+            starts.insert(0, np.linalg.inv(priors[j].pose) @ priors[i].pose)
+        tried = [refine(i, j, T0) for T0 in starts]
+        return max(tried, key=lambda p: p.overlap - see_through(i, j, p.transform))
+
     def acceptable(i: int, j: int, p: PairRegistration) -> bool:
         return p.overlap >= s.min_overlap and see_through(i, j, p.transform) <= s.max_see_through
 
-    pairs = {k: p for k, p in candidates.items() if acceptable(*k, p)}
-    rejected = {k: p for k, p in candidates.items() if k not in pairs}
     def score(k: int, pose: np.ndarray, placed: list[int], placed_poses: list[np.ndarray]) -> float:
         """How well view k at ``pose`` agrees with the placed views: its points on their surfaces, less
         its points in space they saw through and theirs in space it saw through."""
@@ -138,14 +162,29 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
             total -= free_space_share(views[k], clouds[m].points @ Ti[:3, :3].T + Ti[:3, 3], margin)
         return total
 
+    candidates = {(i, j): align(i, j, grids, True) for i, j in itertools.combinations(range(len(views)), 2)}
+    pairs = {k: p for k, p in candidates.items() if acceptable(*k, p)}
     poses, missing = spanning_poses(len(views), pairs, score)
+    # Views the tree does not reach: their pairs with the placed views aligned again on coarser features
+    # (RANSAC on one grid misses now and then; a second grid costs only where it is needed).
+    for factor in s.retry_grids:
+        if not missing:
+            break
+        for i, j in candidates:
+            if (i in missing) != (j in missing) and (i, j) not in pairs:
+                again = align(i, j, [voxel * factor], False)
+                if acceptable(i, j, again):
+                    candidates[(i, j)] = pairs[(i, j)] = again
+        poses, missing = spanning_poses(len(views), pairs, score)
+    rejected = {k: p for k, p in candidates.items() if k not in pairs}
     if missing:
-        k = missing[0]
-        best = max((p.overlap for (i, j), p in rejected.items() if k in (i, j)), default=0.0)
-        raise GnomonError(f"{views[k].folder}: does not overlap the other scans after registration (at best "
-                          f"{best:.0%} of its object points meet another scan's surface, {s.min_overlap:.0%} "
-                          "needed); is it a scan of the same object? Scan it again from a place between two "
-                          "of the others")
+        first = missing[0]
+        best = max((p.overlap for (i, j), p in rejected.items() if first in (i, j)), default=0.0)
+        group = ", ".join(str(views[m].folder) for m in missing)
+        raise GnomonError(f"{views[first].folder}: does not overlap the other scans after registration (at best "
+                          f"{best:.0%} of its object points meet another scan's surface without crossing space "
+                          f"a scan saw through, {s.min_overlap:.0%} needed; scans not joined to the first: {group}); "
+                          "is it a scan of the same object? Scan it again from a place between two of the others")
     # Loop consistency: a pair that disagrees with the tree's poses (a symmetric shape aligned the wrong way
     # round, say) is aligned again from the tree's poses; the better-overlapping one is kept if it agrees.
     inconsistent: dict[tuple[int, int], PairRegistration] = {}
@@ -177,29 +216,42 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
 
 
 def _check_stations(reg: Registration, priors: list[StationPrior], views: list[View]) -> None:
-    """Each station's move by ICP against its georeference's stated σ (a warning with the numbers beyond 3σ)."""
+    """Each station's move by ICP from where its georeference put it, against what the georeferences' stated
+    σ allow (a warning with the numbers beyond 3σ, and what to do).
+
+    The move is measured at the station's object points' centre; what the σ allow there is the two sites'
+    position σ combined with the two headings' σ times the centre's distance from the reference origin
+    (a heading turns the station's whole frame about its origin)."""
+    ref = priors[0]
     for k, (prior, pose) in enumerate(zip(priors, reg.poses, strict=True)):
         if k == 0:
-            reg.stations.append({"view": k, "moved": 0.0, "turned_deg": 0.0, "sigma_position": prior.sigma_position,
-                                 "sigma_heading_deg": prior.sigma_heading_deg})
+            reg.stations.append({"view": k, "moved": 0.0, "turned_deg": 0.0, "allowed_3sigma": 0.0,
+                                 "sigma_position": prior.sigma_position, "sigma_heading_deg": prior.sigma_heading_deg,
+                                 "sigma_stated": prior.stated})
             continue
-        # The reference station is held; what ICP changes is station k relative to it.
-        E = pose @ np.linalg.inv(prior.pose)
+        E = pose @ np.linalg.inv(prior.pose)  # the reference station is held; ICP moves station k
         c = prior.pose[:3, :3] @ views[k].points[views[k].object_mask].mean(axis=0) + prior.pose[:3, 3]
         moved = float(np.linalg.norm(E[:3, :3] @ c + E[:3, 3] - c))
         turned = rotation_angle_deg(E)
-        ref = priors[0]
         sig_pos = float(np.hypot(prior.sigma_position, ref.sigma_position))
         sig_head = float(np.hypot(prior.sigma_heading_deg, ref.sigma_heading_deg))
-        reg.stations.append({"view": k, "moved": moved, "turned_deg": turned, "sigma_position": sig_pos,
-                             "sigma_heading_deg": sig_head})
-        if moved > 3.0 * sig_pos or turned > 3.0 * sig_head:
+        allowed = 3.0 * float(np.hypot(sig_pos, np.linalg.norm(c) * np.radians(sig_head)))
+        reg.stations.append({"view": k, "moved": moved, "turned_deg": turned, "allowed_3sigma": allowed,
+                             "sigma_position": sig_pos, "sigma_heading_deg": sig_head,
+                             "sigma_stated": prior.stated and ref.stated})
+        u = views[k].units
+        if moved > allowed or turned > 3.0 * sig_head:
             reg.warnings.append(
-                f"{views[k].folder}: ICP moved this station by {moved:.3g} {views[k].units} and turned it by "
-                f"{turned:.3g}° from where its georeference put it, beyond 3σ of what the two stations' "
-                f"georeferences state (σ {sig_pos:.3g} {views[k].units}, {sig_head:.3g}°): check [site] "
-                "latitude, longitude, altitude and heading of both scans (or their stated σ); the model "
-                "follows ICP")
+                f"{views[k].folder}: registration moved this station by {moved:.3g} {u} and turned it by "
+                f"{turned:.3g}° from where its georeference put it, beyond 3σ of what the stations' georeferences "
+                f"state ({allowed:.3g} {u} there, {3.0 * sig_head:.3g}°): the model follows the registration; "
+                "check both scans' [site] latitude, longitude, altitude and heading_deg (and position_sigma_m, "
+                "heading_sigma_deg) before using its georeference")
+        elif not (prior.stated and ref.stated):
+            reg.warnings.append(
+                f"{views[k].folder}: the georeference's uncertainty is not stated; assumed "
+                f"{prior.sigma_position:g} m and {prior.sigma_heading_deg:g}° (1σ): give [site] position_sigma_m "
+                "and heading_sigma_deg to have the stations' move checked against what you know")
 
 
 def fuse_surface(views: list[View], reg: Registration, voxel: float | None = None) -> tuple[FusedPoints, FusedMesh]:

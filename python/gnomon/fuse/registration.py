@@ -19,7 +19,8 @@ from scipy.spatial import cKDTree
 
 from gnomon.fuse.o3d import open3d
 
-__all__ = ["Cloud", "PairRegistration", "agreement", "coarse_alignment", "features", "icp", "rotation_angle_deg", "se3_exp"]
+__all__ = ["Cloud", "PairRegistration", "agreement", "coarse_alignment", "features", "icp", "rotation_angle_deg",
+           "se3_exp"]
 
 TUKEY_C = 4.685
 
@@ -129,7 +130,8 @@ def icp(src: Cloud, dst: Cloud, T0: np.ndarray, *, max_distance: float, min_dist
     ok = np.zeros(len(src.points), bool)
     r = w = np.zeros(0)
     var = np.zeros(0)
-    for it in range(1, iterations + 1):
+    for step_index in range(1, iterations + 1):
+        it = step_index
         p = src.points @ T[:3, :3].T + T[:3, 3]
         d, j = dst.tree.query(p, distance_upper_bound=radius)
         ok = np.isfinite(d)

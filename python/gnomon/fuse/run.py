@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -42,7 +44,7 @@ FUSE_MESH_FORMATS = ("ply", "obj", "stl")
 FUSE_OUTPUTS = ("mesh.ply", "mesh.obj", "mesh.stl", "points.ply", "report.json", "fuse.rrd")
 
 
-@dataclass(frozen=True)
+@dataclass
 class Recording:
     """Whether a fusion writes ``OUT/fuse.rrd`` (a :class:`gnomon.recording.worker.RecordingChoice`)."""
 
@@ -134,9 +136,9 @@ def _report(views: list[View], reg: Registration, fused: FusedPoints, mesh: Fuse
     }
 
 
-def fuse_scans(scans: list[str | Path], out_dir: str | Path | None = None, *, voxel: float | None = None,
-               mesh_formats: tuple[str, ...] = ("ply",), rrd: bool = True, settings: FuseSettings | None = None,
-               recording: RecordingChoice | None = None) -> FuseResult:
+def fuse_scans(scans: Sequence[str | os.PathLike], out_dir: str | os.PathLike | None = None, *,
+               voxel: float | None = None, mesh_formats: tuple[str, ...] = ("ply",), rrd: bool = True,
+               settings: FuseSettings | None = None, recording: RecordingChoice | None = None) -> FuseResult:
     """Fuse scan folders (2 or more) into one model; write it into ``out_dir`` (None: in memory only).
 
     ``voxel`` the fusion's grid (world units; default the scans' median point spacing), ``mesh_formats``
@@ -145,7 +147,7 @@ def fuse_scans(scans: list[str | Path], out_dir: str | Path | None = None, *, vo
     folder that is not a scan, units that differ, a scan that overlaps none of the others) raises a
     :class:`GnomonError` naming it, and nothing is written.
     """
-    opts = recording or Recording(rrd=rrd)
+    opts: RecordingChoice = recording or Recording(rrd=rrd)
     if voxel is not None:
         settings = dataclasses.replace(settings or FuseSettings(), voxel=float(voxel))
     open3d()  # the one-line install hint before anything is read

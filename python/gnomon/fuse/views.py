@@ -11,6 +11,7 @@ by RANSAC and their points left out (``setup_fraction``).
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -71,7 +72,7 @@ class View:
         return self.points[m], self.normals[m], self.sigma[m]
 
 
-def read_view(folder: str | Path) -> View:
+def read_view(folder: str | os.PathLike) -> View:
     """Read a scan folder; a folder that is not one is a one-line :class:`GnomonError` naming it."""
     f = Path(folder)
     if not f.is_dir():

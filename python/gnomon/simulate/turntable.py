@@ -35,6 +35,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -56,10 +57,10 @@ from gnomon.util import atomic, toml_io
 __all__ = ["TurnsConfig", "TurnsResult", "TurnedDeskScene", "figure_distance", "seen_surface", "simulate_turns"]
 
 # The figure, in its own frame (mm): what each solid is, and its albedo.
-FIG_BOX = {"centre": (10.0, 0.0, 30.0), "size": (120.0, 70.0, 60.0)}
-FIG_ROOF = {"centre": (25.0, 12.0, 60.0), "axis": (1.0, 0.0, 0.0), "radius": 28.0, "length": 80.0}
-FIG_SPHERE = {"centre": (-62.0, -18.0, 30.0), "radius": 30.0}
-FIG_CHIMNEY = {"centre": (45.0, -22.0, 75.0), "size": (20.0, 18.0, 30.0)}
+FIG_BOX: dict[str, Any] = {"centre": (10.0, 0.0, 30.0), "size": (120.0, 70.0, 60.0)}
+FIG_ROOF: dict[str, Any] = {"centre": (25.0, 12.0, 60.0), "axis": (1.0, 0.0, 0.0), "radius": 28.0, "length": 80.0}
+FIG_SPHERE: dict[str, Any] = {"centre": (-62.0, -18.0, 30.0), "radius": 30.0}
+FIG_CHIMNEY: dict[str, Any] = {"centre": (45.0, -22.0, 75.0), "size": (20.0, 18.0, 30.0)}
 CHIMNEY = 4
 ALBEDO = {SPHERE: 0.70, BOX: 0.60, CYLINDER: 0.65, CHIMNEY: 0.55}
 MAX_VIEWS = 12
