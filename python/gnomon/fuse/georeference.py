@@ -35,12 +35,13 @@ DEFAULT_HEADING_SIGMA_DEG = 1.0
 class StationPrior:
     """A station's pose from its georeference: ``pose`` (4, 4) its world frame → the reference station's
     world frame (world units); σ of its position (world units) and heading (degrees); ``stated``
-    whether the scan gave them (False: the defaults)."""
+    whether the scan gave both (``assumed`` says which defaults stand in)."""
 
     pose: np.ndarray
     sigma_position: float
     sigma_heading_deg: float
     stated: bool
+    assumed: tuple[str, ...] = ()  # what was not stated and is taken at its default, in words
 
 
 def _world_to_ecef(site: dict, where: str) -> tuple[np.ndarray, np.ndarray]:
@@ -70,7 +71,9 @@ def station_priors(views: list[View]) -> list[StationPrior]:
         scale = METRES_PER_UNIT.get(v.units, 1.0)
         pos = v.site.get("position_sigma_m")
         head = (v.report.get("sun") or {}).get("heading_sigma_deg") or v.site.get("heading_sigma_deg")
-        stated = pos is not None and head is not None
+        assumed = tuple(([] if pos is not None else [f"position σ {DEFAULT_POSITION_SIGMA_M:g} m"])
+                        + ([] if head is not None else [f"heading σ {DEFAULT_HEADING_SIGMA_DEG:g}°"]))
         out.append(StationPrior(T, float(pos if pos is not None else DEFAULT_POSITION_SIGMA_M) / scale,
-                                float(head if head is not None else DEFAULT_HEADING_SIGMA_DEG), stated))
+                                float(head if head is not None else DEFAULT_HEADING_SIGMA_DEG), not assumed,
+                                assumed))
     return out

@@ -248,10 +248,11 @@ def _check_stations(reg: Registration, priors: list[StationPrior], views: list[V
                 "check both scans' [site] latitude, longitude, altitude and heading_deg (and position_sigma_m, "
                 "heading_sigma_deg) before using its georeference")
         elif not (prior.stated and ref.stated):
+            missing = sorted({*prior.assumed, *ref.assumed})
             reg.warnings.append(
-                f"{views[k].folder}: the georeference's uncertainty is not stated; assumed "
-                f"{prior.sigma_position:g} m and {prior.sigma_heading_deg:g}° (1σ): give [site] position_sigma_m "
-                "and heading_sigma_deg to have the stations' move checked against what you know")
+                f"{views[k].folder}: the stations' georeferences do not state all their uncertainty; assumed "
+                f"{' and '.join(missing)} (1σ): give [site] position_sigma_m and heading_sigma_deg in each "
+                "field log to have the stations' move checked against what you know")
 
 
 def fuse_surface(views: list[View], reg: Registration, voxel: float | None = None) -> tuple[FusedPoints, FusedMesh]:

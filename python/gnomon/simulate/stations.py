@@ -12,7 +12,7 @@ of its own origin, computed exactly and then moved by a *georeference error* of 
 in a direction drawn from the seed (a phone's GNSS fix), with ``position_sigma_m`` stated. The
 truth, ``stations.json``: every station's folder, ``world_from_scene`` (4 × 4) and
 ``pose_to_reference`` (station k's world → station 0's: what a fusion must find), the georeference
-error, and the camera's distance from the facade.
+error, and the camera's distance from the facade. The field logs state ``heading_sigma_deg`` 0.1°.
 """
 
 from __future__ import annotations
@@ -56,6 +56,8 @@ STATIONS: tuple[dict[str, Any], ...] = (
     {"eye": tuple(CAMERA_EYE), "target": tuple(CAMERA_TARGET), "turn_deg": 0.0, "shift": (0.0, 0.0, 0.0)},
     {"eye": (-10.0, 40.0, 2.5), "target": (10.0, 2.0, 3.0), "turn_deg": 37.0, "shift": (4.0, -9.0, 0.0)},
 )
+#: The heading's σ the field logs state (degrees): the simulated heading is exact, a surveyed one this good.
+HEADING_SIGMA_DEG = 0.1
 WGS84_A = 6378137.0
 WGS84_E2 = 0.00669437999014
 
@@ -147,7 +149,7 @@ def station_field_log(log: dict, T: np.ndarray, error_enu: np.ndarray, sigma_m: 
     enu = R_we.T @ origin + error_enu
     lat, lon, alt = offset_site(site["latitude"], site["longitude"], site["altitude"], *enu)
     site.update(latitude=lat, longitude=lon, altitude=alt, heading_deg=(heading + turn) % 360.0,
-                position_sigma_m=float(sigma_m))
+                position_sigma_m=float(sigma_m), heading_sigma_deg=HEADING_SIGMA_DEG)
     return out
 
 
