@@ -166,11 +166,8 @@ def simulate_stations(out_dir, config: StationsConfig | None = None, *,
                       progress: Callable[[int, int], None] | None = None) -> StationsResult:
     """Render every station's capture into ``out_dir/station_K/`` and ``stations.json`` (last)."""
     config = config or StationsConfig()
-    config.validate()
     t0 = time.perf_counter()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "stations.json").unlink(missing_ok=True)
+    out = sensor.start_captures(out_dir, config, "stations.json")
     rng = np.random.default_rng([config.seed, 29])
     logs, to_ref, entries = [], [], []
     distance = 0.0

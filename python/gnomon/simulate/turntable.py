@@ -49,7 +49,6 @@ from gnomon.simulate.desk_lamp import (
     DeskLampScene,
     clear_previous,
     nuisance_text,
-    prepare_out_dir,
     write_frames,
 )
 from gnomon.util import atomic, toml_io
@@ -204,11 +203,8 @@ def simulate_turns(out_dir, config: TurnsConfig | None = None, *,
     over all views.
     """
     config = config or TurnsConfig()
-    config.validate()
     t0 = time.perf_counter()
-    out = prepare_out_dir(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "turns.json").unlink(missing_ok=True)
+    out = sensor.start_captures(out_dir, config, "turns.json")
     poses = config.poses()
     total = config.views * config.frames
     folders, logs, to_ref = [], [], []
