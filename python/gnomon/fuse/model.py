@@ -30,7 +30,7 @@ from gnomon.fuse.registration import (
 from gnomon.fuse.surface import FusedMesh, FusedPoints, VoxelFusion, holes, poisson_surface
 from gnomon.fuse.views import View, free_space_share, split_setup
 
-__all__ = ["FuseSettings", "Registration", "register_views", "fuse_surface"]
+__all__ = ["FuseSettings", "Registration", "prepare_view", "register_views", "fuse_surface"]
 
 
 @dataclass(frozen=True)
@@ -87,6 +87,20 @@ class Registration:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
+def prepare_view(v: View, settings: FuseSettings | None = None) -> None:
+    """Tell a view's object from its set-up (desk scans: the set-up's points dropped; a survey: all of it is
+    the building); too few object points is a one-line :class:`GnomonError` naming the scan."""
+    s = settings or FuseSettings()
+    if v.site is None:
+        split_setup(v, setup_fraction=s.setup_fraction)
+    else:  # a building: its facades and the ground are the survey, not a set-up to leave out
+        v.object_mask = np.ones(len(v.points), dtype=bool)
+        v.distance = float(np.median(np.linalg.norm(v.points - v.camera_centre, axis=1)))
+    if v.object_mask.sum() < 100:
+        raise GnomonError(f"{v.folder}: only {int(v.object_mask.sum())} points off the set-up's planes; "
+                          "nothing to register (is the object in view?)")
+
+
 def _subsample(n: int, m: int) -> np.ndarray:
     return np.arange(n) if n <= m else np.linspace(0, n - 1, m).round().astype(np.int64)
 
@@ -96,14 +110,8 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
     s = settings or FuseSettings()
     t0 = time.perf_counter()
     for v in views:
-        if v.site is None:
-            split_setup(v, setup_fraction=s.setup_fraction)
-        else:  # a building: its facades and the ground are the survey, not a set-up to leave out
-            v.object_mask = np.ones(len(v.points), dtype=bool)
-            v.distance = float(np.median(np.linalg.norm(v.points - v.camera_centre, axis=1)))
-        if v.object_mask.sum() < 100:
-            raise GnomonError(f"{v.folder}: only {int(v.object_mask.sum())} points off the set-up's planes; "
-                              "nothing to register (is the object in view?)")
+        if not v.prepared:
+            prepare_view(v, s)
     distance = float(np.median([v.distance for v in views]))
     full = [Cloud.of(*v.object_points()) for v in views]
     spacing = float(np.median(np.concatenate(

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from gnomon.errors import GnomonError
-from gnomon.fuse.model import FuseSettings, Registration, fuse_surface, register_views
+from gnomon.fuse.model import FuseSettings, Registration, fuse_surface, prepare_view, register_views
 from gnomon.fuse.o3d import open3d
 from gnomon.fuse.record import record_fusion
 from gnomon.fuse.registration import rotation_angle_deg
@@ -108,6 +108,7 @@ def _report(views: list[View], reg: Registration, fused: FusedPoints, mesh: Fuse
         "distance_note": "the cameras' median distance to the object; the relative figures are of it",
         "views": [{"folder": str(v.folder), "pose": P.tolist(), "rotation_deg": rotation_angle_deg(P),
                    "translation": float(np.linalg.norm(P[:3, 3])) * scale, "object_points": int(v.object_mask.sum()),
+                   "setup_points": v.setup_points,
                    "setup_planes": [{"normal": pl.normal.tolist(), "offset": pl.offset, "share": pl.share}
                                     for pl in v.planes]}
                   for v, P in zip(views, reg.poses, strict=True)],
@@ -155,7 +156,15 @@ def fuse_scans(scans: Sequence[str | os.PathLike], out_dir: str | os.PathLike | 
     for f in mesh_formats:
         if f not in FUSE_MESH_FORMATS:
             raise GnomonError(f"--mesh-formats {f}: a fused model is written as {', '.join(FUSE_MESH_FORMATS)}")
-    views = [read_view(s) for s in scans]
+    if len(scans) < 2:
+        raise GnomonError("fuse: needs at least two scans")
+    views: list[View] = []
+    for scan in scans:  # one at a time: a desk scan keeps only its object (memory: the object, not the desk)
+        view = read_view(scan)
+        if views:
+            check_views([views[0], view])
+        prepare_view(view, settings)
+        views.append(view)
     check_views(views)
     t1 = time.perf_counter()
     reg = register_views(views, settings)

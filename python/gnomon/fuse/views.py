@@ -67,9 +67,25 @@ class View:
     def name(self) -> str:
         return self.folder.name
 
+    setup_points: int = 0     # points left out as the set-up (after :func:`split_setup`)
+
     def object_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         m = self.object_mask
         return self.points[m], self.normals[m], self.sigma[m]
+
+    @property
+    def prepared(self) -> bool:
+        """Whether the object is told from the set-up (:func:`split_setup`, or all of a survey)."""
+        return len(self.object_mask) == len(self.points)
+
+    def keep_object(self) -> None:
+        """Drop the set-up's points (most of a desk scan): what a fusion holds per view is its object."""
+        m = self.object_mask
+        self.setup_points += int(np.count_nonzero(~m))
+        self.points, self.normals, self.sigma = self.points[m], self.normals[m], self.sigma[m]
+        if self.rgb is not None:
+            self.rgb = self.rgb[m]
+        self.object_mask = np.ones(len(self.points), dtype=bool)
 
 
 def read_view(folder: str | os.PathLike) -> View:
@@ -153,7 +169,7 @@ def check_views(views: list[View]) -> None:
 
 def split_setup(view: View, *, setup_fraction: float = 0.15, band_sigmas: float = 5.0,
                 band_fraction: float = 0.002, max_planes: int = 3) -> None:
-    """Find the set-up's planes in a view and mark the rest as the object (in place).
+    """Find the set-up's planes in a view and keep the rest, the object (in place: the set-up's points are dropped).
 
     A plane holding at least ``setup_fraction`` of the view's points (RANSAC, inlier distance
     ``band_fraction`` of the camera's distance) is the set-up; its points — within
@@ -196,3 +212,4 @@ def split_setup(view: View, *, setup_fraction: float = 0.15, band_sigmas: float 
     view.planes = planes
     obj = P[keep]
     view.distance = float(np.median(np.linalg.norm(obj - view.camera_centre, axis=1))) if len(obj) else scale
+    view.keep_object()
