@@ -158,11 +158,15 @@ def fuse_scans(scans: Sequence[str | os.PathLike], out_dir: str | os.PathLike | 
             raise GnomonError(f"--mesh-formats {f}: a fused model is written as {', '.join(FUSE_MESH_FORMATS)}")
     if len(scans) < 2:
         raise GnomonError("fuse: needs at least two scans")
+    # Every input is read and checked before any is worked on, so that a bad one is named first;
+    # then read again one at a time: a desk scan keeps only its object (memory: the object, not the desk).
+    first = read_view(scans[0])
+    for scan in scans[1:]:
+        check_views([first, read_view(scan)])
+    del first
     views: list[View] = []
-    for scan in scans:  # one at a time: a desk scan keeps only its object (memory: the object, not the desk)
+    for scan in scans:
         view = read_view(scan)
-        if views:
-            check_views([views[0], view])
         prepare_view(view, settings)
         views.append(view)
     check_views(views)
