@@ -294,3 +294,31 @@ def test_a_station_moved_beyond_its_stated_sigma_is_named(station_scans, tmp_pat
     assert len(warnings) == 1 and str(copies[1]) in warnings[0] and "beyond 3σ" in warnings[0]
     st = result.report["registration"]["stations"][1]
     assert st["moved"] == pytest.approx(1.5, abs=0.05) and st["allowed_3sigma"] < 0.5 < st["moved"]
+
+
+def test_station_prior_from_two_sites():
+    """Two stations' georeferences (the second's origin 10 m east, 5 m south and 1 m up of the first's, its
+    heading 30° more; sites from the simulator's own geodesy): the prior pose takes the second's frame to
+    the first's exactly (to 1 mm over 11 m: the Earth's curvature is below 0.1 mm there)."""
+    from gnomon.fuse.georeference import station_priors
+    from gnomon.fuse.views import View
+    from gnomon.light.georef import georeference_report
+    from gnomon.simulate.stations import offset_site
+
+    lat, lon, alt, heading = 47.3769, 8.5417, 408.0, 295.0
+    lat2, lon2, alt2 = offset_site(lat, lon, alt, 10.0, -5.0, 1.0)
+    views = []
+    for la, lo, al, h in ((lat, lon, alt, heading), (lat2, lon2, alt2, heading + 30.0)):
+        site = {**georeference_report(la, lo, al, h, "m"), "position_sigma_m": 0.5}
+        views.append(View(Path("s"), "m", np.zeros((1, 3)), np.zeros((1, 3)), np.ones(1), None, np.zeros(3), site,
+                          {"sun": {"heading_sigma_deg": 0.2}}))
+    prior = station_priors(views)[1]
+    a = np.radians(heading)
+    world_from_enu = np.array([[np.sin(a), np.cos(a), 0.0], [-np.cos(a), np.sin(a), 0.0], [0.0, 0.0, 1.0]])
+    np.testing.assert_allclose(prior.pose[:3, 3], world_from_enu @ [10.0, -5.0, 1.0], atol=1e-3)
+    # 30°, less the meridians' convergence over 10 m east: 10 m / (R cos φ) · sin φ = 9.7e-5° at 47.4° N
+    convergence = np.degrees(10.0 / (6.39e6 * np.cos(np.radians(lat))) * np.sin(np.radians(lat)))
+    assert rotation_angle_deg(prior.pose) == pytest.approx(30.0 - convergence, abs=1e-5)
+    # the second station's x axis, in the first's frame, is the first's turned by 30° clockwise seen from above
+    np.testing.assert_allclose(prior.pose[:3, 0], [np.cos(np.radians(-30)), np.sin(np.radians(-30)), 0.0], atol=1e-5)
+    assert (prior.sigma_position, prior.sigma_heading_deg, prior.stated) == (0.5, 0.2, True)
