@@ -45,7 +45,7 @@ __getattr__, __dir__, __all__ = attach(__name__, _WHERE)
 
 class _CallableModule(_types.ModuleType):
     """``gnomon.fuse`` is this package and also :func:`gnomon.fuse.run.fuse_scans`:
-    ``gnomon.fuse(scans, out=None, *, settings=None, mesh_formats=("ply",), recording=None)``."""
+    ``gnomon.fuse(scans, out=None, *, voxel=None, mesh_formats=("ply",), rrd=True, settings=None)``."""
 
     def __call__(self, scans, out=None, **options):
         from gnomon.fuse.run import fuse_scans
