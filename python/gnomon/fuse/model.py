@@ -48,9 +48,12 @@ class FuseSettings:
     lie to count against a placement (1 %: the views' own errors and silhouettes stay below it);
     ``max_see_through``: a pair putting more than this share of either view's points there is left out
     (10 %; measured on the simulated figure: right alignments ≤ 5 %, wrong ones 19–71 %);
+    ``desk_grids``: a pair of desk scans is aligned from features on these multiples of ``coarse_voxel``,
+    the best-agreeing kept (one grid misses now and then: the 6-view benchmark left a view unjoined);
     ``station_grids``: georeferenced stations are aligned from their georeference and from features on
-    these multiples of ``coarse_voxel`` each, the best-agreeing kept; ``retry_grids``: a view no pair
-    joins to the others is aligned again on these, one after the other.
+    these multiples of ``coarse_voxel`` each, the best-agreeing kept; ``retry_grids``: a view the pairs
+    of consecutive scans do not join is aligned with every joined one, on the feature grid and then on
+    these, one after the other.
     """
 
     coarse_voxel: float = 0.004
@@ -63,8 +66,9 @@ class FuseSettings:
     consistency: float = 0.005
     free_space: float = 0.01
     max_see_through: float = 0.1
+    desk_grids: tuple[float, ...] = (1.0, 1.5)
     station_grids: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0)
-    retry_grids: tuple[float, ...] = (1.5, 2.0, 3.0)
+    retry_grids: tuple[float, ...] = (2.0, 3.0)
 
 
 @dataclass
@@ -126,7 +130,7 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
     priors = station_priors(views) if views[0].site is not None else None
     # Feature grids: the desk's; a building's also coarser ones (its windows repeat: the balconies,
     # ledges and corners that tell one window from the next are larger than the desk's details).
-    grids = [voxel] if priors is None else [voxel * f for f in s.station_grids]
+    grids = [voxel * f for f in (s.desk_grids if priors is None else s.station_grids)]
     feats = {g: [features(c.points, c.normals, g) for c in full] for g in grids}
 
     def refine(i: int, j: int, T0: np.ndarray) -> PairRegistration:
@@ -170,20 +174,33 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
             total -= free_space_share(views[k], clouds[m].points @ Ti[:3, :3].T + Ti[:3, 3], margin)
         return total
 
-    candidates = {(i, j): align(i, j, grids, True) for i, j in itertools.combinations(range(len(views)), 2)}
+    # Scans are usually given in the order they were taken, each overlapping the next most: those pairs (and
+    # the last with the first) are aligned from scratch; a scan they leave unjoined is aligned from scratch
+    # with every joined one, on the feature grid and then on coarser ones; every other pair is refined from
+    # the poses, so that all pairs enter the pose graph and the loop closes.
+    n = len(views)
+    everything = list(itertools.combinations(range(n), 2))
+    chain = [(k, k + 1) for k in range(n - 1)] + ([(0, n - 1)] if n > 2 else [])
+    candidates = {pair: align(*pair, grids, True) for pair in chain}
     pairs = {k: p for k, p in candidates.items() if acceptable(*k, p)}
-    poses, missing = spanning_poses(len(views), pairs, score)
-    # Views the tree does not reach: their pairs with the placed views aligned again on coarser features
-    # (RANSAC on one grid misses now and then; a second grid costs only where it is needed).
-    for factor in s.retry_grids:
+    poses, missing = spanning_poses(n, pairs, score)
+    tried = {(pair, tuple(grids)) for pair in chain}
+    for grid_list in [grids] + [[voxel * f] for f in s.retry_grids]:
         if not missing:
             break
-        for i, j in candidates:
-            if (i in missing) != (j in missing) and (i, j) not in pairs:
-                again = align(i, j, [voxel * factor], False)
+        for i, j in everything:
+            if (i in missing) != (j in missing) and (i, j) not in pairs and ((i, j), tuple(grid_list)) not in tried:
+                tried.add(((i, j), tuple(grid_list)))
+                candidates[(i, j)] = again = align(i, j, grid_list, True)
                 if acceptable(i, j, again):
-                    candidates[(i, j)] = pairs[(i, j)] = again
-        poses, missing = spanning_poses(len(views), pairs, score)
+                    pairs[(i, j)] = again
+        poses, missing = spanning_poses(n, pairs, score)
+    if not missing:
+        for i, j in everything:
+            if (i, j) not in candidates:
+                candidates[(i, j)] = near = refine(i, j, np.linalg.inv(poses[j]) @ poses[i])
+                if acceptable(i, j, near):
+                    pairs[(i, j)] = near
     rejected = {k: p for k, p in candidates.items() if k not in pairs}
     if missing:
         first = missing[0]
