@@ -477,13 +477,18 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
                                                           str(d / "o"), "--weights", "sigmoid", f"--beta={beta}",
                                                           "--no-rrd"), needle="--beta", check=absent(d / "o")))
 
-    def merge_bad(name: str, spoil: Callable[[Path], None], needle: str) -> None:
-        d = fresh("merge-" + name.replace(" ", "-"))
+    def second_scan_bad(command: str, name: str, spoil: Callable[[Path], None], needle: str) -> None:
+        """`gnomon COMMAND A B --out O` with B a spoiled copy of scan_b: one line naming it, O absent."""
+        d = fresh(f"{command}-" + name.replace(" ", "-"))
         b = d / "b"
         shutil.copytree(fx["scan_b"], b)
         spoil(b)
-        out.append(Case(mg, f"merge: {name}", gnomon("merge", str(fx["scan_a"]), str(b), "--out", str(d / "o"),
-                                                    "--no-rrd"), needle=needle, check=absent(d / "o")))
+        out.append(Case(command, f"{command}: {name}", gnomon(command, str(fx["scan_a"]), str(b), "--out",
+                                                              str(d / "o"), "--no-rrd"),
+                        needle=needle, check=absent(d / "o")))
+
+    def merge_bad(name: str, spoil: Callable[[Path], None], needle: str) -> None:
+        second_scan_bad(mg, name, spoil, needle)
     merge_bad("truncated depth.npy", lambda b: (b / "depth.npy").write_bytes((b / "depth.npy").read_bytes()[:100]),
               "depth.npy")
     merge_bad("empty depth.npy", lambda b: (b / "depth.npy").write_bytes(b""), "depth.npy")
@@ -514,12 +519,7 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
                     needle=str(fx["scan_a"]), check=unchanged(fx["scan_a"], digest_tree(fx["scan_a"]))))
 
     def fuse_bad(name: str, spoil: Callable[[Path], None], needle: str) -> None:
-        d = fresh("fuse-" + name.replace(" ", "-"))
-        b = d / "b"
-        shutil.copytree(fx["scan_b"], b)
-        spoil(b)
-        out.append(Case(fu, f"fuse: {name}", gnomon("fuse", str(fx["scan_a"]), str(b), "--out", str(d / "o"),
-                                                   "--no-rrd"), needle=needle, check=absent(d / "o")))
+        second_scan_bad(fu, name, spoil, needle)
 
     def other_units(b: Path) -> None:
         report = json.loads((b / "report.json").read_text())
