@@ -265,6 +265,11 @@ def test_two_stations_placed_by_georeference_then_registered(station_scans):
     assert np.sqrt(np.mean(after**2)) < 0.0005 * d
     assert report["warnings"] == []  # moved 1.5 m, 3σ allows more
     assert report["units"] == "m" and "East-North-Up" in report["frame"]
+    import laspy  # the survey's cloud in the site's projected CRS too, as a sun scan's
+
+    las = laspy.read(out / "points.laz")
+    assert "UTM zone 32N" in las.header.parse_crs().name and las.header.point_count == len(
+        read_ply(out / "points.ply")["xyz"])
     # station 0's own points, taken to ENU by its own georeference, lie on the model
     v0 = read_view(scans[0])
     M = np.asarray(v0.site["world_to_enu"])

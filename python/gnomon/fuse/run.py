@@ -5,7 +5,8 @@ they can go together; register them (:func:`gnomon.fuse.model.register_views`); 
 and make the surface (:func:`gnomon.fuse.model.fuse_surface`); write the model into a staging
 folder (mesh.ply with σ per vertex, points.ply, the mesh formats asked for, report.json, fuse.rrd)
 published all at once. A georeferenced survey's model is written in East-North-Up metres at the
-first station's site; a desk object's in the first scan's world frame.
+first station's site, and its points also as points.laz in the site's projected CRS (as a sun
+scan's); a desk object's model in the first scan's world frame.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ __all__ = ["FuseResult", "FUSE_OUTPUTS", "FUSE_MESH_FORMATS", "Recording", "fuse
 #: The mesh formats a fused model can be written in (mesh.ply always).
 FUSE_MESH_FORMATS = ("ply", "obj", "stl")
 #: Every file a fusion publishes into its folder.
-FUSE_OUTPUTS = ("mesh.ply", "mesh.obj", "mesh.stl", "points.ply", "report.json", "fuse.rrd")
+FUSE_OUTPUTS = ("mesh.ply", "mesh.obj", "mesh.stl", "points.ply", "points.laz", "report.json", "fuse.rrd")
 
 
 @dataclass
@@ -76,6 +77,19 @@ def _output_frame(views: list[View]) -> tuple[np.ndarray, str, str]:
     M = np.asarray(ref.site["world_to_enu"], dtype=np.float64)
     return M, (f"East-North-Up metres at the first station's site (latitude {ref.site['latitude_deg']}, "
                f"longitude {ref.site['longitude_deg']}, altitude {ref.site['altitude_m']} m)"), "m"
+
+
+def _write_survey_cloud(path: Path, fused: FusedPoints, to_enu: np.ndarray, site: dict[str, Any]) -> None:
+    """The fused points of a survey in the site's projected CRS (UTM, the site's vertical datum), LAZ."""
+    from gnomon.outputs.crs import survey_frame
+    from gnomon.outputs.las import RESOLUTION, write_las
+
+    metres = float(np.cbrt(abs(np.linalg.det(to_enu[:3, :3]))))
+    enu = fused.points @ to_enu[:3, :3].T + to_enu[:3, 3]
+    frame = survey_frame(site)
+    write_las(path, frame.from_enu(enu, site), frame.crs, resolution=RESOLUTION["m"], rgb=fused.rgb,
+              sigma=fused.sigma * metres,
+              normals=frame.directions_from_enu(fused.normals @ (to_enu[:3, :3] / metres).T, site))
 
 
 def _report(views: list[View], reg: Registration, fused: FusedPoints, mesh: FusedMesh, frame: str, units: str,
@@ -198,6 +212,9 @@ def fuse_scans(scans: Sequence[str | os.PathLike], out_dir: str | os.PathLike | 
                 write_obj(staging / "mesh.obj", V, mesh.faces, normals=normals)
             if "stl" in mesh_formats:
                 write_stl(staging / "mesh.stl", V, mesh.faces, header=f"gnomon fuse, {units}")
+            site = views[0].site
+            if site is not None:  # a survey's cloud also in its projected CRS, as a sun scan's (points.laz)
+                _write_survey_cloud(staging / "points.laz", fused, to_output, site)
             if recorder is not None:
                 record_fusion(recorder, views, reg, fused, mesh, to_output, report)
                 recorder.close()
