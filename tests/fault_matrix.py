@@ -477,13 +477,18 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
                                                           str(d / "o"), "--weights", "sigmoid", f"--beta={beta}",
                                                           "--no-rrd"), needle="--beta", check=absent(d / "o")))
 
-    def merge_bad(name: str, spoil: Callable[[Path], None], needle: str) -> None:
-        d = fresh("merge-" + name.replace(" ", "-"))
+    def second_scan_bad(command: str, name: str, spoil: Callable[[Path], None], needle: str) -> None:
+        """`gnomon COMMAND A B --out O` with B a spoiled copy of scan_b: one line naming it, O absent."""
+        d = fresh(f"{command}-" + name.replace(" ", "-"))
         b = d / "b"
         shutil.copytree(fx["scan_b"], b)
         spoil(b)
-        out.append(Case(mg, f"merge: {name}", gnomon("merge", str(fx["scan_a"]), str(b), "--out", str(d / "o"),
-                                                    "--no-rrd"), needle=needle, check=absent(d / "o")))
+        out.append(Case(command, f"{command}: {name}", gnomon(command, str(fx["scan_a"]), str(b), "--out",
+                                                              str(d / "o"), "--no-rrd"),
+                        needle=needle, check=absent(d / "o")))
+
+    def merge_bad(name: str, spoil: Callable[[Path], None], needle: str) -> None:
+        second_scan_bad(mg, name, spoil, needle)
     merge_bad("truncated depth.npy", lambda b: (b / "depth.npy").write_bytes((b / "depth.npy").read_bytes()[:100]),
               "depth.npy")
     merge_bad("empty depth.npy", lambda b: (b / "depth.npy").write_bytes(b""), "depth.npy")
@@ -506,6 +511,26 @@ def cases(root: Path, fx: dict, mounts: Mounts | None) -> list[Case]:  # noqa: C
     merge_bad("points.ply truncated", lambda b: (b / "points.ply").write_bytes((b / "points.ply").read_bytes()[:300]),
               "points.ply")
     merge_bad("a file, not a folder", lambda b: (shutil.rmtree(b), b.write_text("x")), str(root))
+
+    # --- fuse (several scans into one model): the bad scan is named, nothing is written
+    fu = "fuse"
+    out.append(Case(fu, "fuse A B --out A", gnomon("fuse", str(fx["scan_a"]), str(fx["scan_b"]), "--out",
+                                                  str(fx["scan_a"]), "--no-rrd"),
+                    needle=str(fx["scan_a"]), check=unchanged(fx["scan_a"], digest_tree(fx["scan_a"]))))
+
+    def fuse_bad(name: str, spoil: Callable[[Path], None], needle: str) -> None:
+        second_scan_bad(fu, name, spoil, needle)
+
+    def other_units(b: Path) -> None:
+        report = json.loads((b / "report.json").read_text())
+        report["units"] = "m"
+        (b / "report.json").write_text(json.dumps(report))
+    fuse_bad("units that differ", other_units, "units")
+    fuse_bad("report.json not JSON", lambda b: (b / "report.json").write_text("{"), "report.json")
+    fuse_bad("points.ply truncated", lambda b: (b / "points.ply").write_bytes((b / "points.ply").read_bytes()[:300]),
+             "points.ply")
+    fuse_bad("no points.ply", lambda b: (b / "points.ply").unlink(), "points.ply")
+    fuse_bad("a file, not a folder", lambda b: (shutil.rmtree(b), b.write_text("x")), str(root))
 
     # --- calibrate camera
     cal = "calibrate"

@@ -78,10 +78,12 @@ def test_load_scan_names_what_is_missing(tmp_path) -> None:
 
 
 def test_the_package_exposes_a_small_documented_api() -> None:
-    assert sorted(gnomon.__all__) == sorted(["GnomonError", "Scan", "ScanMesh", "__version__", "load_scan", "scan",
-                                             "simulate"])
+    assert sorted(gnomon.__all__) == sorted(["GnomonError", "Scan", "ScanMesh", "__version__", "fuse", "load_scan",
+                                             "scan", "simulate"])
     for name in ("scan", "load_scan", "Scan"):
         assert getattr(gnomon, name).__doc__
+    # gnomon.fuse is the fusion package and the function (several scans into one model)
+    assert callable(gnomon.fuse) and gnomon.fuse.register_views.__doc__
     # gnomon.simulate is the simulator package and the function
     assert callable(gnomon.simulate) and gnomon.simulate.DeskLampConfig is not None
     with pytest.raises(GnomonError, match="unknown scene"):

@@ -27,6 +27,7 @@ LAYERS: list[set[str]] = [
     {"config"},
     {"reconstruct"},
     {"recording"},
+    {"fuse"},
     {"runs"},
     {"api", "commands", "cli", "__main__", ""},
 ]

@@ -12,6 +12,7 @@ The Python API (:mod:`gnomon.api`)::
     s = gnomon.scan(log)                  # a Scan: depth, sigma, points, normals, mesh, report …
     s = gnomon.scan(log, out="scan")      # … and the files of `gnomon scan` in scan/
     s = gnomon.load_scan("scan")          # read a scan folder back
+    m = gnomon.fuse(["scan_a", "scan_b", "scan_c"], out="model")  # several places, one model
 
 Errors in the input raise :class:`GnomonError`.
 """
@@ -27,7 +28,7 @@ from gnomon.errors import GnomonError
 if TYPE_CHECKING:
     from gnomon.api import Scan, ScanMesh, load_scan, scan
 
-__all__ = ["__version__", "GnomonError", "Scan", "ScanMesh", "load_scan", "scan", "simulate"]
+__all__ = ["__version__", "GnomonError", "Scan", "ScanMesh", "fuse", "load_scan", "scan", "simulate"]
 
 # The API is imported on first use: `python -m gnomon` imports this package before its
 # __main__ can catch a Ctrl-C, so the package itself loads nothing heavy (numpy, OpenCV).
@@ -40,6 +41,9 @@ def __getattr__(name: str):
     # gnomon.simulate: the simulator package, also callable as gnomon.api.simulate
     if name == "simulate":
         return _importlib.import_module("gnomon.simulate")
+    # gnomon.fuse: the fusion package, also callable (several scans into one model)
+    if name == "fuse":
+        return _importlib.import_module("gnomon.fuse")
     raise AttributeError(f"module 'gnomon' has no attribute {name!r}")
 
 

@@ -29,8 +29,9 @@ from gnomon.simulate.scenes import SCENES, simulate
 
 if TYPE_CHECKING:
     from gnomon.config.specs import FieldLog
+    from gnomon.fuse.run import FuseResult
 
-__all__ = ["SCENES", "Scan", "ScanMesh", "load_scan", "scan", "simulate"]
+__all__ = ["SCENES", "Scan", "ScanMesh", "fuse", "load_scan", "scan", "simulate"]
 
 
 @dataclass(repr=False)
@@ -336,3 +337,17 @@ def load_scan(folder: str | os.PathLike) -> Scan:
                 point_sigma=pts.get("sigma"), pixels=pts.get("uv"), mesh=mesh, K=K, dist=dist, R=R, t=t,
                 units=units, report=report, warnings=list(report.get("warnings", [])),
                 notes=list(report.get("notes", [])), folder=f)
+
+
+def fuse(scans: list[str | os.PathLike], out: str | os.PathLike | None = None, *, voxel: float | None = None,
+         mesh_formats: tuple[str, ...] = ("ply",), rrd: bool = True) -> FuseResult:
+    """Several scans of one object (or building) from several places made into one model (`gnomon fuse`).
+
+    ``scans`` scan folders; ``out`` the model's folder (None: in memory only). Returns a
+    :class:`gnomon.fuse.run.FuseResult`: ``registration.poses`` each scan's pose in the first one's
+    world frame, ``mesh`` (σ per vertex, holes), ``points``, ``report`` (report.json's content).
+    Needs Open3D (``pip install "gnomon[fuse]"``).
+    """
+    from gnomon.fuse.run import fuse_scans
+
+    return fuse_scans(scans, out, voxel=voxel, mesh_formats=mesh_formats, rrd=rrd)

@@ -18,6 +18,7 @@ COMMANDS: dict[str, str] = {
     "scan": "reconstruct 3D from a field log",
     "live": "scan while the shadow moves: live view, then the scan's outputs",
     "merge": "fuse two scans of one scene (e.g. lamp left and right)",
+    "fuse": "several scans of one object or building, from several places, made into one model",
     "batch": "run many scans (and merges of scan pairs) on a Dask cluster",
     "review": "summarise, export, compare recordings",
     "bench": "kernel throughput vs the numpy reference",

@@ -20,7 +20,10 @@ def register(subparsers) -> None:
             "desk_lamp: a desk with a sphere, a box and a cylinder, a point-like lamp left of the "
             "camera, a stick whose shadow sweeps the view, plus pencil photos for lamp calibration "
             "(DIR/pencil/, DIR/pencil_log.toml). desk_lamp_right: the same scene and pixel grid with "
-            "the lamp mirrored to the right of the camera (fuse the two scans). two_plane: a desk and "
+            "the lamp mirrored to the right of the camera (fuse the two scans). desk_turns: one object (a box with a "
+            "barrel roof, a chimney and a sphere) turned on the desk by 360/--views degrees between views, one "
+            "desk_lamp capture per view in DIR/view_K/ and DIR/turns.json with every view's exact pose (for "
+            "gnomon fuse). two_plane: a desk and "
             "a wall meeting in a corner, printed 2x2 checker markers on both, a lamp the field log "
             "does not give (the shadow planes come from the lines on both planes). "
             "room: the two_plane scene with a cube and a can, one bounce of interreflection, "
@@ -79,6 +82,7 @@ def register(subparsers) -> None:
     p.add_argument("--read-noise", type=float, default=None, metavar="ELECTRONS",
                    help="room: read noise, electrons; default 3")
     p.add_argument("--no-bounce", action="store_true", help="room: no interreflection (direct light and ambient)")
+    p.add_argument("--views", type=int, default=4, help="desk_turns: how many places (2-12)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -105,6 +109,8 @@ def _options(args: argparse.Namespace) -> dict:
         opts["markers"] = args.markers
         opts["stick"] = args.stick
         opts.update(marks=args.marks, marks_off_px=args.marks_off_px, mark_distance=args.mark_distance)
+    elif args.scene == "desk_turns":
+        opts["views"] = args.views
     else:
         opts["pencil_photos"] = args.pencil_photos
     if args.scene == "room":
@@ -140,6 +146,13 @@ def run(args: argparse.Namespace) -> int:
     if args.scene == "chessboard":
         print(f"wrote 12 chessboard views (9x6 inner corners, 25 mm squares) and the true camera to {args.out} "
               f"in {seconds:.1f} s; try: gnomon calibrate camera {args.out} --board 9x6 --square 25")
+        return 0
+    if args.scene == "desk_turns":
+        turns = json.loads((field_log / "turns.json").read_text())
+        angles = ", ".join(f"{v['angle_deg']:g}" for v in turns["views"])
+        print(f"wrote {len(turns['views'])} captures of the object turned by {angles} deg and "
+              f"{field_log / 'turns.json'} in {seconds:.1f} s; scan each view_K/field_log.toml, then: "
+              "gnomon fuse SCAN_0 SCAN_1 ... --out MODEL")
         return 0
     truth = json.loads((field_log.parent / "ground_truth.json").read_text())
     extra = ""

@@ -340,6 +340,8 @@ def _parse_site(t: Table | None) -> SiteSpec | None:
         geoid=t.string("geoid", "EGM2008", tuple(GEOIDS)),
         heading_north=north,
         declination_deg=declination,
+        position_sigma_m=opt("position_sigma_m", lambda k: t.number(k, positive=True)),
+        heading_sigma_deg=opt("heading_sigma_deg", lambda k: t.number(k, positive=True)),
     )
     if not -90.0 <= site.latitude_deg <= 90.0:
         raise t.error("latitude", f"{site.latitude_deg} is outside ±90°")

@@ -141,6 +141,10 @@ def site_datum(log: FieldLog) -> dict[str, Any] | None:
         datum["geoid"] = s.geoid
     if s.declination_deg is not None:
         datum["declination_deg"] = s.declination_deg
+    if s.position_sigma_m is not None:
+        datum["position_sigma_m"] = s.position_sigma_m
+    if s.heading_sigma_deg is not None:
+        datum["heading_sigma_deg"] = s.heading_sigma_deg
     return datum
 
 

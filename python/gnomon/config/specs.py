@@ -201,6 +201,8 @@ class SiteSpec:
     geoid: str = "EGM2008"  # the geoid an orthometric altitude is above (gnomon.outputs.crs.GEOIDS)
     heading_north: str = "true"  # [site] heading_deg was given from true north, or from magnetic north
     declination_deg: float | None = None  # magnetic declination (east positive), with heading_north = "magnetic"
+    position_sigma_m: float | None = None  # how well the site's position is known, m (1σ): gnomon fuse's stations
+    heading_sigma_deg: float | None = None  # how well heading_deg is known, degrees (1σ)
 
 
 @dataclass(frozen=True)

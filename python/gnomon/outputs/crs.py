@@ -52,7 +52,7 @@ class SurveyFrame:
         """(N, 3) float64 coordinates in :attr:`crs` of (N, 3) East-North-Up metres at ``site``."""
         from pyproj import Transformer
 
-        ecef = _enu_to_ecef(np.asarray(enu, dtype=np.float64).reshape(-1, 3), site)
+        ecef = enu_to_ecef(np.asarray(enu, dtype=np.float64).reshape(-1, 3), site)
         to_target = Transformer.from_crs("EPSG:4978", _horizontal_3d(self.crs), always_xy=True)
         x, y, z = to_target.transform(ecef[:, 0], ecef[:, 1], ecef[:, 2])
         # heights in the datum of the site's altitude (the ellipsoid's, or the geoid's: see the module)
@@ -76,7 +76,7 @@ def _horizontal_3d(crs: Any) -> Any:
     return horizontal.to_3d()
 
 
-def _enu_to_ecef(enu: np.ndarray, site: dict[str, Any]) -> np.ndarray:
+def enu_to_ecef(enu: np.ndarray, site: dict[str, Any]) -> np.ndarray:
     """(N, 3) ECEF metres of ENU offsets from the site (its latitude, longitude and altitude taken as
     the WGS 84 geodetic position of the ENU origin)."""
     lat, lon = np.radians(float(site["latitude_deg"])), np.radians(float(site["longitude_deg"]))

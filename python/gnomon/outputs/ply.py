@@ -191,14 +191,15 @@ def write_mesh_ply(
     rgb: np.ndarray | None = None,
     comments: Iterable[str] = (),
     normals: np.ndarray | None = None,
+    sigma: np.ndarray | None = None,
 ) -> None:
     """Write a triangle mesh as binary little-endian PLY, atomically.
 
     ``vertices`` (N, 3) float32; ``faces`` (M, 3) int32 vertex indices (0-based);
     ``rgb`` (N, 3) uint8 per-vertex colour or None; ``normals`` (N, 3) float32
-    per-vertex unit normals or None.
+    per-vertex unit normals or None; ``sigma`` (N,) float32 per-vertex σ (world units) or None.
     """
-    table, props = _vertex_table(vertices, rgb, normals=normals)
+    table, props = _vertex_table(vertices, rgb, sigma, normals=normals)
     f = np.asarray(faces)
     if f.ndim != 2 or f.shape[1] != 3:
         raise ValueError(f"faces must have shape (M, 3), got {f.shape}")

@@ -11,6 +11,8 @@ frames, ``.npz``). Scenes:
 * ``desk_lamp_right`` — the same scene with the lamp mirrored to the other
   side of the camera (``DeskLampConfig(lamp_side="right")``), for dual-scan
   fusion on the same pixel grid;
+* ``desk_turns`` — :func:`simulate_turns` (:mod:`gnomon.simulate.turntable`): one object
+  turned on the desk by known angles, a ``desk_lamp`` capture per view, for ``gnomon fuse``;
 * ``two_plane`` — :func:`simulate_two_plane` (:mod:`gnomon.simulate.two_plane_scene`):
   desk + wall, printed markers, a lamp the field log does not give;
 * ``room`` — :func:`simulate_room` (:mod:`gnomon.simulate.room`): the two_plane
@@ -36,9 +38,10 @@ from gnomon.simulate.desk_lamp import (
 )
 from gnomon.simulate.facade_sun import FacadeSunConfig, FacadeSunResult, FacadeSunScene, simulate_facade_sun
 from gnomon.simulate.room import RoomConfig, RoomScene, simulate_room
+from gnomon.simulate.turntable import TurnsConfig, TurnsResult, simulate_turns
 from gnomon.simulate.two_plane_scene import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
 
-SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "room", "facade_sun", "facade_day")
+SCENES = ("desk_lamp", "desk_lamp_right", "desk_turns", "two_plane", "room", "facade_sun", "facade_day")
 
 __all__ = [
     "SCENES",
@@ -52,10 +55,13 @@ __all__ = [
     "DeskLampScene",
     "SimulationResult",
     "SweepConfig",
+    "TurnsConfig",
+    "TurnsResult",
     "TwoPlaneConfig",
     "TwoPlaneScene",
     "simulate_desk_lamp",
     "simulate_room",
+    "simulate_turns",
     "simulate_two_plane",
 ]
 

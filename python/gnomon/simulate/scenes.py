@@ -17,7 +17,7 @@ from gnomon.util.progress import Progress
 __all__ = ["SCENES", "simulate"]
 
 #: Scenes :func:`simulate` (and `gnomon simulate`) can render.
-SCENES = ("desk_lamp", "desk_lamp_right", "two_plane", "room", "facade_sun", "facade_day", "chessboard")
+SCENES = ("desk_lamp", "desk_lamp_right", "desk_turns", "two_plane", "room", "facade_sun", "facade_day", "chessboard")
 
 
 def _scene_config(scene: str, options: dict[str, Any]) -> tuple[Any, Any]:
@@ -31,6 +31,10 @@ def _scene_config(scene: str, options: dict[str, Any]) -> tuple[Any, Any]:
             raise GnomonError(f"simulate {scene}: lamp_side is the scene's (desk_lamp: left, desk_lamp_right: right)")
         make, render = DeskLampConfig, simulate_desk_lamp
         options = {**options, "lamp_side": "left" if scene == "desk_lamp" else "right"}
+    elif scene == "desk_turns":
+        from gnomon.simulate.turntable import TurnsConfig, simulate_turns
+
+        make, render = TurnsConfig, simulate_turns
     elif scene == "two_plane":
         from gnomon.simulate.two_plane_scene import TwoPlaneConfig, simulate_two_plane
 
@@ -87,6 +91,7 @@ def simulate(scene: str, out: str | os.PathLike, *, progress: bool = False, **op
                                n_views=12, seed=seed)
         return Path(out)
     config, render = _scene_config(scene, options)
-    with Progress("simulate", config.frames, enabled=progress) as bar:
+    total = config.frames * getattr(config, "views", 1)
+    with Progress("simulate", total, enabled=progress) as bar:
         result = render(out, config, progress=lambda done, total: bar.update(done))
-    return Path(result.field_log)
+    return Path(result.out_dir) if scene == "desk_turns" else Path(result.field_log)

@@ -20,6 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from gnomon.errors import GnomonError
 from gnomon.util import atomic
 
 AMBIENT = 0.1  # ambient irradiance of the desk scenes (radiance = albedo · AMBIENT)
@@ -110,6 +111,19 @@ def encode_dn(L_blurred: np.ndarray, gamma: float, noise_dn: float, rng: np.rand
     if noise_dn > 0:
         dn += np.float32(noise_dn) * rng.standard_normal(dn.shape, dtype=np.float32)
     return np.clip(np.rint(dn), 0, 255).astype(np.uint8)
+
+
+def start_captures(out_dir: Any, config: Any, index: str) -> Path:
+    """The folder of several captures (views, stations) and its index file's name, ``index``: the
+    configuration checked, the folder made, a previous index removed (the index is written last, so a
+    folder with one holds every capture)."""
+    config.validate()
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise GnomonError(f"{out}: exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / index).unlink(missing_ok=True)
+    return out
 
 
 def write_ground_truth(out: Path, arrays: dict[str, Any], summary: dict) -> tuple[Path, Path]:
