@@ -57,6 +57,7 @@ def _markers(plane):
     return {m.aruco_id: m.ab for m in plane.markers}
 
 
+@pytest.mark.slow  # renders, records or tracks: seconds (the fast loop stays under a minute)
 @pytest.mark.parametrize("name", ["desk", "wall"])
 def test_plane_from_aruco_markers_without_hints(scene, name):
     sc, img = scene

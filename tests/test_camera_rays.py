@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from gnomon import _kernel
 from gnomon.camera.models import (
@@ -42,6 +43,7 @@ def test_strongly_distorted_rays_reproject_to_their_pixels():
     assert r_ray > 1.12 * r_pinhole
 
 
+@pytest.mark.slow  # renders, records or tracks: seconds (the fast loop stays under a minute)
 def test_pixels_newton_leaves_fall_back_to_undistort_points():
     _, solved = _kernel.ray_map(STRONG.width, STRONG.height, (STRONG.fx, STRONG.fy, STRONG.cx, STRONG.cy),
                                 STRONG.dist, RAY_MAP_TOL_PX, 2)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from gnomon.camera.models import OpenCVCamera
 from gnomon.cli import main as gnomon
@@ -63,6 +64,7 @@ def test_a_plane_whose_marks_no_focal_length_fits_shows_in_the_fit() -> None:
     assert fit.rms_fit_px[1] > 4.0 * NOISE_PX
 
 
+@pytest.mark.slow  # renders, records or tracks: seconds (the fast loop stays under a minute)
 def test_calibrate_focal_writes_the_camera_file_with_the_fitted_focal_length(tmp_path) -> None:
     """gnomon calibrate focal on a field log whose planes' marks are given as pixels: it writes the camera
     file with fx, fy scaled by the fit (principal point, size and distortion as the camera's), the evidence

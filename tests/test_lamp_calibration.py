@@ -416,6 +416,7 @@ def test_a_missing_tip_needs_the_empty_desk_or_three_photos(tmp_path, capsys) ->
     assert len(err) == 1 and "tip: missing" in err[0] and "at least 3 photos" in err[0]
 
 
+@pytest.mark.slow  # renders, records or tracks: seconds (the fast loop stays under a minute)
 def test_without_a_pose_the_planes_own_markers_place_the_camera(two_plane_small, tmp_path) -> None:
     """The paper's set-up: no pose typed; the desk's printed markers in the capture's first frame place the
     camera (as a scan of the same field log does), and the pencils are located in that frame."""

@@ -145,6 +145,7 @@ def test_ctrl_c_ends_the_stream_not_the_run(tiny_capture):
     assert got == list(range(6)) and stats.stopped == "interrupted" and frames.stopped_early
 
 
+@pytest.mark.slow  # renders, records or tracks: seconds (the fast loop stays under a minute)
 def test_bad_source_is_one_line(desk_scan, capsys):
     log = desk_scan / "capture" / "field_log.toml"
     assert main(["live", str(log), "--source", "no/such/thing.mp4", "--no-view", "--quiet"]) == 2

@@ -518,6 +518,7 @@ def test_calibrate_run_poses_per_view_and_corners(tmp_path):
     assert np.allclose(display_to_pixels(np.array(pts[1][1]), [0.5, 0.5]), corners + 1, atol=1e-4)
 
 
+@pytest.mark.slow  # renders, records or tracks: seconds (the fast loop stays under a minute)
 def test_command_line_options(tmp_path):
     import argparse
 

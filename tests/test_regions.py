@@ -332,6 +332,7 @@ def test_regions_on_retimed_times_leave_out_a_fold() -> None:
     assert scene["depth_off"][kept_fold].max() < 4.2 * 1.1  # 10 % for the line fit and the hinge's pixel
 
 
+@pytest.mark.slow  # renders, records or tracks: seconds (the fast loop stays under a minute)
 def test_one_plane_seeded_over_a_flat_topped_object_leaves_its_top_out() -> None:
     """A single plane (the paper's desk and lamp) seeded over an object with a flat top and its cast
     shadow: the top's isochrones are straight too, but off the desk's lines; the proposal keeps the desk

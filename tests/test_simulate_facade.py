@@ -261,6 +261,7 @@ def test_penumbra_and_occlusion(small, small_scene):
         np.testing.assert_allclose(sc.pole_occlusion(k), sc.pole_occlusion(k, restrict=False), atol=0)
 
 
+@pytest.mark.slow  # renders, records or tracks: seconds (the fast loop stays under a minute)
 def test_building_shadows_are_soft_and_kept_out_of_swept(small_scene):
     sc = small_scene
     fractional = 0

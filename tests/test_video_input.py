@@ -16,6 +16,7 @@ from gnomon.util import toml_io
 av = pytest.importorskip("av")  # PyAV: an H.264 encoder to make the test video (the `test` extra)
 
 
+@pytest.mark.slow  # renders, records or tracks: seconds (the fast loop stays under a minute)
 def test_video_capture_is_recorded_as_a_video(tiny_capture: Path) -> None:
     from rerun.chunk import RrdReader
 
