@@ -212,21 +212,40 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
                           "is it a scan of the same object? Scan it again from a place between two of the others")
     # Loop consistency: a pair that disagrees with the tree's poses (a symmetric shape aligned the wrong way
     # round, say) is aligned again from the tree's poses; the better-overlapping one is kept if it agrees.
-    inconsistent: dict[tuple[int, int], PairRegistration] = {}
     centres = [c.points.mean(axis=0) for c in clouds]
-    for (i, j), p in list(candidates.items()):
-        res = edge_residual(i, j, p.transform, poses, centres[i])
-        if res.rotation_deg <= s.consistency_deg and res.displacement <= s.consistency * distance:
-            continue
-        again = refine(i, j, np.linalg.inv(poses[j]) @ poses[i])
-        res2 = edge_residual(i, j, again.transform, poses, centres[i])
-        pairs.pop((i, j), None)
-        rejected.pop((i, j), None)
-        if (acceptable(i, j, again) and res2.rotation_deg <= s.consistency_deg
-                and res2.displacement <= s.consistency * distance):
-            pairs[(i, j)] = again
-        else:
-            inconsistent[(i, j)] = p
+
+    def agrees(i: int, j: int, T: np.ndarray) -> bool:
+        res = edge_residual(i, j, T, poses, centres[i])
+        return res.rotation_deg <= s.consistency_deg and res.displacement <= s.consistency * distance
+
+    def check_loop() -> dict[tuple[int, int], PairRegistration]:
+        inconsistent: dict[tuple[int, int], PairRegistration] = {}
+        for (i, j), p in list(candidates.items()):
+            if agrees(i, j, p.transform):
+                if (i, j) not in pairs and acceptable(i, j, p):  # agrees now that a view was moved
+                    pairs[(i, j)] = p
+                    rejected.pop((i, j), None)
+                continue
+            again = refine(i, j, np.linalg.inv(poses[j]) @ poses[i])
+            pairs.pop((i, j), None)
+            rejected.pop((i, j), None)
+            if acceptable(i, j, again) and agrees(i, j, again.transform):
+                pairs[(i, j)] = again
+            else:
+                inconsistent[(i, j)] = p
+        return inconsistent
+
+    inconsistent = check_loop()
+    # A view held by pairs that fit their surfaces worse than a pair the loop left out (its residual in the
+    # points' own σ, rms_sigma): the tree followed the worse pair (a view whose sides one neighbour sees
+    # little of, an ICP that converged short); the view moves to where the better-fitting pair puts it.
+    for _ in range(len(views)):
+        moved = _better_fit(n, pairs, {e: p for e, p in inconsistent.items() if acceptable(*e, p)}, poses)
+        if moved is None:
+            break
+        view, pose = moved
+        poses[view] = pose
+        inconsistent = check_loop()
     t2 = time.perf_counter()
     if len(pairs) > len(views) - 1:
         poses = optimise_poses(poses, pairs)
@@ -238,6 +257,26 @@ def register_views(views: list[View], settings: FuseSettings | None = None) -> R
     if priors is not None:
         _check_stations(reg, priors, views)
     return reg
+
+
+#: A left-out pair replaces the pairs holding a view when it fits its surfaces this many times better.
+BETTER_FIT = 1.5
+
+
+def _better_fit(n: int, pairs: dict[tuple[int, int], PairRegistration],
+                left_out: dict[tuple[int, int], PairRegistration],
+                poses: list[np.ndarray]) -> tuple[int, np.ndarray] | None:
+    """The first view (not the reference) and its pose by a left-out pair whose rms_sigma is BETTER_FIT
+    times lower than that of every pair holding the view, its partner where the tree put it; or None."""
+    for k in range(1, n):
+        held = [p.rms_sigma for pair, p in pairs.items() if k in pair]
+        odd = [(pair, p) for pair, p in left_out.items() if k in pair]
+        if not held or not odd:
+            continue
+        (i, j), best = min(odd, key=lambda e: e[1].rms_sigma)
+        if BETTER_FIT * best.rms_sigma <= min(held):
+            return k, (poses[j] @ best.transform if i == k else poses[i] @ np.linalg.inv(best.transform))
+    return None
 
 
 def _check_stations(reg: Registration, priors: list[StationPrior], views: list[View]) -> None:
