@@ -509,8 +509,11 @@ def stop_local_workers(cluster) -> None:
     import logging
     import signal
 
-    for name in ("distributed.nanny", "distributed.worker", "distributed.core", "distributed.scheduler"):
-        logging.getLogger(name).setLevel(logging.CRITICAL)  # the deaths below are meant
+    # the deaths below are meant: nothing Dask logs about them (the comms they close included, which
+    # "distributed.batched" reported at INFO on a terminated batch's stderr) is the user's to read
+    for name in ("distributed", "distributed.nanny", "distributed.worker", "distributed.core", "distributed.scheduler",
+                 "distributed.batched", "distributed.comm"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
     for nanny in list(getattr(cluster, "workers", {}).values()):
         pid = getattr(getattr(getattr(nanny, "process", None), "process", None), "pid", None)
         if pid:
