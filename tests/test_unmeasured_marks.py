@@ -459,8 +459,9 @@ def test_the_shadows_corner_doubts_a_focal_length_the_marks_blame() -> None:
     uncertain; with the marks' factor × 0.52 the same check put it 2.22° off normals 0.6° and 0.4°
     uncertain): the scan says the shadow does not call for it. A corner off the line, or marks that blame
     nothing, give no such warning."""
+    from gnomon.config.setup import FOCAL_BLAME
     from gnomon.geometry.plane_tie import CornerTie
-    from gnomon.reconstruct.corners import FOCAL_BLAME, corner_limit_deg, focal_blame_doubt
+    from gnomon.reconstruct.corners import corner_limit_deg, focal_blame_doubt
 
     def tie(angle: float) -> CornerTie:
         return CornerTie(offset=2.12, sigma=0.002, frames=60, spread=0.01, corner=np.zeros(3),

@@ -243,9 +243,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _regions_lines(name: str, regions_help: bool) -> str:
+    """A plane table's commented mask line (``regions_help``: with the regions' keys explained)."""
+    return REGIONS_MASK.format(name=name) if regions_help else f'# mask = "regions/{name}_mask.png"'
+
+
 def _marked_plane(name: str, what: str, howto: str, first_id: int, regions_help: bool) -> str:
     """A [[planes]] table with markers to fill in (``regions_help``: with the regions' keys explained)."""
-    regions = REGIONS_MASK.format(name=name) if regions_help else f'# mask = "regions/{name}_mask.png"'
+    regions = _regions_lines(name, regions_help)
     return MARKED_PLANE.format(what=f"The {name}. {what}", howto=howto, name=name, first_id=first_id,
                                regions=regions)
 
@@ -341,7 +346,7 @@ def corrupt_frames(files: list[Path]) -> list[tuple[Path, str]]:
 def _found_plane(name: str, what: str, marks, first_id: int, drawing: str, regions_help: bool,
                  units_line: bool) -> str:
     """A [[planes]] table whose markers were found in the first frame (pixels as found, no plane_xy)."""
-    regions = REGIONS_MASK.format(name=name) if regions_help else f'# mask = "regions/{name}_mask.png"'
+    regions = _regions_lines(name, regions_help)
     lines = ",\n".join(f"  {{ id = {first_id + i}, pixel_hint = [{m.pixel[0]:.1f}, {m.pixel[1]:.1f}] }}"
                         for i, m in enumerate(marks))
     distance = (f"# mark_distance = {{ between = [{first_id}, {first_id + 1}], length = L }}  # one measured "
@@ -457,12 +462,13 @@ def run(args: argparse.Namespace) -> int:
         fps = video_fps(files[0]) if video else None  # a rate of 10^4 or more is a container's time base
         capture += _sun_times(files, video, fps if fps is not None and fps < 1e4 else None)
     howto = MARKERS_HOWTO.format(units=units)
-    found_note = ""
+    found_note, found = "", None  # found: the marks init assigned to the desk and the wall, if any
     if light == "two-plane":
         from gnomon.camera.plane_pose import search_markers, split_marks
 
         groups = split_marks(search_markers(first.grey))
         if groups.lower:
+            found = groups
             drawing = out.with_name(out.stem + "_marks.png")
             draw_found_marks(first.grey, groups, ("desk", "wall"), drawing)
             units = "relative"
@@ -486,7 +492,7 @@ def run(args: argparse.Namespace) -> int:
                 howto += ("# Printed 2x2 checkers found in the first frame (copy each into its plane's markers):\n"
                           + "".join(f"#   pixel_hint = [{m.pixel[0]:.1f}, {m.pixel[1]:.1f}]\n" for m in groups.found))
     if light in ("two-plane", "sun"):
-        if not found_note.startswith("; found"):
+        if found is None:
             named = ("desk", "wall") if light == "two-plane" else ("ground", "facade")
             where = ("origin `point`, axes `x_axis` and normal x x_axis" if light == "two-plane"
                      else "z up; its x axis is [site] heading_deg")
@@ -524,12 +530,11 @@ def run(args: argparse.Namespace) -> int:
     sections = [capture, "[camera]\n" + camera, *planes, *([SITE] if light == "sun" else []),
                 LIGHT[light].format(name=name), scan]
     steps = (STEPS["two-plane-found"].format(name=name, drawing=out.stem + "_marks.png")
-             if found_note.startswith("; found") else STEPS[light].format(name=name))
+             if found is not None else STEPS[light].format(name=name))
     text = HEADER.format(setup=setup, steps=steps) + "\n".join(sections)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic.write_text(out, text)
-    todo = {"two-plane": "check the marks" if found_note.startswith("; found") and "fourth" not in found_note
-            else "fill in the markers",
+    todo = {"two-plane": "check the marks" if found is not None and found.complete else "fill in the markers",
             "lamp": "fill in the board and the pencil photos", "sun": "fill in [site] and the markers"}[light]
     print(f"wrote {out}: {count} {what} of {width}x{height}{found_note}; {todo}, then "
           + (f"`gnomon calibrate lamp {out}`" if light == "lamp" else f"`gnomon preview {out}`"))

@@ -360,6 +360,11 @@ def best_focal_factor(camera: OpenCVCamera, rms_at: Any) -> tuple[float, float, 
     return float(FOCAL_FACTORS[best]), float(rms[best]), float(rms_at(camera))
 
 
+#: What a plane's marker warning says when its marks fit another focal length better (the scan's shadow check,
+#: gnomon.reconstruct.corners.focal_blame_doubt, looks for it).
+FOCAL_BLAME = "the camera's calibration does not fit these frames"
+
+
 def _focal_clause(camera: OpenCVCamera, factor: float, best_rms: float, here: float, limit_rms_px: float,
                   alone_tells: bool, others: dict[str, float] | None, marks_off: str) -> str:
     """The clause of :func:`focal_diagnosis` (and of marks taken as a rectangle) from a plane's best factor.
@@ -373,8 +378,8 @@ def _focal_clause(camera: OpenCVCamera, factor: float, best_rms: float, here: fl
         if alone_tells or agree or not others:
             caveat = ("" if alone_tells or agree else " (or a mark is off: 4 points cannot tell)")
             also = (" as do " + ", ".join(f"{n}'s (× {k:.2f})" for n, k in agree.items())) if agree else ""
-            return (f"; {fits}{also} ({camera.fx * factor:.0f} px instead of {camera.fx:.0f}): the camera's "
-                    f"calibration does not fit these frames (zoom, focus or crop changed since){caveat}")
+            return (f"; {fits}{also} ({camera.fx * factor:.0f} px instead of {camera.fx:.0f}): {FOCAL_BLAME} "
+                    f"(zoom, focus or crop changed since){caveat}")
         told = ", ".join(f"{n} × {k:.2f}" for n, k in others.items())
         return (f"; {fits}, but the other planes' marks do not agree on it ({told} alone): the marks are off, "
                 "not the camera")

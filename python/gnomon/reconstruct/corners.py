@@ -14,7 +14,7 @@ import dataclasses
 
 import numpy as np
 
-from gnomon.config.setup import MAX_PLANE_DEPTH_SHARE, ScanSetup
+from gnomon.config.setup import FOCAL_BLAME, MAX_PLANE_DEPTH_SHARE, ScanSetup
 from gnomon.errors import GnomonError
 from gnomon.geometry.plane_tie import MIN_TIE_FRAMES, CornerTie, tie_by_corner
 from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines, measure_reference_lines
@@ -70,10 +70,6 @@ def tie_message(name: str, anchor: str, tie: CornerTie | None, sigmas_deg: tuple
         return "", ""
     return "", (f"[[planes]] {name}: placed by where it meets {anchor}, but " + "; ".join(notes)
                 + ": measure its marks' positions (plane_xy) or give it mark_distance")
-
-
-#: What a plane's marker warning says when its marks fit another focal length better (gnomon.config.setup).
-FOCAL_BLAME = "the camera's calibration does not fit these frames"
 
 
 def focal_blame_doubt(name: str, anchor: str, tie: CornerTie, sigmas_deg: tuple[float, float],
