@@ -160,11 +160,12 @@ def clicked_photos(mirror: Path, bases: list) -> dict[str, list]:
     return out
 
 
-def walkthrough(mirror: Path, out: Path) -> None:
+def walkthrough(mirror: Path, out: Path, clicked_bases: bool = False) -> None:
     """The README's lamp walk-through, as a user runs it: `gnomon calibrate camera` on the board photos,
     `gnomon init --light lamp` (the board photo from the scan's place, the pencil photos), then the only
-    edits: the pencil's length and each photo's base (the author's clicks); `gnomon calibrate lamp` (the
-    shadows' tips found), `gnomon regions` (from the two bands it starts from when none are given),
+    edit: the pencil's length (with ``clicked_bases``, also each photo's base: the author's clicks);
+    `gnomon calibrate lamp` (the pencils' feet and the shadows' tips found; the feet found printed against
+    the author's clicks), `gnomon regions` (from the two bands it starts from when none are given),
     `gnomon scan`; scored as the scripted run is."""
     folder = out / "walkthrough"
     folder.mkdir(parents=True, exist_ok=True)
@@ -188,11 +189,23 @@ def walkthrough(mirror: Path, out: Path) -> None:
         b = base_of[Path(m.group(1)).name]
         return f'image = "{m.group(1)}"\nbase = [{b[0]:.0f}, {b[1]:.0f}]'
 
-    edited = re.sub(r'image = "(light/[^"]+)"\n# base = \[u, v\]  # the pencil\'s foot: fill in', fill, edited)
+    if clicked_bases:
+        edited = re.sub(r'image = "(light/[^"]+)"\n# base = \[u, v\]  # the pencil\'s foot: found if left out',
+                        fill, edited)
     lines = sum(a != b for a, b in zip(text.splitlines(), edited.splitlines(), strict=True))
     path.write_text(edited)
-    print(f"the field log's lines edited by hand: {lines} (the pencil's length and {len(base_of)} bases)")
-    run(["calibrate", "lamp", str(path)])
+    print(f"the field log's lines edited by hand: {lines} (the pencil's length"
+          + (f" and {len(base_of)} bases)" if clicked_bases else ")"))
+    out_lamp = io.StringIO()
+    with contextlib.redirect_stdout(out_lamp):
+        run(["calibrate", "lamp", str(path)])
+    print(out_lamp.getvalue(), end="")
+    if not clicked_bases:  # each foot found against the author's click for the same photo
+        found = dict(re.findall(r"\((light/\S+\.jpg)\): base \[([-\d.]+, [-\d.]+)\]", out_lamp.getvalue()))
+        misses = [float(np.hypot(*(np.array([float(x) for x in found[k].split(",")]) - base_of[Path(k).name])))
+                  for k in sorted(found)]
+        print(f"feet found: {len(misses)} of {len(base_of)}, against the author's clicks: median "
+              f"{np.median(misses):.1f} px, max {max(misses):.1f} px")
     run(["regions", str(path), "--quiet"])
     run(["scan", str(path), "--out", str(folder / "scan"), "--no-rrd", "--quiet"])
     print(f"commands: {time.perf_counter() - t0:.0f} s")
@@ -204,9 +217,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("mirror", type=Path, help="checkout of Leeiieeo/3D-photography-on-your-desk")
     ap.add_argument("--out", type=Path, default=Path("desk_lamp_capture"))
     ap.add_argument("--walkthrough", action="store_true", help="the README's walk-through instead (see walkthrough)")
+    ap.add_argument("--clicked-bases", action="store_true",
+                    help="with --walkthrough: type the author's clicked pencil feet instead of having them found")
     args = ap.parse_args(argv)
     if args.walkthrough:
-        walkthrough(args.mirror, args.out)
+        walkthrough(args.mirror, args.out, args.clicked_bases)
         return 0
     t0 = time.perf_counter()
     folder = args.out

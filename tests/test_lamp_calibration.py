@@ -399,6 +399,62 @@ def test_tips_found_against_the_photos_median(desk_lamp_full, dark_pencil, tmp_p
     assert cv2.imread(str(cap / "lamp_tips.png")) is not None
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("pencil", ["pale", "dark"])
+def test_feet_and_tips_found_from_the_photos_alone(desk_lamp_full, dark_pencil, tmp_path, capsys, pencil) -> None:
+    """No pixel typed: each photo's image alone. The pencil is found from its own image and its shadow (two
+    arms meeting at the foot, the pencil's arm predicted from the foot, the desk's pose and its length):
+    every foot within the pencil's own radius in that photo (its projected width: 8.5-12 px here), every
+    tip within 2 px, the lamp within 3 of its σ (found feet count 1.5 px each coordinate, said in a note)."""
+    import tomllib
+
+    from gnomon.cli import main
+    from gnomon.config.pencil_log import load_pencil_log
+    from gnomon.util import toml_io
+
+    cap = copy_capture(desk_lamp_full if pencil == "pale" else dark_pencil, tmp_path / "capture")
+    log = tomllib.loads((cap / "pencil_log.toml").read_text())
+    for photo in log["pencil"]["photos"]:
+        del photo["tip"], photo["base"]
+    log["pencil"].update(gamma=2.2, sigma_px=0.5)
+    toml_io.dump(log, cap / "auto.toml")
+    capsys.readouterr()
+    assert main(["calibrate", "lamp", str(cap / "auto.toml")]) == 0
+    out = capsys.readouterr().out
+    found = [line for line in out.splitlines() if "the pencil found with it" in line]
+    assert len(found) == len(log["pencil"]["photos"])
+    pixels = np.array([[float(x) for x in re.findall(r"-?\d+\.\d+", line.split(":", 1)[1])[:4]] for line in found])
+    truth = np.load(cap / "ground_truth.npz")
+    pencil_log = load_pencil_log(cap / "pencil_log.toml")
+    depth = pencil_log.pose.world_to_camera(truth["pencil_bases_world"])[:, 2]
+    radius_px = float(truth["pencil_radius"]) * pencil_log.camera.fx / depth
+    assert np.all(np.linalg.norm(pixels[:, :2] - truth["pencil_base_pixels"], axis=1) <= radius_px)
+    assert np.linalg.norm(pixels[:, 2:4] - truth["pencil_tip_pixels"], axis=1).max() <= 2.0
+    assert "note: σ = 1.5 px instead of sigma_px = 0.5" in out
+    lamp = tomllib.loads((cap / "lamp.toml").read_text())
+    position, sigma = (np.array(lamp["light"]["position"]), np.array(lamp["lamp_calibration"]["sigma"]))
+    assert np.all(np.abs(position - truth["lamp"]) <= 3.0 * sigma)
+
+
+def test_a_found_foot_is_refused_where_no_pencil_stands() -> None:
+    """A photo where nothing differs from the empty desk, or where what differs is no pencil and shadow: one
+    line naming the photo and what to give instead."""
+    from gnomon.light.pencil_detection import find_pencil_base
+
+    rng = np.random.default_rng(2)
+    empty = (0.5 + 0.01 * rng.standard_normal((120, 160))).astype(np.float32)
+
+    def tops(feet):
+        return feet + np.array([0.0, -40.0])
+
+    with pytest.raises(GnomonError, match=r"p\.jpg: nothing differs from the empty desk.*give its base"):
+        find_pencil_base(empty * 1.02, empty, tops, source="p.jpg")
+    blob = empty.copy()
+    blob[40:100, 30:130] *= 0.3  # a dark rectangle (a book put down), not a pencil and its shadow
+    with pytest.raises(GnomonError, match=r"p\.jpg: (no standing pencil|what differs).*give its base"):
+        find_pencil_base(blob, empty, tops, source="p.jpg")
+
+
 def test_a_missing_tip_needs_the_empty_desk_or_three_photos(tmp_path, capsys) -> None:
     import tomllib
     from pathlib import Path

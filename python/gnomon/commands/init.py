@@ -48,8 +48,9 @@ STEPS = {
     "two-plane-found": "# Next: check the marks found (drawn in {drawing}) with `gnomon preview {name}`,\n"
                        "# propose the regions with `gnomon regions {name}` (it switches on each plane's mask\n"
                        "# below), then `gnomon scan {name}`.",
-    "lamp": "# Next: fill in the desk's board (or markers), the pencil's length and each photo's base,\n"
-            "# locate the lamp with `gnomon calibrate lamp {name}` (it writes lamp.toml), check with\n"
+    "lamp": "# Next: fill in the desk's board (or markers) and the pencil's length (each photo's base and tip\n"
+            "# are found; give them where `gnomon calibrate lamp` asks), "
+            "locate the lamp with\n# `gnomon calibrate lamp {name}` (it writes lamp.toml, lamp_tips.png), check with\n"
             "# `gnomon preview {name}`, propose the bare desk with `gnomon regions {name}` (from two bands\n"
             "# of the image's top and bottom rows, or the regions you give), then `gnomon scan {name}`.",
     "sun": "# Next: fill in [site] (every NaN), the frames' times if asked below and the markers,\n"
@@ -145,9 +146,9 @@ PENCIL = '''\
 [pencil]
 # For `gnomon calibrate lamp`: photos (from the scan's place, the lamp where it is for the sweep)
 # of a pencil standing upright on the desk, moved between photos to places spread around the
-# scene. For each: its base (foot) and the tip of its shadow, in pixels. The tip may be left out
-# and found for you (the base then a rough pixel) against `empty`, a photo of the desk without the
-# pencil, or, with 3 or more photos, against their median.
+# scene. For each: its base (foot) and the tip of its shadow, in pixels. Both may be left out and
+# found for you (or the tip alone, the base then a rough pixel) against `empty`, a photo of the desk
+# without the pencil, or, with 3 or more photos, against their median.
 height = {height}  # the pencil's length in {units}: measure it
 sigma_px = 1.0  # how well the base and tip are placed, pixels
 # empty = "light/empty.jpg"
@@ -514,8 +515,8 @@ def run(args: argparse.Namespace) -> int:
         planes = [LAMP_DESK.format(units=units, board=board.rstrip("\n"))]
         if pencils:
             photos = "\n".join(f"[[pencil.photos]]\nimage = {_toml_string(_relative(p, base))}\n"
-                               "# base = [u, v]  # the pencil's foot: fill in\n"
-                               "# tip = [u, v]  # its shadow's tip: fill in (or give `empty` above)\n"
+                               "# base = [u, v]  # the pencil's foot: found if left out\n"
+                               "# tip = [u, v]  # its shadow's tip: found if left out\n"
                                for p in pencils)
         else:
             photos = ('# [[pencil.photos]]  # one table per photo (at least 2; list them with --pencil)\n'
@@ -535,7 +536,9 @@ def run(args: argparse.Namespace) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic.write_text(out, text)
     todo = {"two-plane": "check the marks" if found is not None and found.complete else "fill in the markers",
-            "lamp": "fill in the board and the pencil photos", "sun": "fill in [site] and the markers"}[light]
+            "lamp": "fill in the pencil's length" + ("" if args.board and args.square is not None else " and the board")
+                    + ("" if pencils else " and list the pencil photos"),
+            "sun": "fill in [site] and the markers"}[light]
     print(f"wrote {out}: {count} {what} of {width}x{height}{found_note}; {todo}, then "
           + (f"`gnomon calibrate lamp {out}`" if light == "lamp" else f"`gnomon preview {out}`"))
     return 0

@@ -26,7 +26,10 @@ the desk photographed from the scan's place), plus::
 3 photos with their ``image``: their per-pixel median is the empty desk): the
 shadow's tip is then found by comparing the two photos' irradiance, and the
 base (a hint, a few pixels off at most) is moved onto the shadow's axis
-(:mod:`gnomon.light.pencil_detection`). ``[capture]``, ``[light]``,
+(:mod:`gnomon.light.pencil_detection`). A photo without ``base`` either (its
+``image`` alone) has its pencil found too: its own image and its shadow, two
+arms meeting at the foot, the pencil's arm predicted from the foot, the
+desk's pose and ``height``. ``[capture]``, ``[light]``,
 ``[scan]`` and ``[site]`` tables are ignored, so a scan's own field log may
 carry the ``[pencil]`` table; any other table is an error. The result is
 written to ``lamp.toml`` beside the field log: a ``[light]`` table
@@ -69,7 +72,7 @@ class PencilLog:
     sigma_px: float
     sigma_height: float
     units: str
-    bases_px: np.ndarray
+    bases_px: np.ndarray  # NaN rows: found with the tip (from the pencil's image and shadow)
     tips_px: np.ndarray  # NaN rows: to be found against the empty-desk photo
     images: tuple[str | None, ...]
     empty: Path | None = None  # photo of the desk without the pencil
@@ -187,11 +190,14 @@ def load_pencil_log(path: str | Path) -> PencilLog:
         pt = Table(p, f"pencil.photos.{i}", raw)
         image = pt.string("image") if "image" in pt.data else None
         for key, out in (("base", bases), ("tip", tips)):
-            if key == "tip" and "tip" not in pt.data:
+            if key == "base" and "base" not in pt.data and "tip" in pt.data:
+                raise pt.error("base", "missing: a photo with its tip given needs its base too (leave both "
+                                       "out to have them found)")
+            if key not in pt.data:
                 # found automatically: needs this photo and the empty desk (or the photos' median)
                 median = len(photos) >= MEDIAN_PHOTOS and all(isinstance(x.get("image"), str) for x in photos)
                 if image is None or (empty is None and not median):
-                    raise pt.error("tip", "missing: give the tip's pixel, or the photo's 'image' and "
+                    raise pt.error(key, f"missing: give the {key}'s pixel, or the photo's 'image' and "
                                           "[pencil] 'empty' (a photo of the desk without the pencil; or at "
                                           f"least {MEDIAN_PHOTOS} photos, each with its 'image')")
                 out.append(np.array([np.nan, np.nan]))

@@ -23,6 +23,7 @@ same lamp) and a rough pixel of the base, both are measured:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -166,3 +167,130 @@ def detect_pencil(photo_linear: np.ndarray, empty_linear: np.ndarray, base_hint_
     tip = hint + s_tip * axis + np.polyval(line, s_tip) * normal
     shadow_ratio = float(1.0 - np.median(deficit[near].max(axis=1)))
     return PencilDetection(base, tip, float(np.degrees(np.arctan2(axis[1], axis[0]))), shadow_ratio)
+
+
+@dataclass(frozen=True)
+class PencilBase:
+    """Where a pencil stands in a photo, found from its image and its shadow's together.
+
+    ``base_px``: its foot (on its shadow's axis); ``top_px``: where its top projects from that foot;
+    ``fit``: how much of what changed against the empty desk the pencil and its shadow explain, as an
+    intersection over union (1 = all of it and nothing else); ``changed_px``: the pixels that changed.
+    """
+
+    base_px: np.ndarray
+    top_px: np.ndarray
+    fit: float
+    changed_px: int
+
+
+FOUND_FOOT_SIGMA_PX = 1.5
+"""1σ (pixels, each coordinate) of a foot found by :func:`find_pencil_base`: on the simulator's pale and
+dark pencils (12 feet, 800×600) the found feet lie 0.7–3.7 px from the truth, 2.0 px RMS in distance."""
+
+BASE_FIT_MIN = 0.5
+"""Below this intersection over union, what changed against the empty desk is not one pencil and its shadow."""
+
+
+def _changed(ratio: np.ndarray) -> np.ndarray:
+    """The largest connected piece of what is much darker or brighter (by 30 %, 40 %) than the empty desk
+    (bool mask)."""
+    # a thin pale pencil is a bright strip beside a dark one: closed into one piece
+    changed = cv2.morphologyEx(((ratio < 0.7) | (ratio > 1.4)).astype(np.uint8), cv2.MORPH_CLOSE,
+                               np.ones((3, 3), np.uint8))
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(changed)
+    if n < 2:
+        return np.zeros(ratio.shape, dtype=bool)
+    return labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+
+
+def _segment_distance(pts: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    d = b - a
+    s = np.clip(((pts - a) @ d) / max(float(d @ d), 1e-9), 0.0, 1.0)
+    return np.linalg.norm(pts - (a + s[:, None] * d), axis=1)
+
+
+def _two_arm_fit(pts: np.ndarray, cell: float, size: tuple[int, int], base: np.ndarray, top: np.ndarray,
+                 half_width: float) -> float:
+    """Intersection over union of the changed points ``pts`` (each standing for ``cell`` px²) with a pencil
+    (``base`` → ``top``) and a shadow leaving ``base`` to the farthest changed point the pencil does not
+    hold, each ``half_width`` px wide; the pencil counted inside the image (``size``: width, height) only.
+    0 when that shadow is shorter than 4 half-widths (what changed is a blob, not a pencil's shadow)."""
+    pencil = _segment_distance(pts, base, top) <= half_width
+    rest = pts[~pencil]
+    tip = rest[np.argmax(np.linalg.norm(rest - base, axis=1))] if len(rest) else base
+    if np.linalg.norm(tip - base) < 4.0 * half_width:  # a shadow is long and thin; a blob is not one
+        return 0.0
+    held = pencil | (_segment_distance(pts, base, tip) <= half_width)
+    seen, a, b = cv2.clipLine((0, 0, size[0], size[1]), tuple(int(x) for x in np.round(base)),
+                              tuple(int(x) for x in np.round(np.clip(top, -1e6, 1e6))))
+    pencil_length = float(np.hypot(b[0] - a[0], b[1] - a[1])) if seen else 0.0
+    arms = 2.0 * half_width * (pencil_length + float(np.linalg.norm(tip - base))) + np.pi * half_width ** 2
+    covered = float(held.sum()) * cell
+    return covered / (len(pts) * cell + max(arms - covered, 0.0))
+
+
+def find_pencil_base(photo_linear: np.ndarray, empty_linear: np.ndarray,
+                     tops_px: Callable[[np.ndarray], np.ndarray], *, source: str = "photo",
+                     step_px: int = 4) -> PencilBase:
+    """The foot of a pencil standing somewhere in ``photo_linear``, no pixel given.
+
+    What changed against the empty desk (``empty_linear``; both grey, linear irradiance) is the pencil's
+    own image and its shadow, two arms meeting at the foot. ``tops_px`` maps candidate feet (N, 2) to where
+    the pencil's top then projects (the camera, the desk's pose and the pencil's length: the pencil's arm
+    is predicted whole from its foot). Every changed pixel (every ``step_px``-th) whose predicted pencil
+    lies 80 % inside the changed region (of what is inside the image) is a candidate; the one whose pencil
+    and shadow (to the farthest changed pixel the pencil does not hold) best explain the changed region
+    wins, then every pixel around the best three. Refuses (naming
+    ``source``) when nothing changed, when no candidate's pencil fits, or when the best explains less than
+    :data:`BASE_FIT_MIN` of it (two pencils, a hand, a moved object: click the base instead).
+    """
+    ratio = photo_linear / np.maximum(empty_linear, 1e-4)
+    changed = _changed(ratio)
+    n_changed = int(changed.sum())
+    if n_changed < 50:
+        raise GnomonError(f"{source}: nothing differs from the empty desk (no pencil found): give its base")
+    half_width = float(np.percentile(cv2.distanceTransform(changed.astype(np.uint8), cv2.DIST_L2, 5)[changed],
+                                     95))
+    held = cv2.dilate(changed.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    vs, us = np.nonzero(changed[::step_px, ::step_px])
+    candidates = np.stack([us, vs], axis=1).astype(np.float64) * step_px
+    tops = np.asarray(tops_px(candidates), dtype=np.float64)
+    s = np.linspace(0.0, 1.0, 40)
+    along = candidates[:, None, :] + s[None, :, None] * (tops - candidates)[:, None, :]
+    h, w = changed.shape
+    u = np.round(along[..., 0]).astype(np.int64)
+    v = np.round(along[..., 1]).astype(np.int64)
+    inside = (u >= 0) & (u < w) & (v >= 0) & (v < h) & np.isfinite(along).all(axis=-1)
+    on = np.zeros(inside.shape, dtype=bool)
+    on[inside] = held[v[inside], u[inside]]
+    seen = inside.sum(axis=1)  # a pencil may stand partly outside the image: judged on what is seen of it
+    fits = (seen >= 0.2 * len(s)) & (on.sum(axis=1) >= 0.8 * np.maximum(seen, 1))
+    if not fits.any():
+        raise GnomonError(f"{source}: no standing pencil's image fits what differs from the empty desk "
+                          "(a pale pencil on a pale desk, or the wrong length?): give its base")
+    stride = 2 if n_changed > 4000 else 1
+    ys, xs = np.nonzero(changed[::stride, ::stride])
+    pts = np.stack([xs, ys], axis=1).astype(np.float64) * stride
+    arm = half_width + 1.0  # a pixel's worth of slack on each side of the arms
+
+    def fit(feet: np.ndarray, tops: np.ndarray) -> np.ndarray:
+        return np.array([_two_arm_fit(pts, stride ** 2, (w, h), b, t, arm) for b, t in zip(feet, tops, strict=True)])
+
+    candidates, tops = candidates[fits], tops[fits]
+    scores = fit(candidates, tops)
+    # then every pixel around the best few of the coarse grid
+    offsets = np.stack(np.meshgrid(np.arange(-step_px, step_px + 1), np.arange(-step_px, step_px + 1)),
+                       axis=-1).reshape(-1, 2)
+    best = candidates[np.argsort(scores)[-3:]]
+    fine = np.unique((best[:, None, :] + offsets[None]).reshape(-1, 2), axis=0)
+    fine_tops = np.asarray(tops_px(fine), dtype=np.float64)
+    ok = np.isfinite(fine_tops).all(axis=1)
+    fine, fine_tops = fine[ok], fine_tops[ok]
+    fine_scores = fit(fine, fine_tops)
+    k = int(np.argmax(fine_scores))
+    if fine_scores[k] < BASE_FIT_MIN:
+        raise GnomonError(f"{source}: what differs from the empty desk is not one pencil and its shadow (the best "
+                          f"fit explains {fine_scores[k]:.0%} of its {n_changed} pixels): give its base")
+    return PencilBase(fine[k], fine_tops[k], float(fine_scores[k]), n_changed)
+

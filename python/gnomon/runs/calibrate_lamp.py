@@ -47,7 +47,7 @@ def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
     from gnomon.camera.calibration import read_grey
     from gnomon.capture.tracking import decoding_lut
     from gnomon.geometry.reference_lines import PlaneInCamera
-    from gnomon.light.pencil_detection import detect_pencil
+    from gnomon.light.pencil_detection import detect_pencil, find_pencil_base
 
     missing = np.flatnonzero(~np.isfinite(log.tips_px[:, 0]))
     if len(missing) == 0:
@@ -65,6 +65,12 @@ def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
     up = np.asarray(log.plane_normal, dtype=np.float64)
     if (log.pose.camera_centre_world - log.plane_point) @ up < 0:
         up = -up
+    def tops_of(feet_px: np.ndarray) -> np.ndarray:
+        """(N, 2) pixels of the pencil's top standing on the plane at each foot pixel (NaN off the plane)."""
+        feet = plane.intersect(log.camera.rays(feet_px))
+        tops = log.pose.camera_to_world(feet) + log.height * up
+        return np.asarray(log.camera.project(log.pose.world_to_camera(tops)), dtype=np.float64).reshape(-1, 2)
+
     bases, tips, lines = log.bases_px.copy(), log.tips_px.copy(), []
     for i in missing:
         name = log.images[i]
@@ -73,16 +79,19 @@ def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
         if photo_raw.shape != empty_raw.shape:
             raise GnomonError(f"{log.path}: [pencil] photo {name} is {photo_raw.shape[1]}x{photo_raw.shape[0]}, "
                               f"the empty desk {empty_raw.shape[1]}x{empty_raw.shape[0]}")
-        foot = plane.intersect(log.camera.rays(bases[i][None]))[0]
-        if not np.all(np.isfinite(foot)):
+        photo, source = lut[photo_raw], f"{log.path}: {name}"
+        how = ""
+        if not np.all(np.isfinite(bases[i])):
+            standing = find_pencil_base(photo, empty, tops_of, source=source)
+            bases[i] = standing.base_px
+            how = f", the pencil found with it (fit {standing.fit:.2f})"
+        top_px = tops_of(bases[i][None])[0]
+        if not np.all(np.isfinite(top_px)):
             raise GnomonError(f"{log.path}: [pencil] photo {name}: the base pixel does not see the plane")
-        foot_world = log.pose.camera_to_world(foot)
-        top_world = foot_world + log.height * up
-        top_px = log.camera.project(log.pose.world_to_camera(top_world)[None])[0]
-        found = detect_pencil(lut[photo_raw], empty, bases[i], top_px, source=f"{log.path}: {name}")
+        found = detect_pencil(photo, empty, bases[i], top_px, source=source)
         bases[i], tips[i] = found.base_px, found.tip_px
         lines.append(f"photo {i + 1} ({name}): base {found.base_px.round(2).tolist()}, "
-                     f"tip {found.tip_px.round(2).tolist()} (found against {empty_name})")
+                     f"tip {found.tip_px.round(2).tolist()} (found against {empty_name}{how})")
     return replace(log, bases_px=bases, tips_px=tips), lines
 
 
@@ -173,9 +182,18 @@ def _degenerate_lamp(cal, distance: float) -> str | None:
 def calibrate_lamp_cli(args: argparse.Namespace) -> int:
     """``gnomon calibrate lamp FIELD_LOG``: reads ``args.field_log`` (a Path), prints the
     lamp ± 1σ, residuals and warnings, writes ``lamp.toml`` beside the field log (atomic)."""
-    log, detected = detect_missing_tips(load_pencil_log(args.field_log))
+    from dataclasses import replace
+
+    from gnomon.light.pencil_detection import FOUND_FOOT_SIGMA_PX
+
+    given = load_pencil_log(args.field_log)
+    log, detected = detect_missing_tips(given)
     for line in detected:
         print(line)
+    if not np.isfinite(given.bases_px).all() and log.sigma_px < FOUND_FOOT_SIGMA_PX:
+        print(f"note: σ = {FOUND_FOOT_SIGMA_PX:g} px instead of sigma_px = {log.sigma_px:g}: the pencils' feet "
+              f"were found, to about {FOUND_FOOT_SIGMA_PX:g} px (give them as `base` to use yours)")
+        log = replace(log, sigma_px=FOUND_FOOT_SIGMA_PX)
     try:
         cal = calibrate_lamp_from_pencil(
             log.camera, log.pose, log.plane_point, log.plane_normal, log.bases_px, log.tips_px,
