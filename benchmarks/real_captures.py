@@ -73,7 +73,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from gnomon.camera.plane_pose import find_cross
+from gnomon.camera.plane_pose import find_cross, search_crosses
 from gnomon.cli import main as gnomon
 from gnomon.util import toml_io
 from score import score_scan
@@ -410,6 +410,21 @@ def refit_focal(name: str, log_path: Path, folder: Path) -> None:
           f"({abs(fit.factor - 1.0) / fit.sigma_factor:.0f} σ from the stills' camera): scanned with {camera.name}")
 
 
+def cross_search(name: str, first: np.ndarray, reference: np.ndarray) -> None:
+    """What `gnomon init` finds without hints (:func:`gnomon.camera.plane_pose.search_crosses`) against the
+    crosses refined from the clicks (``reference``, K × 2 px): how many found, each one's distance, and the
+    finds that are no reference cross (farther than 3 px from every one)."""
+    found = np.array([d.pixel for d in search_crosses(first)]).reshape(-1, 2)
+    if len(found) == 0:
+        print(f"{name}: hint-free search: no cross found (of {len(reference)})")
+        return
+    dist = np.linalg.norm(found[:, None, :] - reference[None], axis=2)
+    hits = dist.min(axis=0)
+    print(f"{name}: hint-free search: {int((hits <= 3.0).sum())} of the {len(reference)} crosses found (within "
+          f"{np.round(hits[hits <= 3.0], 2).tolist()} px), {int((dist.min(axis=1) > 3.0).sum())} other finds "
+          f"at {np.round(found[dist.min(axis=1) > 3.0], 1).tolist()}")
+
+
 def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
     seq = Path(min(glob.glob(str(mirror / "custom-data-dump" / name / "seq-*"))))
     folder = out / name
@@ -427,6 +442,8 @@ def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
                 cv2.circle(shown, (int(round(c[0])), int(round(c[1]))), 25, (0, 0, 255), 3)
                 print(f"{name} {plane}: a cross at {np.round(c, 1).tolist()}")
         cv2.imwrite(str(folder / "crosses.png"), shown)
+        cross_search(name, first, np.array([find_cross(first, np.array(r, float)) for rough in CANDLE_CROSSES.values()
+                                            for r in rough]))
         print(f"{name}: no extrinsic_calib.npz, and the objects hide all but 3 of its 8 crosses in {first_path.name} "
               f"and in every later frame (the objects do not move; {folder / 'crosses.png'}): 2 on the desk, 1 on "
               "the wall, where a plane's pose needs 4 (3 give up to four poses); not scanned", flush=True)
@@ -452,6 +469,7 @@ def phone(mirror: Path, out: Path, name: str, camera: Path) -> None:
               f"{at_f:.2f} px RMS with the camera (f = {toml_io.load(camera)['fx']:.0f} px); best over focal "
               f"lengths {best:.2f} px at f = {best_f:.0f} px")
         planes.append(plane_table(plane, PHONE_RECT, crosses, exact=True))
+    cross_search(name, first, np.array([m["pixel"] for p in planes for m in p["markers"]]))
     print(f"{name}: npz intrinsics fx/fy = {ev['fx_over_fy']:.4f} (stills squashed to 1920×1080 give "
           f"{ev['squash']:.4f}); npz desk–wall angle {ev['angle_deg']:.2f}°; npz planes {ev['offset_h']:.0f} / "
           f"{ev['offset_v']:.0f} mm from the camera", flush=True)

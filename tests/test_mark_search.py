@@ -75,7 +75,7 @@ def test_a_missing_mark_is_asked_for_and_fewer_are_listed() -> None:
     assert "the upper plane has 3" in groups.why
     six = split_marks(search_markers(scene(DESK[:3] + WALL[:3])))
     assert not six.lower and not six.upper and len(six.found) == 6
-    assert "6 printed 2x2 checker(s) found" in six.why
+    assert "6 printed 2x2 checkers found" in six.why
 
 
 TEMPLATE = """[capture]
@@ -109,3 +109,61 @@ def test_regions_switches_on_only_the_template_lines_for_the_masks_it_wrote() ->
     assert [p.get("mask") for p in log["planes"]] == ["regions/desk_mask.png", "hand/wall.png", None]
     assert log["light"]["kind"] == "two-plane"
     assert switch_on_masks(text, masks) == ([], text)  # a second run changes nothing
+
+
+def cross_scene(centres: list[tuple[float, float]], size=(600, 800), seed: int = 0) -> np.ndarray:
+    """Hand-drawn crosses (two pen strokes, 18 px long, 3 px wide, turned and not quite square) on bright
+    paper with its shading, beside a pen line (the stick's trace), a blot, a darker box and a dark stroke's
+    end: the references are the strokes' crossing points."""
+    rng = np.random.default_rng(seed)
+    h, w = size
+    yy, xx = np.mgrid[0:h * SS, 0:w * SS]
+    big = (200 - 30 * xx / (w * SS) - 15 * yy / (h * SS)).astype(np.uint8)  # paper under a lamp
+    cv2.rectangle(big, (40 * SS, 250 * SS), (160 * SS, 330 * SS), 90, -1)
+    cv2.line(big, (300 * SS, 280 * SS), (460 * SS, 300 * SS), 70, 3 * SS)
+    cv2.circle(big, (560 * SS, 300 * SS), 6 * SS, 60, -1)
+    for k, (u, v) in enumerate(centres):
+        c = np.array([u, v]) * SS + (SS - 1) / 2.0
+        for turn in (np.radians(25 + 7 * k), np.radians(25 + 7 * k + 80)):
+            d = 9.0 * SS * np.array([np.cos(turn), np.sin(turn)])
+            p0, p1 = np.round((c - d) * 16).astype(int), np.round((c + d) * 16).astype(int)
+            cv2.line(big, tuple(p0), tuple(p1), 45, 3 * SS, cv2.LINE_AA, 4)
+    img = cv2.resize(big, (w, h), interpolation=cv2.INTER_AREA).astype(np.float64)
+    img += rng.normal(0.0, 2.0, img.shape)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def test_every_cross_found_where_it_was_drawn_and_nothing_else() -> None:
+    """Hand-drawn crosses, no hints: each found within 0.3 px of where its strokes cross (a fifth of a
+    stroke's width), none among the line, the blot and the box; 4 + 4 split into the two planes, kind
+    "cross" (init writes them as exact pixels)."""
+    from gnomon.camera.plane_pose import search_crosses
+
+    found = search_crosses(cross_scene(DESK + WALL))
+    assert len(found) == 8, [d.pixel for d in found]
+    drawn = np.array(DESK + WALL)
+    got = np.array([d.pixel for d in found])
+    miss = np.linalg.norm(got[:, None, :] - drawn[None], axis=2).min(axis=1)
+    assert miss.max() <= 0.3, miss
+    assert {d.kind for d in found} == {"cross"}
+    groups = split_marks(found)
+    assert groups.complete
+    assert sorted(np.round([d.pixel for d in groups.lower]).tolist()) == sorted(np.round(DESK).tolist())
+
+
+def test_init_writes_the_crosses_it_found(tmp_path) -> None:
+    """A capture with crosses and no printed checkers: `gnomon init` writes 4 + 4 exact pixels."""
+    import re
+
+    from gnomon.cli import main
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    img = cross_scene(DESK + WALL, seed=3)
+    for i in range(3):
+        cv2.imwrite(str(frames / f"f{i:02d}.png"), img)
+    assert main(["init", str(frames), "--out", str(tmp_path / "field_log.toml")]) == 0
+    text = (tmp_path / "field_log.toml").read_text()
+    pixels = np.array([[float(u), float(v)] for u, v in re.findall(r"pixel = \[([\d.]+), ([\d.]+)\]", text)])
+    assert len(pixels) == 8 and "pixel_hint" not in text.split("[[planes]]", 1)[1].split("[light]")[0]
+    assert np.linalg.norm(pixels[:4] - np.array(sorted(DESK, key=lambda p: p[1])), axis=1).max() <= 0.3

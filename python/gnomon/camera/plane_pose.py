@@ -56,6 +56,8 @@ class MarkerDetection:
     x_score: float
     asymmetry: float
     sigma_px: float = float("nan")  # the centre's 1 σ per axis from the image noise (symmetric_centre_sigma)
+    kind: str = "checker"  # "checker" (a printed 2×2 checker: x_score, asymmetry as above) or "cross" (a
+    # hand-drawn cross, :func:`search_crosses`: x_score its ink's isotropy, asymmetry 1 − its point symmetry)
 
 
 def _circle_profile(img: np.ndarray, centre: tuple[float, float], radius: float, n: int = 64) -> np.ndarray:
@@ -336,17 +338,18 @@ def split_marks(dets: Sequence[MarkerDetection]) -> MarkGroups:
     between the planes, and with a mark missing no split can be told from another."""
     dets = sorted(dets, key=lambda d: d.pixel[1])
     n = len(dets)
+    crosses = bool(dets) and dets[0].kind == "cross"
+    marks, mark = ("hand-drawn crosses", "clean cross") if crosses else ("printed 2x2 checkers", "clean 2x2 checker")
     v = np.array([d.pixel[1] for d in dets])
     gaps = np.diff(v)
     if n == 7 and max(gaps[2], gaps[3]) >= SEVEN_MARKS_GAP_RATIO * min(gaps[2], gaps[3]):
         # one mark missing: 4 above and 3 below, or 3 and 4, where one gap clearly parts them
         upper, lower = (dets[:4], dets[4:]) if gaps[3] > gaps[2] else (dets[:3], dets[3:])
         short = "lower" if len(lower) == 3 else "upper"
-        return MarkGroups(tuple(lower), tuple(upper), f"7 printed 2x2 checkers found in the first frame: the "
-                          f"{short} plane has 3 (its fourth mark is not a clean 2x2 checker, or hidden)", tuple(dets))
+        return MarkGroups(tuple(lower), tuple(upper), f"7 {marks} found in the first frame: the "
+                          f"{short} plane has 3 (its fourth mark is not a {mark}, or hidden)", tuple(dets))
     if n < 8:
-        return MarkGroups((), (), f"{n} printed 2x2 checker(s) found in the first frame; two planes need 4 each",
-                          tuple(dets))
+        return MarkGroups((), (), f"{n} {marks} found in the first frame; two planes need 4 each", tuple(dets))
     cut = max(range(3, n - 4), key=lambda i: gaps[i])
     upper, lower = dets[: cut + 1], dets[cut + 1:]
     top2 = sorted(lower, key=lambda d: d.pixel[1])[:2]
@@ -356,7 +359,7 @@ def split_marks(dets: Sequence[MarkerDetection]) -> MarkGroups:
         return v1 if abs(u2 - u1) < 1e-9 else v1 + (v2 - v1) * (u - u1) / (u2 - u1)
 
     if not all(d.pixel[1] < line_v(d.pixel[0]) for d in upper):
-        return MarkGroups((), (), f"{n} printed 2x2 checkers found in the first frame, but no row splits them "
+        return MarkGroups((), (), f"{n} {marks} found in the first frame, but no row splits them "
                           "into two planes of 4 or more (the planes' marks interleave in the image)", tuple(dets))
     return MarkGroups(tuple(lower), tuple(upper))
 
@@ -433,6 +436,85 @@ def find_cross(
     if np.isfinite(su) and np.isfinite(sv) and np.hypot(su - pu, sv - pv) <= radius_px / 2:
         pu, pv = su, sv
     return a0 + pu, b0 + pv
+
+
+CROSS_SIZE_PX = (8, 80)
+"""The extent (pixels) of a hand-drawn cross that :func:`search_crosses` looks for."""
+
+
+def search_crosses(
+    image: np.ndarray,
+    *,
+    stroke_px: int = 11,
+    min_ink: float = 12.0,
+    min_isotropy: float = 0.1,
+    min_symmetry: float = 0.75,
+    min_relative_ink: float = 0.6,
+) -> list[MarkerDetection]:
+    """Every hand-drawn cross (dark pen strokes on bright paper) in ``image``, found without hints.
+
+    The strokes are the black-hat filter's ink (dark details narrower than ``stroke_px``) at least
+    ``min_ink`` DN (8-bit) and 12 % of the paper darker than the paper, on paper (the closed image at
+    least 60 % of its 99th percentile: the brightest thing in view). Each piece of ink
+    :data:`CROSS_SIZE_PX` across, sparse in its box (at most 60 % of it: not a blot) and about as wide
+    one way as the other (its second moments' smaller eigenvalue at least ``min_isotropy`` of the larger:
+    a stroke, a box's edge or the stick's trace is a line) is refined with :func:`find_cross` and kept
+    when its ink is point-symmetric about that centre (correlation with itself turned by 180° at least
+    ``min_symmetry``); of those, the ones whose ink is at least ``min_relative_ink`` of the darkest's (one
+    pen drew them all) are the crosses. Named ``m0, m1, ...`` from the top of the image down, ``kind``
+    "cross".
+
+    The thresholds: on two real phone videos' first frames (1080p, crosses 15-20 px across, JPEG) the
+    crosses' ink reaches 76-102 DN, their isotropy 0.15-0.69 and asymmetry 0.05-0.20, and the next
+    strongest symmetric pieces (wood grain, an object's dark details, a shadow's corner) at most 53 DN:
+    7 of one capture's 8 crosses found and nothing else, and the other's 3 visible crosses and nothing
+    else."""
+    img = grey_8bit_scale(image)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (stroke_px, stroke_px))
+    ink = cv2.morphologyEx(img, cv2.MORPH_BLACKHAT, kernel).astype(np.float32)
+    paper = cv2.morphologyEx(img, cv2.MORPH_CLOSE, kernel).astype(np.float32)
+    on_paper = paper >= 0.6 * float(np.percentile(paper, 99))
+    mask = ((ink >= min_ink) & (ink >= 0.12 * paper) & on_paper).astype(np.uint8)
+    n, labels, stats, centroids = cv2.connectedComponentsWithStats(mask)
+    h, w = img.shape
+    found: list[MarkerDetection] = []
+    for i in range(1, n):
+        x, y, bw, bh, area = (int(v) for v in stats[i])
+        size = max(bw, bh)
+        if not (CROSS_SIZE_PX[0] <= size <= CROSS_SIZE_PX[1]) or area > 0.6 * bw * bh or area < 12:
+            continue
+        ys, xs = np.nonzero(labels[y:y + bh, x:x + bw] == i)
+        weights = ink[y + ys, x + xs]
+        cov = np.cov(np.stack([xs, ys]), aweights=weights)
+        eig = np.linalg.eigvalsh(cov)
+        isotropy = float(eig[0] / eig[1]) if eig[1] > 0 else 0.0
+        if isotropy < min_isotropy:
+            continue
+        radius = max(3, size // 2)
+        try:
+            u, v = find_cross(img, centroids[i], search_px=float(size), radius_px=radius, stroke_px=stroke_px,
+                              follow=0)
+        except GnomonError:
+            continue
+        if np.hypot(u - centroids[i][0], v - centroids[i][1]) > size / 2:
+            continue
+        # point symmetry of the ink about the refined centre
+        r = radius + 2
+        grid = np.mgrid[-r:r + 1, -r:r + 1].astype(np.float32)
+        mx, my = (u + grid[1]).astype(np.float32), (v + grid[0]).astype(np.float32)
+        patch = cv2.remap(ink, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+        turned = patch[::-1, ::-1]
+        a, b = patch.ravel() - patch.mean(), turned.ravel() - turned.mean()
+        symmetry = float(a @ b / max(float(np.sqrt((a @ a) * (b @ b))), 1e-9))
+        if symmetry < min_symmetry or not (0 <= u <= w - 1 and 0 <= v <= h - 1):
+            continue
+        found.append(MarkerDetection("", (float(centroids[i][0]), float(centroids[i][1])), (float(u), float(v)),
+                                     float(patch.max()), isotropy, 1.0 - symmetry, kind="cross"))
+    if found:
+        darkest = max(d.contrast for d in found)
+        found = [d for d in found if d.contrast >= min_relative_ink * darkest]
+    found.sort(key=lambda d: (d.pixel[1], d.pixel[0]))
+    return [replace(d, name=f"m{k}") for k, d in enumerate(found)]
 
 
 # --------------------------------------------------------------------------- pose fitting

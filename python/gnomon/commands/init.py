@@ -348,8 +348,12 @@ def _found_plane(name: str, what: str, marks, first_id: int, drawing: str, regio
                  units_line: bool) -> str:
     """A [[planes]] table whose markers were found in the first frame (pixels as found, no plane_xy)."""
     regions = _regions_lines(name, regions_help)
-    lines = ",\n".join(f"  {{ id = {first_id + i}, pixel_hint = [{m.pixel[0]:.1f}, {m.pixel[1]:.1f}] }}"
-                        for i, m in enumerate(marks))
+    # a checker's hint is refined again by the scan; a cross is found here once and for all (find_cross)
+    def mark_line(i: int, m) -> str:
+        key, digits = ("pixel", 2) if m.kind == "cross" else ("pixel_hint", 1)
+        return f"  {{ id = {first_id + i}, {key} = [{m.pixel[0]:.{digits}f}, {m.pixel[1]:.{digits}f}] }}"
+
+    lines = ",\n".join(mark_line(i, m) for i, m in enumerate(marks))
     distance = (f"# mark_distance = {{ between = [{first_id}, {first_id + 1}], length = L }}  # one measured "
                 "spacing sets the lengths (then [capture] units = \"mm\")\n") if units_line else ""
     return FOUND_PLANE.format(what=f"The {name}. {what}", howto=FOUND_MARKERS_HOWTO.format(drawing=drawing),
@@ -465,9 +469,13 @@ def run(args: argparse.Namespace) -> int:
     howto = MARKERS_HOWTO.format(units=units)
     found_note, found = "", None  # found: the marks init assigned to the desk and the wall, if any
     if light == "two-plane":
-        from gnomon.camera.plane_pose import search_markers, split_marks
+        from gnomon.camera.plane_pose import search_crosses, search_markers, split_marks
 
         groups = split_marks(search_markers(first.grey))
+        if not groups.lower and len(groups.found) < 4:  # no printed checkers: hand-drawn crosses, then
+            crosses = split_marks(search_crosses(first.grey))
+            if crosses.lower or len(crosses.found) > len(groups.found):
+                groups = crosses
         if groups.lower:
             found = groups
             drawing = out.with_name(out.stem + "_marks.png")
@@ -484,14 +492,19 @@ def run(args: argparse.Namespace) -> int:
                           f"(drawn in {drawing.name})")
             if not groups.complete:
                 short = "desk" if len(groups.lower) < 4 else "wall"
-                found_note += (f"; the {short}'s fourth mark is not a clean 2x2 checker (or hidden): add it to its "
+                mark = "cross" if groups.lower[0].kind == "cross" else "2x2 checker"
+                found_note += (f"; the {short}'s fourth mark is not a clean {mark} (or hidden): add it to its "
                                "markers, pixel = [u, v]")
         else:
             found_note = f"; {groups.why}: give the markers' pixels by hand"
             if groups.found:
-                found_note += " (the checkers found are listed in the desk's table)"
-                howto += ("# Printed 2x2 checkers found in the first frame (copy each into its plane's markers):\n"
-                          + "".join(f"#   pixel_hint = [{m.pixel[0]:.1f}, {m.pixel[1]:.1f}]\n" for m in groups.found))
+                crosses_found = groups.found[0].kind == "cross"
+                found_note += (f" (the {'crosses' if crosses_found else 'checkers'} found are listed in the "
+                               "desk's table)")
+                key = "pixel" if crosses_found else "pixel_hint"
+                howto += (f"# {'Hand-drawn crosses' if crosses_found else 'Printed 2x2 checkers'} found in the first "
+                          "frame (copy each into its plane's markers):\n"
+                          + "".join(f"#   {key} = [{m.pixel[0]:.1f}, {m.pixel[1]:.1f}]\n" for m in groups.found))
     if light in ("two-plane", "sun"):
         if found is None:
             named = ("desk", "wall") if light == "two-plane" else ("ground", "facade")
