@@ -296,6 +296,8 @@ class FacadeSunConfig:
     drift_px: float = 0.0                # the camera's slow drift by the last frame, px (sensor.camera_motion)
     bump_px: float = 0.0                 # a sudden shift of the camera, px, from bump_frame on
     bump_frame: int | None = None        # None: 60 % of the way
+    # No pole: the roof line across the street sweeps its shadow up the facade (gnomon.simulate.roof_edge).
+    roof_edge: bool = False
 
     @classmethod
     def day(cls, **overrides) -> FacadeSunConfig:
@@ -630,7 +632,7 @@ class FacadeSunScene:
         d_cam = self.lens.rays_cam(uu, vv)
         d = d_cam @ self.R
         t, ids, n, box = self.building.cast(self.C, d)
-        tp = self.pole.intersect(self.C, d)
+        tp = np.full(t.shape, np.inf) if self.config.roof_edge else self.pole.intersect(self.C, d)
         pole = tp < t
         t = np.where(pole, tp, t)
         ids = np.where(pole, POLE, ids).astype(np.int8)
@@ -1314,7 +1316,12 @@ def simulate_facade_sun(out_dir, config: FacadeSunConfig | None = None, *,
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise GnomonError(f"{out}: exists and is not a directory")
-    scene = FacadeSunScene(config)
+    if config.roof_edge:
+        from gnomon.simulate.roof_edge import RoofEdgeScene  # a subclass of this module's scene
+
+        scene = RoofEdgeScene(config)
+    else:
+        scene = FacadeSunScene(config)
     out.mkdir(parents=True, exist_ok=True)
     _clear_previous(out)
     frames_dir = out / "frames"
