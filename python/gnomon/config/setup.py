@@ -116,7 +116,7 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
     planes = tuple(ReferencePlane(p.name, PlaneInCamera.from_world(p.point, p.normal, pose),
                                   plane_region_mask(p, shape), p.regions) for p in log.planes)
     s = log.scan
-    tracker = dataclasses.replace(tracker_settings(log), second_dips=light.chooses_dips)
+    tracker = dataclasses.replace(tracker_settings(log), second_dips=light.chooses_dips, steps=light.tracks_steps)
     inputs = ScanInputs(log.path, log.camera_file, dict(log.calibration), planes_report)
     georeferenced = light.georeference(log.capture.units) is not None
     if log.output.crs is not None and not georeferenced:

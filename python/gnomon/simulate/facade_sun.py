@@ -1303,12 +1303,14 @@ def _clear_previous(out: Path) -> None:
 
 
 def simulate_facade_sun(out_dir, config: FacadeSunConfig | None = None, *,
-                        progress: Callable[[int, int], None] | None = None) -> FacadeSunResult:
+                        progress: Callable[[int, int], None] | None = None,
+                        scene: FacadeSunScene | None = None) -> FacadeSunResult:
     """Render the facade/sun time-lapse into ``out_dir``; return what was written.
 
     Writes ``frames/<UTC time>.{jpg,png}`` (EXIF capture times inside),
     ``ground_truth.npz``, ``ground_truth.json`` and, last, ``field_log.toml``,
-    every file atomically. ``progress(done, total)`` is called after each frame.
+    every file atomically. ``progress(done, total)`` is called after each frame. ``scene``: the scene built
+    from ``config`` already (a subclass's: :func:`gnomon.simulate.roof_edge.simulate_roof_edge`).
     """
     config = config or FacadeSunConfig()
     config.validate()
@@ -1316,11 +1318,10 @@ def simulate_facade_sun(out_dir, config: FacadeSunConfig | None = None, *,
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise GnomonError(f"{out}: exists and is not a directory")
-    if config.roof_edge:
-        from gnomon.simulate.roof_edge import RoofEdgeScene  # a subclass of this module's scene
-
-        scene = RoofEdgeScene(config)
-    else:
+    if scene is None:
+        if config.roof_edge:
+            raise GnomonError("simulate facade_sun: roof_edge scenes are rendered by "
+                              "gnomon.simulate.roof_edge.simulate_roof_edge")
         scene = FacadeSunScene(config)
     out.mkdir(parents=True, exist_ok=True)
     _clear_previous(out)

@@ -40,13 +40,14 @@ plane, the facade (its regions bare wall the edge's shadow swept).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from gnomon.simulate import shadow
-from gnomon.simulate.facade_sun import RHO, WALL, FacadeSunConfig, FacadeSunScene
+from gnomon.simulate.facade_sun import RHO, WALL, FacadeSunConfig, FacadeSunResult, FacadeSunScene, simulate_facade_sun
 
-__all__ = ["EDGE_A", "EDGE_B", "EDGE_BODY", "EDGE_Y", "EDGE_Z", "RoofEdgeScene"]
+__all__ = ["EDGE_A", "EDGE_B", "EDGE_BODY", "EDGE_Y", "EDGE_Z", "RoofEdgeScene", "simulate_roof_edge"]
 
 EDGE_Y = 40.0   # m: the front wall of the building across the street
 EDGE_Z = 22.0   # m: its roof line
@@ -174,3 +175,13 @@ class RoofEdgeScene(FacadeSunScene):
         out["edge"] = {"a": EDGE_A.tolist(), "b": EDGE_B.tolist(), "body": EDGE_BODY.tolist(),
                        "swept_surface_pixels": int(self.swept_surface.sum())}
         return out
+
+
+def simulate_roof_edge(out_dir, config: FacadeSunConfig | None = None, *,
+                       progress: Callable[[int, int], None] | None = None) -> FacadeSunResult:
+    """Render the roof-edge capture (``config.roof_edge`` is set) into ``out_dir``, as
+    :func:`gnomon.simulate.facade_sun.simulate_facade_sun` writes its scene."""
+    config = FacadeSunConfig(roof_edge=True) if config is None else config
+    if not config.roof_edge:
+        config = FacadeSunConfig(**{**config.__dict__, "roof_edge": True})
+    return simulate_facade_sun(out_dir, config, progress=progress, scene=RoofEdgeScene(config))
