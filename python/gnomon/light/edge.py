@@ -29,10 +29,18 @@ from gnomon.errors import Remark
 from gnomon.light.base import EdgePlanes, EdgeTimes, ReferenceGeometry, Screening
 from gnomon.light.sun import SUBSTEPS, SunClock, SunLight, substep_sun_world
 
-__all__ = ["REFUSED_NOTE", "SunWithEdge"]
+__all__ = ["PILE_UP", "PILE_UP_FRAMES", "REFUSED_NOTE", "SunWithEdge", "pile_ups"]
 
 # A warning lists the edge checks' refusals when they refuse more than this share of the points.
 REFUSED_NOTE = 0.1
+# A frame holds a pile-up of steps when it has more than PILE_UP times the median count of the frames around it
+# (± PILE_UP_FRAMES): a cloud that dims the sun as the edge's shadow arrives makes every point the shadow
+# reaches in the cloud's frames step at its onset (the penumbra's mid-level is crossed early), and leaves a
+# hole of too few steps after it, as long as the cloud lasts.
+PILE_UP = 1.6
+PILE_UP_FRAMES = 16
+# The hole begins within this many frames after the pile-up.
+HOLE_AFTER = 3
 
 
 def _rows(table: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -44,6 +52,33 @@ def _rows(table: np.ndarray, times: np.ndarray) -> np.ndarray:
     f = (t - k)[..., None]
     out = table[k] * (1 - f) + table[np.minimum(k + 1, m - 1)] * f
     return np.where(ok[..., None], out, np.nan)
+
+
+def pile_ups(times: np.ndarray, n_frames: int) -> list[tuple[int, int]]:
+    """Spans of tracker frames ``(first, last)`` (inclusive) where the steps' times ``times`` (H, W, NaN = none)
+    pile up in a frame (``PILE_UP`` times the median count of the frames around it) and then thin out (a hole:
+    frames with fewer than 1/``PILE_UP`` of it, beginning within ``HOLE_AFTER`` frames): from the frame before
+    the pile-up to the end of the hole, and a frame more."""
+    t = times[np.isfinite(times)]
+    if t.size == 0:
+        return []
+    counts = np.bincount(np.clip(np.floor(t).astype(np.int64), 0, n_frames - 1), minlength=n_frames)
+    local = np.array([np.median(counts[max(f - PILE_UP_FRAMES, 0):f + PILE_UP_FRAMES + 1]) for f in range(n_frames)])
+    spans: list[tuple[int, int]] = []
+    hole = counts * PILE_UP < local
+    for f in np.flatnonzero(counts > PILE_UP * np.maximum(local, 1.0)):
+        ahead = np.flatnonzero(hole[f + 1:f + 1 + HOLE_AFTER])
+        if not ahead.size:  # no frames emptied after it: the geometry's (a row of windows), not a cloud's
+            continue
+        end = int(f) + 1 + int(ahead[0])
+        while end + 1 < n_frames and hole[end + 1]:
+            end += 1
+        span = (max(int(f) - 1, 0), min(end + 1, n_frames - 1))
+        if spans and span[0] <= spans[-1][1]:
+            spans[-1] = (spans[-1][0], max(spans[-1][1], span[1]))
+        else:
+            spans.append(span)
+    return spans
 
 
 class SunWithEdge(SunLight):
@@ -109,6 +144,13 @@ class SunWithEdge(SunLight):
         down_sun = (s > 0) & (u >= 0) & (u <= 1)
         rejected = {"not_down_sun_of_the_edge": int((had & ~down_sun).sum())}
         sound = had & down_sun
+        piled = np.zeros(had.shape, dtype=bool)
+        spans = pile_ups(edge.times, n_frames)
+        for first, last in spans:
+            with np.errstate(invalid="ignore"):
+                piled |= (edge.times >= first) & (edge.times < last + 1)
+        rejected["step_in_a_pile_up_of_steps"] = int((sound & piled).sum())
+        sound &= ~piled
         if self.body_world is not None:
             # Signed distance to the plane (positive: lit) a little before and after the step's time.
             table = self._plane_table()
@@ -125,10 +167,16 @@ class SunWithEdge(SunLight):
             rejected["step_against_the_edge_shadow_motion"] = int((sound & ~goes).sum())
             sound &= goes
         notes: list[str] = []
+        if rejected["step_in_a_pile_up_of_steps"]:
+            notes.append(Remark(f"{rejected['step_in_a_pile_up_of_steps']} points refused: their "
+                                f"steps piled up in tracker frames {[list(sp) for sp in spans][:6]} (a cloud dimming "
+                                "the "
+                                "sun as the edge's shadow arrived moves the step to the cloud's onset); the surface "
+                                "the shadow reached then has no points: a capture on a clear day fills it"))
         n_had = max(int(had.sum()), 1)
         refused = n_had - int(sound.sum())
         if refused > REFUSED_NOTE * n_had:
-            notes.append(Remark(f"{edge.name} edge: {refused} of {n_had} points ({100 * refused / n_had:.0f} %) "
+            notes.append(Remark(f"{refused} of {n_had} points ({100 * refused / n_had:.0f} %) "
                                 f"refused as not the [edge]'s shadow ("
                                 f"{', '.join(f'{k}: {v}' for k, v in rejected.items() if v)}); check [edge] a, b "
                                 "and body, or the building's other shadow edges crossing the view"))
