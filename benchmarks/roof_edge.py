@@ -18,7 +18,6 @@ not measured, the first frame 172), which ``--register on`` (the field log as wr
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import sys
 import tempfile
@@ -29,7 +28,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "python"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from building_shadows import facade_arguments  # noqa: E402
 from gnomon.runs.accuracy import depth_accuracy  # noqa: E402
 from gnomon.runs.scan import ScanOptions, run_scan  # noqa: E402
 from gnomon.simulate import FacadeSunConfig  # noqa: E402
@@ -38,11 +39,7 @@ from gnomon.util import toml_io  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--out", type=Path, default=None)
-    ap.add_argument("--width", type=int, default=800)
-    ap.add_argument("--height", type=int, default=600)
-    ap.add_argument("--seed", type=int, default=0)
+    ap = facade_arguments(__doc__.split("\n")[0])
     ap.add_argument("--register", choices=("on", "off"), default="off",
                     help="off: [capture] register = \"off\" (the camera is still); on: the field log as written")
     args = ap.parse_args(argv)
