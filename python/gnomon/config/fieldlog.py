@@ -363,11 +363,15 @@ def _parse_pole(t: Table | None) -> PoleSpec | None:
 
 
 def _parse_edge(t: Table | None) -> EdgeSpec | None:
-    """[edge]: ``a``, ``b`` (the edge's ends) and optionally ``body`` (a point of the occluder off the edge)."""
+    """[edge]: ``a``, ``b`` (the edge's ends; neither: found from the shadow's lines on the reference planes) and
+    optionally ``body`` (a point of the occluder off the edge)."""
     if t is None:
         return None
-    a, b = t.vector("a", 3), t.vector("b", 3)
     body = t.vector("body", 3) if "body" in t.data else None
+    if "a" not in t.data and "b" not in t.data:  # found from the shadow's lines on the reference planes
+        t.done()
+        return EdgeSpec(None, None, body)
+    a, b = t.vector("a", 3), t.vector("b", 3)
     length = float(np.linalg.norm(b - a))
     if length <= 0:
         raise t.error("b", "must differ from a")

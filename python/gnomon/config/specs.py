@@ -217,11 +217,11 @@ class PoleSpec:
 @dataclass(frozen=True)
 class EdgeSpec:
     """[edge]: a straight occluding edge whose shadow the sun sweeps (a roof line; world coordinates, the
-    capture's units): its ends ``a`` and ``b``, and optionally ``body``, a point of the occluder away from the
-    edge (the side its shadow falls on)."""
+    capture's units): its ends ``a`` and ``b`` (None: found from the shadow's lines on the reference planes), and
+    optionally ``body``, a point of the occluder away from the edge (the side its shadow falls on)."""
 
-    a: np.ndarray
-    b: np.ndarray
+    a: np.ndarray | None
+    b: np.ndarray | None
     body: np.ndarray | None = None
 
 

@@ -19,6 +19,7 @@ planes mostly fails them.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -27,9 +28,10 @@ from gnomon.camera.models import Pose
 from gnomon.capture.tracking import ShadowTimes
 from gnomon.errors import Remark
 from gnomon.light.base import EdgePlanes, EdgeTimes, ReferenceGeometry, Screening
-from gnomon.light.sun import SUBSTEPS, SunClock, SunLight, substep_sun_world
+from gnomon.light.shadow_planes import sun_shadow_planes
+from gnomon.light.sun import SUBSTEPS, SunClock, SunLight, substep_sun_world, sun_directions_camera
 
-__all__ = ["PILE_UP", "PILE_UP_FRAMES", "REFUSED_NOTE", "SunWithEdge", "pile_ups"]
+__all__ = ["PILE_UP", "PILE_UP_FRAMES", "REFUSED_NOTE", "CommonLine", "SunWithEdge", "common_line", "pile_ups"]
 
 # A warning lists the edge checks' refusals when they refuse more than this share of the points.
 REFUSED_NOTE = 0.1
@@ -41,6 +43,57 @@ PILE_UP = 1.6
 PILE_UP_FRAMES = 16
 # The hole begins within this many frames after the pile-up.
 HOLE_AFTER = 3
+# An edge found from the reference lines needs this many frames' planes, turning by at least this much about it.
+MIN_LINE_PLANES = 10
+MIN_LINE_TURN_DEG = 2.0
+# Planes farther from the common line than this many robust σ (1.4826 · median distance) are left out of its fit.
+LINE_OUTLIER_SIGMAS = 3.0
+
+
+@dataclass(frozen=True)
+class CommonLine:
+    """The line a family of planes shares (camera frame): ``point`` (the foot of the perpendicular from the
+    camera centre), unit ``direction``; ``planes`` used of ``offered``; ``rms`` their distance from it (world
+    units) and ``turn_deg`` the angle their normals span about it (how well its place is fixed)."""
+
+    point: np.ndarray
+    direction: np.ndarray
+    planes: int
+    offered: int
+    rms: float
+    turn_deg: float
+
+
+def common_line(planes: np.ndarray) -> CommonLine | None:
+    """The line every plane of ``planes`` (N, 4) rows ``[n, d]``, ``n·X = d``, NaN rows none) contains, by least
+    squares: its direction the normals' least singular vector, its point the minimum-norm solution of ``n·X = d``;
+    planes more than ``LINE_OUTLIER_SIGMAS`` robust σ from it are left out and the fit repeated. None with fewer
+    than ``MIN_LINE_PLANES`` planes."""
+    ok = np.all(np.isfinite(planes), axis=1)
+    n, d = planes[ok, :3], planes[ok, 3]
+    keep = np.ones(len(n), dtype=bool)
+    for _ in range(4):
+        if keep.sum() < MIN_LINE_PLANES:
+            return None
+        e = np.linalg.svd(n[keep])[2][-1]
+        x = np.linalg.lstsq(n[keep], d[keep], rcond=None)[0]
+        x -= e * (x @ e)
+        dist = np.abs(n @ x - d)
+        scale = 1.4826 * float(np.median(dist[keep]))
+        new = dist <= max(LINE_OUTLIER_SIGMAS * scale, 1e-12)
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    if keep.sum() < MIN_LINE_PLANES:
+        return None
+    # the normals' spread about the line: their angles in the plane perpendicular to it
+    u = n[keep][0] - e * (n[keep][0] @ e)  # the first normal, square to the line: angle 0
+    u /= np.linalg.norm(u)
+    v = np.cross(e, u)
+    angle = np.degrees(np.arctan2(n[keep] @ v, n[keep] @ u))
+    angle = (angle + 90.0) % 180.0 - 90.0  # a normal and its opposite are one plane
+    return CommonLine(x, e, int(keep.sum()), int(len(n)), float(np.sqrt(np.mean(dist[keep] ** 2))),
+                      float(np.ptp(angle)))
 
 
 def _rows(table: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -89,13 +142,16 @@ class SunWithEdge(SunLight):
     tracks_steps = True
     planes_from_reference_lines = False  # the planes need the capture's whole timeline
 
-    def __init__(self, clock: SunClock, pose: Pose, a_world: np.ndarray, b_world: np.ndarray,
+    def __init__(self, clock: SunClock, pose: Pose, a_world: np.ndarray | None, b_world: np.ndarray | None,
                  body_world: np.ndarray | None = None):
         super().__init__(clock, pose)
-        self.a_world = np.asarray(a_world, dtype=np.float64)
-        self.b_world = np.asarray(b_world, dtype=np.float64)
+        # None: found from each edge's shadow lines on the reference planes (:meth:`shadow_planes`)
+        self.a_world = None if a_world is None else np.asarray(a_world, dtype=np.float64)
+        self.b_world = None if b_world is None else np.asarray(b_world, dtype=np.float64)
         self.body_world = None if body_world is None else np.asarray(body_world, dtype=np.float64)
         self._sun: np.ndarray | None = None
+        # per scan edge ("enter", "leave"): the edge found from its lines, world (a, b) and the fit
+        self.found: dict[str, tuple[np.ndarray, np.ndarray, CommonLine] | None] = {}
 
     def _sun_world(self) -> np.ndarray:
         """Unit directions towards the sun (world) every 1/SUBSTEPS tracker frame."""
@@ -104,35 +160,63 @@ class SunWithEdge(SunLight):
             self._sun = substep_sun_world(self._timeline(), c.site, c.heading_deg)
         return self._sun
 
-    def _plane_table(self) -> np.ndarray:
-        """(M, 4) camera-frame planes through the edge containing the sun, every 1/SUBSTEPS tracker frame; with
-        ``body``, each normal points to the lit side (away from the occluder)."""
+    def _ends(self, name: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """The edge's ends (world) for the scan edge ``name``: as given, or as found from its lines."""
+        if self.a_world is not None and self.b_world is not None:
+            return self.a_world, self.b_world
+        found = self.found.get(name)
+        return None if found is None else (found[0], found[1])
+
+    def _plane_table(self, a_world: np.ndarray, b_world: np.ndarray) -> np.ndarray:
+        """(M, 4) camera-frame planes through the edge ``a`` → ``b`` containing the sun, every 1/SUBSTEPS tracker
+        frame; with ``body``, each normal points to the lit side (away from the occluder)."""
         d = self._sun_world()
-        n = np.cross(self.b_world - self.a_world, d)
+        n = np.cross(b_world - a_world, d)
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         if self.body_world is not None:
-            n = np.where(((n @ (self.body_world - self.a_world)) > 0)[:, None], -n, n)
+            n = np.where(((n @ (self.body_world - a_world)) > 0)[:, None], -n, n)
         n_cam = n @ self.pose.R.T
-        a_cam = self.pose.world_to_camera(self.a_world)
+        a_cam = self.pose.world_to_camera(a_world)
         return np.concatenate([n_cam, (n_cam @ a_cam)[:, None]], axis=1)
 
     def shadow_planes(self, edge: EdgeTimes, geometry: ReferenceGeometry) -> EdgePlanes:
-        table = self._plane_table()
-        return EdgePlanes(table, 0, [], np.zeros(len(table)), SUBSTEPS, measured=False)
+        """The table through the edge; without ``a`` and ``b``, through the line all the frames' planes share, each
+        plane through the frame's shadow line on the reference planes and the sun (:func:`common_line`)."""
+        lines = []
+        if self.a_world is None or self.b_world is None:
+            lines = geometry.lines(edge.times)
+            c = self.clock
+            planes, _ = sun_shadow_planes(lines, sun_directions_camera(self._timeline(), c.site, c.heading_deg,
+                                                                       self.pose))
+            fit = common_line(planes)
+            if fit is None or fit.turn_deg < MIN_LINE_TURN_DEG:
+                self.found[edge.name] = None
+                rows = (len(self._timeline().used) - 1) * SUBSTEPS + 1
+                return EdgePlanes(np.full((rows, 4), np.nan), 0, lines, np.zeros(rows), SUBSTEPS, measured=False)
+            a = self.pose.camera_to_world(fit.point)
+            self.found[edge.name] = (a, a + fit.direction @ self.pose.R, fit)
+        ends = self._ends(edge.name)
+        assert ends is not None
+        table = self._plane_table(*ends)
+        return EdgePlanes(table, 0, lines, np.zeros(len(table)), SUBSTEPS, measured=False)
 
     def screen(self, edge: EdgeTimes, points_cam: np.ndarray, times: ShadowTimes, n_frames: int,
                relative_depth: np.ndarray | None = None,
                relative_depth_sigma: np.ndarray | None = None,
                levelled: np.ndarray | None = None) -> Screening:
-        """Only points down-sun of the edge between its ends and, with ``body``, whose step goes the way the
-        edge's shadow moves there and then."""
+        """Only points down-sun of the edge (between its ends when they were given), not in a pile-up of steps
+        and, with ``body``, whose step goes the way the edge's shadow moves there and then."""
         had = np.isfinite(points_cam[..., 2])
+        ends = self._ends(edge.name)
+        if ends is None:  # no edge found from this edge's lines: no planes, no points
+            return Screening(np.zeros(had.shape, dtype=bool))
+        given = self.a_world is not None
         rows = edge.times.astype(np.float64) * SUBSTEPS
         X = np.where(had[..., None], points_cam, 0.0)
         # The sun's ray from X meets the edge's line (X lies in the plane through both): X + s·d = a + u·(b − a).
         R = self.pose.R
         d = _rows(self._sun_world() @ R.T, rows)
-        a, b = self.pose.world_to_camera(self.a_world), self.pose.world_to_camera(self.b_world)
+        a, b = self.pose.world_to_camera(ends[0]), self.pose.world_to_camera(ends[1])
         e = b - a
         w = a - X
         ee, de, dd = float(e @ e), d @ e, np.einsum("...i,...i->...", d, d)
@@ -141,7 +225,7 @@ class SunWithEdge(SunLight):
         with np.errstate(invalid="ignore", divide="ignore"):
             s = (de * ew - ee * dw) / det
             u = (dd * ew - de * dw) / det
-        down_sun = (s > 0) & (u >= 0) & (u <= 1)
+        down_sun = (s > 0) & (((u >= 0) & (u <= 1)) | (not given))  # a found edge has no ends
         rejected = {"not_down_sun_of_the_edge": int((had & ~down_sun).sum())}
         sound = had & down_sun
         piled = np.zeros(had.shape, dtype=bool)
@@ -153,7 +237,7 @@ class SunWithEdge(SunLight):
         sound &= ~piled
         if self.body_world is not None:
             # Signed distance to the plane (positive: lit) a little before and after the step's time.
-            table = self._plane_table()
+            table = self._plane_table(*ends)
             h = 0.5 * SUBSTEPS
             before = _rows(table, rows - h)
             after = _rows(table, rows + h)
@@ -170,9 +254,8 @@ class SunWithEdge(SunLight):
         if rejected["step_in_a_pile_up_of_steps"]:
             notes.append(Remark(f"{rejected['step_in_a_pile_up_of_steps']} points refused: their "
                                 f"steps piled up in tracker frames {[list(sp) for sp in spans][:6]} (a cloud dimming "
-                                "the "
-                                "sun as the edge's shadow arrived moves the step to the cloud's onset); the surface "
-                                "the shadow reached then has no points: a capture on a clear day fills it"))
+                                "the sun as the edge's shadow arrived moves the step to the cloud's onset); the "
+                                "surface the shadow reached then has no points: a capture on a clear day fills it"))
         n_had = max(int(had.sum()), 1)
         refused = n_had - int(sound.sum())
         if refused > REFUSED_NOTE * n_had:
@@ -184,6 +267,22 @@ class SunWithEdge(SunLight):
 
     def report(self, planes_cam: list[np.ndarray], warnings: list[str]) -> dict[str, Any]:
         out = super().report(planes_cam, warnings)
-        out["sun"]["edge"] = {"a": self.a_world.tolist(), "b": self.b_world.tolist(),
-                              "body": None if self.body_world is None else self.body_world.tolist()}
+        edge: dict[str, Any] = {
+            "a": None if self.a_world is None else self.a_world.tolist(),
+            "b": None if self.b_world is None else self.b_world.tolist(),
+            "body": None if self.body_world is None else self.body_world.tolist(),
+            "found_from_lines": self.a_world is None}
+        if self.found and all(f is None for f in self.found.values()):
+            warnings.append(f"no straight edge found from the shadow's lines on the reference planes (fewer than "
+                            f"{MIN_LINE_PLANES} frames' planes, or turning by less than {MIN_LINE_TURN_DEG:g}° about "
+                            "their common line): no points; give [edge] a and b, or reference regions the edge's "
+                            "shadow crosses")
+        for name, found in self.found.items():
+            if found is None:  # this edge's steps did not cross the reference regions: no points from it
+                edge[name] = None
+                continue
+            a, b, fit = found
+            edge[name] = {"point": a.tolist(), "direction": (b - a).tolist(), "planes": fit.planes,
+                          "planes_offered": fit.offered, "rms": fit.rms, "turn_deg": fit.turn_deg}
+        out["sun"]["edge"] = edge
         return out
