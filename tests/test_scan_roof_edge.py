@@ -129,3 +129,23 @@ def test_facade_from_the_edge_found_in_the_shadow_lines(roof_edge) -> None:
     assert acc.coverage >= 0.9 * float(truth["cloud_free_passage"].sum() / truth["swept"].sum())
     assert acc.gross_rate <= 0.01
     shutil.rmtree(root / "scan_found")
+
+
+@pytest.mark.slow
+def test_regions_from_the_edge_steps(roof_edge, tmp_path: Path, capsys) -> None:
+    """`gnomon regions` tracks an [edge] capture's steps (not dips) and grows the facade's mask along its lines."""
+    import cv2
+
+    root, truth = roof_edge
+    log = tmp_path / "field_log.toml"
+    data = tomllib.loads((root / "capture" / "field_log.toml").read_text())
+    data["capture"]["frames"] = str(root / "capture" / data["capture"]["frames"])
+    toml_io.dump(data, log)
+    assert main(["regions", str(log), "--out", str(tmp_path / "regions"), "--quiet"]) == 0
+    print(capsys.readouterr().out)
+    mask = cv2.imread(str(tmp_path / "regions" / "facade_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
+    wall = truth["object_id"] == 1
+    # grown from the field log's three rectangles (6,580 px) along the wall the edge's shadow swept (measured
+    # 15,803 px)
+    assert mask.sum() > 2 * sum((u1 - u0) * (v1 - v0) for u0, v0, u1, v1 in data["planes"][0]["regions"])
+    assert (mask & wall & truth["swept_surface"]).sum() >= 0.95 * mask.sum()
