@@ -85,11 +85,12 @@ def test_facade_from_the_roof_edge_without_a_pole(roof_edge) -> None:
     free = float(truth["cloud_free_passage"].sum() / truth["swept"].sum())
     assert acc.coverage >= 0.9 * free
     assert calm.coverage >= 0.85
-    # Gross errors, > 1 % of the distance (issue 35's bar for the building's own shadows): measured 0.43 %.
+    # Gross errors, > 1 % of the distance, and false points (issue 35's bars for the building's own shadows,
+    # 1 % each): measured 0.19 % and 0.70 % (4.9 % before the points that saw less than half the sun were
+    # refused: in a window reveal's or the ledge's penumbra as the edge passed, which the truth does not count
+    # as swept).
     assert GROSS_FRACTION == 0.01 and acc.gross_rate <= 0.01
-    # False points: mostly in a window reveal's or the ledge's penumbra while the edge's shadow passed, which the
-    # truth does not count as swept (less than half the disc seen), a median 0.27 % off; measured 4.9 %.
-    assert acc.false_point_rate <= 0.06
+    assert acc.false_point_rate <= 0.01
     # Leaving steps are against the edge's shadow's motion here (it climbs): the checks refuse them.
     leave = next(e for e in result.edges if e.name == "leave")
     assert leave.rejected["step_against_the_edge_shadow_motion"] > 0
@@ -127,7 +128,7 @@ def test_facade_from_the_edge_found_in_the_shadow_lines(roof_edge) -> None:
     assert np.degrees(np.arccos(min(1.0, abs(direction @ e)))) <= 0.1
     assert acc.rms_pct <= 0.2  # measured 0.078 %
     assert acc.coverage >= 0.9 * float(truth["cloud_free_passage"].sum() / truth["swept"].sum())
-    assert acc.gross_rate <= 0.01
+    assert acc.gross_rate <= 0.01 and acc.false_point_rate <= 0.01
     shutil.rmtree(root / "scan_found")
 
 

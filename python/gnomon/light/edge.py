@@ -9,12 +9,17 @@ goes into the shadow (or out of it) once and stays — a step, which the tracker
 shadow boundary at the step's time), so the entering and the leaving steps are two edges of the scan,
 triangulated on the same planes and fused.
 
-With ``body`` (a point of the occluder away from the edge: the side its shadow falls on) each point's step
-must go the way the edge's shadow moves there at that time — into the shadow where the plane sweeps towards
-the shadowed side, out of it otherwise —, and every point's ray towards the sun must pass the edge between
-``a`` and ``b`` (the point lies down-sun of the edge). Points that fail are refused, counted by reason
-(:meth:`SunWithEdge.screen`): another edge's step (a balcony's, a window reveal's) triangulated on the wrong
-planes mostly fails them.
+Every point's ray towards the sun must pass the edge's line beyond the point (the point lies down-sun of the
+edge), between ``a`` and ``b`` when they are given; with ``body`` (a point of the occluder away from the edge: the
+side its shadow falls on) its step must go the way the edge's shadow moves there at that time — into the
+shadow where the plane sweeps towards the shadowed side, out of it otherwise. The step must not sit in a
+pile-up of steps (a cloud dimming the sun as the shadow arrived, :func:`pile_ups`), and the point must have
+seen at least half the sun as the edge passed (:func:`gnomon.geometry.validity.fully_lit_like_neighbours`: the
+edge hides the whole disc once past). Points that fail are refused, counted by reason
+(:meth:`SunWithEdge.screen`).
+
+Without ``a`` and ``b`` the edge is found: the line all the frames' planes share, each through the shadow's
+line on the reference planes and the sun (:func:`common_line`), each scan edge from its own steps.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import numpy as np
 from gnomon.camera.models import Pose
 from gnomon.capture.tracking import ShadowTimes
 from gnomon.errors import Remark
+from gnomon.geometry.validity import fully_lit_like_neighbours
 from gnomon.light.base import EdgePlanes, EdgeTimes, ReferenceGeometry, Screening
 from gnomon.light.shadow_planes import sun_shadow_planes
 from gnomon.light.sun import SUBSTEPS, SunClock, SunLight, substep_sun_world, sun_directions_camera
@@ -204,8 +210,9 @@ class SunWithEdge(SunLight):
                relative_depth: np.ndarray | None = None,
                relative_depth_sigma: np.ndarray | None = None,
                levelled: np.ndarray | None = None) -> Screening:
-        """Only points down-sun of the edge (between its ends when they were given), not in a pile-up of steps
-        and, with ``body``, whose step goes the way the edge's shadow moves there and then."""
+        """Only points down-sun of the edge (between its ends when they were given), not in a pile-up of steps,
+        that saw at least half the sun as the edge passed and, with ``body``, whose step goes the way the edge's
+        shadow moves there and then."""
         had = np.isfinite(points_cam[..., 2])
         ends = self._ends(edge.name)
         if ends is None:  # no edge found from this edge's lines: no planes, no points
@@ -250,6 +257,12 @@ class SunWithEdge(SunLight):
             goes = np.where(np.isfinite(s_before) & np.isfinite(s_after), goes, True)
             rejected["step_against_the_edge_shadow_motion"] = int((sound & ~goes).sum())
             sound &= goes
+        if relative_depth is not None:
+            # The edge hides the whole disc once past: the step takes the direct share of the lit level, less
+            # where another object (a reveal, a ledge) hid part of the disc as the edge passed (its time biased).
+            full = fully_lit_like_neighbours(relative_depth, np.ones(had.shape), sound)
+            rejected["saw_less_than_half_the_sun"] = int((sound & ~full).sum())
+            sound &= full
         notes: list[str] = []
         if rejected["step_in_a_pile_up_of_steps"]:
             notes.append(Remark(f"{rejected['step_in_a_pile_up_of_steps']} points refused: their "
