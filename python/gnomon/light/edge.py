@@ -35,12 +35,10 @@ from gnomon.errors import Remark
 from gnomon.geometry.validity import fully_lit_like_neighbours
 from gnomon.light.base import EdgePlanes, EdgeTimes, ReferenceGeometry, Screening
 from gnomon.light.shadow_planes import sun_shadow_planes
-from gnomon.light.sun import SUBSTEPS, SunClock, SunLight, substep_sun_world, sun_directions_camera
+from gnomon.light.sun import REFUSED_NOTE, SUBSTEPS, SunClock, SunLight, substep_sun_world, sun_directions_camera
 
-__all__ = ["PILE_UP", "PILE_UP_FRAMES", "REFUSED_NOTE", "CommonLine", "SunWithEdge", "common_line", "pile_ups"]
+__all__ = ["PILE_UP", "PILE_UP_FRAMES", "CommonLine", "SunWithEdge", "common_line", "pile_ups"]
 
-# A warning lists the edge checks' refusals when they refuse more than this share of the points.
-REFUSED_NOTE = 0.1
 # A frame holds a pile-up of steps when it has more than PILE_UP times the median count of the frames around it
 # (± PILE_UP_FRAMES): a cloud that dims the sun as the edge's shadow arrives makes every point the shadow
 # reaches in the cloud's frames step at its onset (the penumbra's mid-level is crossed early), and leaves a
