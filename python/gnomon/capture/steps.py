@@ -60,7 +60,8 @@ class _Direction:
         self.samples = np.zeros((2 * half,) + shape, np.float32)  # v[k − m … k + m − 1] at the best k
 
     def fold(self, k: int, strength: np.ndarray, before: np.ndarray, after: np.ndarray, spread: np.ndarray,
-             width: int, window: np.ndarray) -> None:
+             width: int, ring: np.ndarray, slots: np.ndarray) -> None:
+        """Candidate ``k`` of this direction's strength; ``ring[slots]`` the frames ``k − m … k + m − 1``."""
         far = (k - self.at) > width
         better = strength > self.best
         self.rival = np.where(far & better, np.maximum(self.rival, self.best), self.rival)
@@ -73,7 +74,7 @@ class _Direction:
         self.before[idx] = before[idx]
         self.after[idx] = after[idx]
         self.spread[idx] = spread[idx]
-        self.samples[(slice(None),) + idx] = window[(slice(None),) + idx]
+        self.samples[:, idx[0], idx[1]] = ring[slots[:, None], idx[0][None, :], idx[1][None, :]]
 
 
 class StepTracker:
@@ -139,9 +140,9 @@ class StepTracker:
         spread = np.sqrt(var).astype(np.float32)
         before, after = before.astype(np.float32), after.astype(np.float32)
         m = self.half
-        window = self.ring[[(j % self.slots) for j in range(k - m, k + m)]]
-        self.enter.fold(k, before - after, before, after, spread, self.width, window)
-        self.leave.fold(k, after - before, before, after, spread, self.width, window)
+        slots = np.arange(k - m, k + m) % self.slots
+        self.enter.fold(k, before - after, before, after, spread, self.width, self.ring, slots)
+        self.leave.fold(k, after - before, before, after, spread, self.width, self.ring, slots)
 
     def _add_right(self, v: np.ndarray, sign: float) -> None:
         v64 = v.astype(np.float64)
