@@ -50,13 +50,19 @@ def building_shadow_crossed(config: FacadeSunConfig, step: int = 2) -> np.ndarra
     return seen & hidden & np.isfinite(scene.depth)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def facade_arguments(description: str) -> argparse.ArgumentParser:
+    """The options of a facade benchmark: ``--out`` (a folder to keep the capture and scans in), the image size,
+    the scene's seed."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--width", type=int, default=800)
     ap.add_argument("--height", type=int, default=600)
     ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = facade_arguments(__doc__.split("\n")[0]).parse_args(argv)
     root = args.out or Path(tempfile.mkdtemp(prefix="gnomon-building-shadows-"))
     config = FacadeSunConfig(width=args.width, height=args.height, seed=args.seed)
     capture = root / "capture"

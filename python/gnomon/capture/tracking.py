@@ -63,6 +63,7 @@ from gnomon.capture.cloud_levels import HeldFrame, cloud_levels
 from gnomon.capture.frames import DroppedFrame, Frame, FrameSource, frame_pass
 from gnomon.capture.noise import image_noise_dn
 from gnomon.capture.registration import FrameRegistrar, Registration, reference_frame, registered
+from gnomon.capture.steps import StepTracker
 from gnomon.errors import FrameError, KernelArrayError, KernelFramesError, KernelLutError, KernelParameterError
 from gnomon.util.progress import Progress
 from gnomon.util.validate import MAX_DIP_FRAMES
@@ -357,7 +358,10 @@ class TrackerSettings:
     the two; the kernel keeps them only then: its block pass is about a third
     cheaper per frame without, and :meth:`ShadowTracker.second_dips` needs it); ``register``: measure
     every tracked frame's motion against the first and resample the frames that moved onto its grid
-    (:mod:`gnomon.capture.registration`).
+    (:mod:`gnomon.capture.registration`); ``steps``: report each pixel's strongest lasting step into and
+    out of the shadow instead of its dip (:mod:`gnomon.capture.steps`: a straight edge's shadow under the
+    sun, which passes each pixel once and does not come back), over the same frames, the dip width
+    ``max_width`` the steps' sides.
     """
 
     gamma: float | str = "srgb"
@@ -368,6 +372,7 @@ class TrackerSettings:
     ambiguity: float = 0.6
     second_dips: bool = False
     register: bool = False
+    steps: bool = False
 
 
 class ShadowTracker:
@@ -394,6 +399,9 @@ class ShadowTracker:
                                                 ambiguity=settings.ambiguity, lut=self.lut,
                                                 normalise=self.normalizer is not None,
                                                 second_dips=settings.second_dips)
+        # The steps (a straight edge's shadow), over exactly the frames and levels the kernel sees.
+        self._steps = (StepTracker((h, w), self.lut, settings.max_width, min(settings.window, 4),
+                                   settings.ambiguity) if settings.steps else None)
         self.fed: list[int] = []  # capture index of every frame the kernel saw, in order
         self.refused: list[int] = []  # capture index of every frame it did not see (illumination dips)
         self.levelled: list[int] = []  # capture index of every frame fed levelled pixel by pixel (a cloud's)
@@ -425,7 +433,7 @@ class ShadowTracker:
             held = [h for _, h in self._held]
             for (i, _), (clear_gain, levels), h in zip(self._held, cloud_levels(self.lut, before, gain_before, grey,
                                                                                 gain, held), held, strict=True):
-                self._feed(h.grey, clear_gain, levels)
+                self._feed(h.grey, clear_gain, levels, h.gain)
                 self.fed.append(i)
                 self.levelled.append(i)
             self._held = []
@@ -434,7 +442,11 @@ class ShadowTracker:
         self._clear = (grey, gain)
         return True
 
-    def _feed(self, grey: np.ndarray, gain: float | None, levels: np.ndarray | None) -> None:
+    def _feed(self, grey: np.ndarray, gain: float | None, levels: np.ndarray | None,
+              measured_gain: float | None = None) -> None:
+        """One frame to the kernel (and the steps); a frame levelled pixel by pixel comes with its
+        ``measured_gain`` (its own global level), which the steps take instead of the levels: these are fitted
+        for a thin passing shadow, and would move a step made under the cloud."""
         if self.crop is not None:
             grey = np.ascontiguousarray(grey[self.crop])
             levels = None if levels is None else np.ascontiguousarray(levels[self.crop])
@@ -442,6 +454,8 @@ class ShadowTracker:
             self._tracker.update(grey, gain)
         else:
             self._tracker.update(grey, gain, levels)
+        if self._steps is not None:
+            self._steps.update(grey, gain if levels is None else measured_gain)
 
     def flush(self) -> None:
         """The frames still held at the end (a dip the capture ends in) are refused."""
@@ -474,8 +488,12 @@ class ShadowTracker:
 
     def finish(self, noise_dn: float | None = None) -> ShadowTimes:
         """The shadow times so far: the kernel keeps the dips at least :func:`contrast_floor` deep
-        (``settings.min_contrast`` and, given the image noise ``noise_dn`` (DN), its multiple)."""
-        return ShadowTimes.from_kernel(self._tracker.finish(contrast_floor(self.settings.min_contrast, noise_dn)))
+        (``settings.min_contrast`` and, given the image noise ``noise_dn`` (DN), its multiple). With
+        ``settings.steps``, the steps instead (:class:`~gnomon.capture.steps.StepTracker`, the same floor)."""
+        floor = contrast_floor(self.settings.min_contrast, noise_dn)
+        if self._steps is not None:
+            return ShadowTimes(**self._steps.finish(floor))
+        return ShadowTimes.from_kernel(self._tracker.finish(floor))
 
 
 @dataclass

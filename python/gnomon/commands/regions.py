@@ -122,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             raise FieldLogError(f"{log.path}: [[planes]] {plane.name}: nothing to start from; give it markers, "
                                 "a chessboard or rough regions")
-    tracked, _, notes = track_widening(track_source, source, tracker_settings(log), shape,
+    settings = tracker_settings(log)
+    tracked, _, notes = track_widening(track_source, source, settings, shape,
                                        dip_width=dip_width_policy(log), progress=not args.quiet,
                                        where=f"{log.path}: [camera]")
     for note in notes:
@@ -130,6 +131,10 @@ def run(args: argparse.Namespace) -> int:
     # The scan's own times: a compressed video's block times interpolated between their centres, a fast
     # sweep's staircase re-timed between its isochrones (gnomon.reconstruct.edges.edge_time_maps).
     maps = edge_time_maps(tracked, log.scan.edge)
+    if settings.steps and len(maps) == 2:
+        # An [edge]'s steps into and out of its shadow are one event each, both on its boundary at their time:
+        # one map (a pixel with both: its step into the shadow).
+        maps = [np.where(np.isfinite(maps[0]), maps[0], maps[1])]
     planes = [PlaneInCamera.from_world(p.point, p.normal, log.pose) for p in log.planes]
     names = [p.name for p in log.planes]
     untied = untied_planes(planes_report)

@@ -57,6 +57,9 @@ def register(subparsers) -> None:
                    help="facade_sun: the first frame's time, local at the site (Zurich) or with an offset "
                         "(default 2026-11-12T11:40:00; the capture lasts 3 h 19 min)")
     p.add_argument("--pole-radius", type=float, default=0.05, metavar="M", help="facade_sun: pole radius, m")
+    p.add_argument("--roof-edge", action="store_true",
+                   help="facade_sun: no pole; the roof line of the building across the street sweeps its shadow up "
+                        "the facade (the field log names it in [edge]; ground_truth.npz edge_time)")
     p.add_argument("--clouds", type=int, default=None, help="facade_sun/facade_day: number of cloud dips (0-10); "
                    "default 3, facade_day 6")
     p.add_argument("--drift", type=float, default=0.0, metavar="PX",
@@ -99,6 +102,8 @@ def _options(args: argparse.Namespace) -> dict:
         opts["frames"] = args.frames
     if args.scene in ("facade_sun", "facade_day"):
         opts["pole_radius"] = args.pole_radius
+        if args.roof_edge:
+            opts["roof_edge"] = True
         if args.start is not None:
             opts["start"] = args.start
         if args.clouds is not None:

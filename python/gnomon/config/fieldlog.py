@@ -25,6 +25,7 @@ from gnomon.config.specs import (
     ArucoSpec,
     CaptureSpec,
     CharucoSpec,
+    EdgeSpec,
     FieldLog,
     GnomonSpec,
     LightSpec,
@@ -361,6 +362,25 @@ def _parse_pole(t: Table | None) -> PoleSpec | None:
     return pole
 
 
+def _parse_edge(t: Table | None) -> EdgeSpec | None:
+    """[edge]: ``a``, ``b`` (the edge's ends; neither: found from the shadow's lines on the reference planes) and
+    optionally ``body`` (a point of the occluder off the edge)."""
+    if t is None:
+        return None
+    body = t.vector("body", 3) if "body" in t.data else None
+    if "a" not in t.data and "b" not in t.data:  # found from the shadow's lines on the reference planes
+        t.done()
+        return EdgeSpec(None, None, body)
+    a, b = t.vector("a", 3), t.vector("b", 3)
+    length = float(np.linalg.norm(b - a))
+    if length <= 0:
+        raise t.error("b", "must differ from a")
+    if body is not None and np.linalg.norm(np.cross(b - a, body - a)) <= 1e-6 * length * length:
+        raise t.error("body", "lies on the edge's line; give a point of the occluder away from the edge")
+    t.done()
+    return EdgeSpec(a, b, body)
+
+
 def _parse_gnomon(t: Table | None) -> GnomonSpec | None:
     if t is None:
         return None
@@ -485,6 +505,13 @@ def load_field_log(path: str | Path, *, without_light: bool = False) -> FieldLog
     scan = _parse_scan(optional_section("scan"))
     site = _parse_site(optional_section("site"))
     pole = _parse_pole(optional_section("pole"))
+    edge = _parse_edge(optional_section("edge"))
+    if edge is not None and pole is not None:
+        raise FieldLogError(f"{p}: [edge] and [pole] both given: a sun scan follows one occluder's shadow; "
+                            "remove one of the two tables")
+    if edge is not None and not without_light and light.kind != "sun":
+        raise FieldLogError(f"{p}: [edge] needs [light] kind = 'sun' (the edge's shadow planes contain the sun's "
+                            f"direction), got {light.kind!r}")
     gnomon = _parse_gnomon(optional_section("gnomon"))
     output = _parse_output(optional_section("output"), planes)
     if kind is not None:  # what the light needs beside its own table ([site] for the sun, two planes, …)
@@ -499,7 +526,7 @@ def load_field_log(path: str | Path, *, without_light: bool = False) -> FieldLog
             "or markers or a chessboard on a [[planes]] entry to measure it"
         )
     log = FieldLog(p, capture, camera, pose, planes, light, scan, camera_file, calibration, site, pole, gnomon,
-                   output)
+                   output, edge)
     if pose is not None:
         check_geometry(log, pose)
     check_field_log(log)  # plausible numbers and geometry (gnomon.config.plausibility)

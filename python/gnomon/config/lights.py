@@ -114,9 +114,12 @@ def _check_sun(s: LightSections) -> None:
 
 
 def _sun(log: FieldLog, pose: Pose, n_frames: int, warnings: list[str]) -> LightModel:
-    from gnomon.light.sun import SunWithLines, SunWithPole  # pandas and pvlib: loaded by sun scans only
+    from gnomon.light.edge import SunWithEdge  # pandas and pvlib: loaded by sun scans only
+    from gnomon.light.sun import SunWithLines, SunWithPole
 
     clock = _sun_clock(log, pose, n_frames, warnings)
+    if log.edge is not None:
+        return SunWithEdge(clock, pose, log.edge.a, log.edge.b, log.edge.body)
     if log.pole is not None:
         return SunWithPole(clock, pose, log.pole.base, log.pole.top, log.pole.radius)
     return SunWithLines(clock, pose)

@@ -116,7 +116,7 @@ def resolve_scan(log: FieldLog, source: FrameSource) -> ScanSetup:
     planes = tuple(ReferencePlane(p.name, PlaneInCamera.from_world(p.point, p.normal, pose),
                                   plane_region_mask(p, shape), p.regions) for p in log.planes)
     s = log.scan
-    tracker = dataclasses.replace(tracker_settings(log), second_dips=light.chooses_dips)
+    tracker = dataclasses.replace(tracker_settings(log), second_dips=light.chooses_dips, steps=light.tracks_steps)
     inputs = ScanInputs(log.path, log.camera_file, dict(log.calibration), planes_report)
     georeferenced = light.georeference(log.capture.units) is not None
     if log.output.crs is not None and not georeferenced:
@@ -182,9 +182,11 @@ def dip_width_policy(log: FieldLog) -> str:
 def tracker_settings(log: FieldLog) -> TrackerSettings:
     """How the field log's frames become shadow times."""
     s = log.scan
+    # An [edge]'s shadow passes each pixel once and stays: steps, not dips (the scan's light, SunWithEdge,
+    # says so too; `gnomon regions` tracks without building the light).
     return TrackerSettings(log.capture.gamma, s.min_contrast, s.window, s.normalize_illumination,
                            DEFAULT_DIP_FRAMES if s.max_dip_frames is None else s.max_dip_frames,
-                           register=registers(log))
+                           register=registers(log), steps=log.edge is not None)
 
 
 def first_frame(source: FrameSource) -> np.ndarray:

@@ -215,6 +215,17 @@ class PoleSpec:
 
 
 @dataclass(frozen=True)
+class EdgeSpec:
+    """[edge]: a straight occluding edge whose shadow the sun sweeps (a roof line; world coordinates, the
+    capture's units): its ends ``a`` and ``b`` (None: found from the shadow's lines on the reference planes), and
+    optionally ``body``, a point of the occluder away from the edge (the side its shadow falls on)."""
+
+    a: np.ndarray | None
+    b: np.ndarray | None
+    body: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
 class GnomonSpec:
     """[gnomon]: a vertical pole seen in one frame, to find the world frame's heading."""
 
@@ -238,3 +249,4 @@ class FieldLog:
     pole: PoleSpec | None = None
     gnomon: GnomonSpec | None = None
     output: OutputSpec = field(default_factory=OutputSpec)
+    edge: EdgeSpec | None = None

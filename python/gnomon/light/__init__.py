@@ -4,7 +4,8 @@ interface (:class:`LightModel`), and what the models need.
 * :class:`LampLight`: a point lamp at a known position;
 * :class:`TwoPlaneLight`: any point light, the planes from two reference planes;
 * :class:`SunWithLines`: the sun, the planes through the reference lines;
-* :class:`SunWithPole`: the sun and a vertical pole of known axis.
+* :class:`SunWithPole`: the sun and a vertical pole of known axis;
+* :class:`SunWithEdge`: the sun and a straight edge of the scene (a roof line), its shadow a step per pixel.
 
 Beside the models: the shadow planes from reference lines (:mod:`~gnomon.light.shadow_planes`), the
 sun's ephemeris (:mod:`~gnomon.light.ephemeris`, pvlib), the frames' times
@@ -29,6 +30,7 @@ from gnomon.light.pencil import LampCalibration, calibrate_lamp_from_pencil
 from gnomon.light.two_plane import TwoPlaneLight
 
 if TYPE_CHECKING:
+    from gnomon.light.edge import SunWithEdge as SunWithEdge
     from gnomon.light.sun import HeadingEstimate as HeadingEstimate
     from gnomon.light.sun import SunClock as SunClock
     from gnomon.light.sun import SunWithLines as SunWithLines
@@ -37,7 +39,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "EdgePlanes", "EdgeTimes", "HeadingEstimate", "LampCalibration", "LampLight", "LightModel", "ReferenceGeometry",
-    "Screening", "SunClock", "SunWithLines", "SunWithPole", "TIMESTAMP_MODES", "TwoPlaneLight",
+    "Screening", "SunClock", "SunWithEdge", "SunWithLines", "SunWithPole", "TIMESTAMP_MODES", "TwoPlaneLight",
     "calibrate_lamp_from_pencil", "heading_from_gnomon",
 ]
 
@@ -45,4 +47,5 @@ __all__ = [
 _SUN_NAMES = ("HeadingEstimate", "SunClock", "SunWithLines", "SunWithPole", "heading_from_gnomon")
 
 
-__getattr__, __dir__, _ = attach(__name__, dict.fromkeys(_SUN_NAMES, "gnomon.light.sun"))
+__getattr__, __dir__, _ = attach(__name__, {**dict.fromkeys(_SUN_NAMES, "gnomon.light.sun"),
+                                            "SunWithEdge": "gnomon.light.edge"})

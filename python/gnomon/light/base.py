@@ -150,6 +150,10 @@ class LightModel:
     # so that a dip much shallower than the pixel's lit level is not the light's own shadow on it
     # (gnomon.reconstruct.fused.screen_direct_light); False for the sun, whose pole may cast no umbra.
     occluder_hides_light: ClassVar[bool] = False
+    # True when the light's shadow passes each pixel once and does not come back (a straight edge under the sun):
+    # the tracker reports each pixel's lasting steps into and out of the shadow instead of its dip
+    # (gnomon.capture.steps; TrackerSettings.steps).
+    tracks_steps: ClassVar[bool] = False
 
     def skipped_frames(self, n_frames: int) -> np.ndarray:
         """(n_frames,) bool: capture frames the tracker must not see."""

@@ -61,7 +61,7 @@ from gnomon.light.timestamps import interpolate_times
 
 __all__ = [
     "SUBSTEPS", "HeadingEstimate", "SunClock", "SunTimeline", "SunWithLines", "SunWithPole", "below_horizon",
-    "heading_from_gnomon", "pole_plane_table", "sun_directions_camera", "sun_world",
+    "heading_from_gnomon", "pole_plane_table", "substep_sun_world", "sun_directions_camera", "sun_world",
 ]
 
 # Sun directions per frame interval for the pole's plane table.
@@ -142,6 +142,13 @@ class SunTimeline:
         return interpolate_times(self.times, capture_index)
 
 
+def substep_sun_world(timeline: SunTimeline, site: Site, heading_deg: float) -> np.ndarray:
+    """Unit directions towards the sun (world), row k at tracker time k / SUBSTEPS."""
+    n = len(timeline.used)
+    tau = np.arange((n - 1) * SUBSTEPS + 1) / SUBSTEPS
+    return sun_world(pd.DatetimeIndex(timeline.utc(tau)), site, heading_deg)
+
+
 def pole_plane_table(pole_base: np.ndarray, pole_top: np.ndarray, timeline: SunTimeline, site: Site,
                      heading_deg: float, pose: Pose) -> np.ndarray:
     """Camera-frame planes containing the pole's axis and the sun, every 1/SUBSTEPS tracker frame.
@@ -149,10 +156,7 @@ def pole_plane_table(pole_base: np.ndarray, pole_top: np.ndarray, timeline: SunT
     Row k is the plane at tracker time k / SUBSTEPS; triangulate with
     ``times · SUBSTEPS``.
     """
-    n = len(timeline.used)
-    tau = np.arange((n - 1) * SUBSTEPS + 1) / SUBSTEPS
-    utc = timeline.utc(tau)
-    d = sun_world(pd.DatetimeIndex(utc), site, heading_deg)
+    d = substep_sun_world(timeline, site, heading_deg)
     axis = (pole_top - pole_base) / np.linalg.norm(pole_top - pole_base)
     normal_w = np.cross(axis, d)
     norm = np.linalg.norm(normal_w, axis=1, keepdims=True)

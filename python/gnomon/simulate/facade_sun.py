@@ -296,6 +296,8 @@ class FacadeSunConfig:
     drift_px: float = 0.0                # the camera's slow drift by the last frame, px (sensor.camera_motion)
     bump_px: float = 0.0                 # a sudden shift of the camera, px, from bump_frame on
     bump_frame: int | None = None        # None: 60 % of the way
+    # No pole: the roof line across the street sweeps its shadow up the facade (gnomon.simulate.roof_edge).
+    roof_edge: bool = False
 
     @classmethod
     def day(cls, **overrides) -> FacadeSunConfig:
@@ -630,7 +632,7 @@ class FacadeSunScene:
         d_cam = self.lens.rays_cam(uu, vv)
         d = d_cam @ self.R
         t, ids, n, box = self.building.cast(self.C, d)
-        tp = self.pole.intersect(self.C, d)
+        tp = np.full(t.shape, np.inf) if self.config.roof_edge else self.pole.intersect(self.C, d)
         pole = tp < t
         t = np.where(pole, tp, t)
         ids = np.where(pole, POLE, ids).astype(np.int8)
@@ -1301,12 +1303,14 @@ def _clear_previous(out: Path) -> None:
 
 
 def simulate_facade_sun(out_dir, config: FacadeSunConfig | None = None, *,
-                        progress: Callable[[int, int], None] | None = None) -> FacadeSunResult:
+                        progress: Callable[[int, int], None] | None = None,
+                        scene: FacadeSunScene | None = None) -> FacadeSunResult:
     """Render the facade/sun time-lapse into ``out_dir``; return what was written.
 
     Writes ``frames/<UTC time>.{jpg,png}`` (EXIF capture times inside),
     ``ground_truth.npz``, ``ground_truth.json`` and, last, ``field_log.toml``,
-    every file atomically. ``progress(done, total)`` is called after each frame.
+    every file atomically. ``progress(done, total)`` is called after each frame. ``scene``: the scene built
+    from ``config`` already (a subclass's: :func:`gnomon.simulate.roof_edge.simulate_roof_edge`).
     """
     config = config or FacadeSunConfig()
     config.validate()
@@ -1314,7 +1318,11 @@ def simulate_facade_sun(out_dir, config: FacadeSunConfig | None = None, *,
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise GnomonError(f"{out}: exists and is not a directory")
-    scene = FacadeSunScene(config)
+    if scene is None:
+        if config.roof_edge:
+            raise GnomonError("simulate facade_sun: roof_edge scenes are rendered by "
+                              "gnomon.simulate.roof_edge.simulate_roof_edge")
+        scene = FacadeSunScene(config)
     out.mkdir(parents=True, exist_ok=True)
     _clear_previous(out)
     frames_dir = out / "frames"

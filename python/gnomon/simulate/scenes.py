@@ -48,6 +48,10 @@ def _scene_config(scene: str, options: dict[str, Any]) -> tuple[Any, Any]:
 
         make = FacadeSunConfig.day if scene == "facade_day" else FacadeSunConfig
         render = simulate_facade_sun
+        if options.get("roof_edge"):
+            from gnomon.simulate.roof_edge import simulate_roof_edge
+
+            render = simulate_roof_edge
     try:
         config = make(**options)
     except TypeError as exc:
