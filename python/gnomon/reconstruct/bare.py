@@ -54,17 +54,34 @@ class OffPlane:
 
 def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, camera,
               ray_map: np.ndarray) -> OffPlane:
-    """One plane's region without the pieces that do not follow the plane's own lines (see the module)."""
+    """One plane's region without the pieces that do not follow the plane's own lines (see the module).
+
+    Every round works on the given region's pixels and their box alone (grown by the closing's and the
+    margin's reach, so the pieces are the whole image's): their points on the plane are computed once,
+    each later round takes those of the pixels left."""
     mask = reference.mask.copy()
     given = int(mask.sum())
     pieces: list[tuple[int, tuple[int, int, int, int]]] = []
     tolerance, typical = MIN_TOLERANCE, float("nan")
+    if given == 0:
+        return OffPlane(mask, given, 0, pieces, tolerance, typical)
     grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * MARGIN_PX + 1, 2 * MARGIN_PX + 1))
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    reach = MARGIN_PX + 1  # the closing (3 × 3) reads 2 px around a pixel, the margin's disc MARGIN_PX
+    v0, u0 = max(int(rows[0]) - reach, 0), max(int(cols[0]) - reach, 0)
+    v1, u1 = min(int(rows[-1]) + 1 + reach, mask.shape[0]), min(int(cols[-1]) + 1 + reach, mask.shape[1])
+    box = mask[v0:v1, u0:u1]  # a view: the rounds leave pixels out of ``mask`` through it
+    v_all, u_all = np.nonzero(mask)
+    ok_all, xy_all = plane_points(reference.plane, ray_map[v_all, u_all])  # the region's points, for every edge
+    hits = np.zeros(v_all.size, dtype=bool)
+    hits[ok_all] = True
+    xy_of = np.full((v_all.size, 2), np.nan)
+    xy_of[ok_all] = xy_all
+    left = np.ones(v_all.size, dtype=bool)  # the given pixels still in the region
     for _ in range(ROUNDS):
-        v, u = np.nonzero(mask)
-        if u.size == 0:
-            break
-        ok, xy = plane_points(reference.plane, ray_map[v, u])  # the region's points, for every edge's lines
+        v, u = v_all[left], u_all[left]
+        ok = np.flatnonzero(hits[left])
+        xy = xy_of[left][ok]
         worst = np.full(u.size, -np.inf)
         for times in maps:
             lines = measure_reference_lines(times, n_frames, dataclasses.replace(reference, mask=mask), camera)
@@ -74,18 +91,21 @@ def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, 
             with np.errstate(invalid="ignore"):
                 worst = np.fmax(worst, np.abs(times[v, u] - predicted))
         worst[~np.isfinite(worst)] = np.nan
-        residual = np.full(mask.shape, np.nan)
-        residual[v, u] = worst
+        residual = np.full(box.shape, np.nan)
+        residual[v - v0, u - u0] = worst
         judged = worst[np.isfinite(worst)]
         if judged.size == 0:
             break
         typical = float(np.median(judged))
         tolerance = max(MIN_TOLERANCE, TOLERANCE_SIGMAS * 1.4826 * typical)
-        off, found = off_plane_pieces(residual, mask, tolerance, MIN_PIECE_PX)
+        off, found = off_plane_pieces(residual, box, tolerance, MIN_PIECE_PX)
         if not found:
             break
-        pieces += found
-        mask &= ~cv2.dilate(off.astype(np.uint8), grow).astype(bool)
+        pieces += [(area, (a + u0, b + v0, c + u0, d + v0)) for area, (a, b, c, d) in found]
+        box &= ~cv2.dilate(off.astype(np.uint8), grow).astype(bool)
+        left &= mask[v_all, u_all]
+        if not left.any():
+            break
     pieces.sort(reverse=True)
     return OffPlane(mask, given, given - int(mask.sum()), pieces, tolerance, typical)
 
