@@ -22,7 +22,7 @@ import numpy as np
 
 from gnomon.config.setup import ScanSetup
 from gnomon.geometry.plane_times import off_plane_pieces, plane_points, times_at_points
-from gnomon.geometry.reference_lines import ReferencePlane, measure_reference_lines
+from gnomon.geometry.reference_lines import LineMemo, ReferencePlane, measure_reference_lines
 
 __all__ = ["MIN_PIECE_PX", "OffPlane", "hold_regions", "off_plane"]
 
@@ -53,12 +53,13 @@ class OffPlane:
 
 
 def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, camera,
-              ray_map: np.ndarray) -> OffPlane:
+              ray_map: np.ndarray, memo: LineMemo | None = None) -> OffPlane:
     """One plane's region without the pieces that do not follow the plane's own lines (see the module).
 
     Every round works on the given region's pixels and their box alone (grown by the closing's and the
     margin's reach, so the pieces are the whole image's): their points on the plane are computed once,
-    each later round takes those of the pixels left."""
+    each later round takes those of the pixels left. ``memo``: where the lines are measured (and kept: the
+    last round's, on the final mask, are those the scan's edges measure again on the same times)."""
     mask = reference.mask.copy()
     given = int(mask.sum())
     pieces: list[tuple[int, tuple[int, int, int, int]]] = []
@@ -71,28 +72,32 @@ def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, 
     v0, u0 = max(int(rows[0]) - reach, 0), max(int(cols[0]) - reach, 0)
     v1, u1 = min(int(rows[-1]) + 1 + reach, mask.shape[0]), min(int(cols[-1]) + 1 + reach, mask.shape[1])
     box = mask[v0:v1, u0:u1]  # a view: the rounds leave pixels out of ``mask`` through it
-    v_all, u_all = np.nonzero(mask)
-    ok_all, xy_all = plane_points(reference.plane, ray_map[v_all, u_all])  # the region's points, for every edge
-    hits = np.zeros(v_all.size, dtype=bool)
+    at = np.flatnonzero(mask)  # the given pixels (flat indices, row-major), gathered with np.take
+    v_all, u_all = np.divmod(at, mask.shape[1])
+    in_box = (v_all - v0) * (u1 - u0) + (u_all - u0)
+    ok_all, xy_all = plane_points(reference.plane, ray_map.reshape(-1, 3)[at])  # their points, for every edge
+    hits = np.zeros(at.size, dtype=bool)
     hits[ok_all] = True
-    xy_of = np.full((v_all.size, 2), np.nan)
+    xy_of = np.full((at.size, 2), np.nan)
     xy_of[ok_all] = xy_all
-    left = np.ones(v_all.size, dtype=bool)  # the given pixels still in the region
+    left = np.ones(at.size, dtype=bool)  # the given pixels still in the region
     for _ in range(ROUNDS):
-        v, u = v_all[left], u_all[left]
+        here = at[left]
         ok = np.flatnonzero(hits[left])
         xy = xy_of[left][ok]
-        worst = np.full(u.size, -np.inf)
+        worst = np.full(here.size, -np.inf)
         for times in maps:
-            lines = measure_reference_lines(times, n_frames, dataclasses.replace(reference, mask=mask), camera)
-            predicted = np.full(u.size, np.nan)
+            held = dataclasses.replace(reference, mask=mask)
+            lines = (measure_reference_lines(times, n_frames, held, camera) if memo is None
+                     else memo.measure(times, n_frames, held, camera))
+            predicted = np.full(here.size, np.nan)
             if np.count_nonzero(lines.found) >= 2:
                 predicted[ok] = times_at_points(lines, xy)
             with np.errstate(invalid="ignore"):
-                worst = np.fmax(worst, np.abs(times[v, u] - predicted))
+                worst = np.fmax(worst, np.abs(np.take(times.reshape(-1), here) - predicted))
         worst[~np.isfinite(worst)] = np.nan
         residual = np.full(box.shape, np.nan)
-        residual[v - v0, u - u0] = worst
+        residual.reshape(-1)[in_box[left]] = worst
         judged = worst[np.isfinite(worst)]
         if judged.size == 0:
             break
@@ -103,7 +108,7 @@ def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, 
             break
         pieces += [(area, (a + u0, b + v0, c + u0, d + v0)) for area, (a, b, c, d) in found]
         box &= ~cv2.dilate(off.astype(np.uint8), grow).astype(bool)
-        left &= mask[v_all, u_all]
+        left &= np.take(mask.reshape(-1), at)
         if not left.any():
             break
     pieces.sort(reverse=True)
@@ -111,13 +116,14 @@ def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, 
 
 
 def hold_regions(setup: ScanSetup, maps: list[np.ndarray], n_frames: int, ray_map: np.ndarray,
-                 warnings: list[str]) -> ScanSetup:
+                 warnings: list[str], memo: LineMemo | None = None) -> ScanSetup:
     """``setup`` with each plane's region held to the plane (:func:`off_plane`) on the edges' time ``maps``
     (:func:`gnomon.reconstruct.edges.edge_time_maps`), a warning per plane that lost pixels: how many,
-    where the largest piece lies, and what to do."""
+    where the largest piece lies, and what to do. ``memo``: :func:`off_plane`'s."""
     # the planes are independent: one thread each (numpy, OpenCV and the kernel release the GIL)
     with ThreadPoolExecutor(max_workers=2, thread_name_prefix="gnomon-regions") as pool:
-        helds = list(pool.map(lambda ref: off_plane(ref, maps, n_frames, setup.camera, ray_map), setup.planes))
+        helds = list(pool.map(lambda ref: off_plane(ref, maps, n_frames, setup.camera, ray_map, memo),
+                              setup.planes))
     planes = []
     for reference, held in zip(setup.planes, helds, strict=True):
         if held.left_out and held.pieces:
