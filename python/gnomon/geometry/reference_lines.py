@@ -39,9 +39,8 @@ FIT_K = 3.0
 FIT_ITERATIONS = 5
 
 __all__ = [
-    "LineMemo", "PlaneInCamera", "ReferenceLines", "ReferencePlane", "fit_line_robust", "isochrone_crossings", "lines_on_plane",
-    "mask_crossings",
-    "measure_reference_lines", "ransac_line", "region_mask",
+    "LineMemo", "PlaneInCamera", "ReferenceLines", "ReferencePlane", "fit_line_robust", "isochrone_crossings",
+    "lines_on_plane", "mask_crossings", "measure_reference_lines", "ransac_line", "region_mask",
 ]
 # A frame's own fit sets the line's direction when its inliers span at least
 # this fraction of the longest lines seen on the plane; shorter lines keep
