@@ -98,7 +98,8 @@ def surface_points(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np
     normals = grid_normals(world_grid, depth, valid, pose.camera_centre_world, max_relative_jump)
     index = np.flatnonzero(valid)  # the valid pixels, row-major: one gather (np.take) per array
     v, u = np.divmod(index, valid.shape[1])
-    uv = np.stack([u, v], axis=1).astype(np.float32)
+    uv = np.empty((index.size, 2), dtype=np.float32)  # the pixels' columns and rows, cast as astype casts them
+    uv[:, 0], uv[:, 1] = u, v
     return SurfacePoints(depth, sigma, valid, np.take(world_grid.reshape(-1, 3), index, axis=0),
                          np.take(rgb.reshape(-1, 3), index, axis=0), uv, np.take(normals.reshape(-1, 3), index, axis=0),
                          rgb, world_grid, normals)
