@@ -7,9 +7,10 @@ The first run tracks the capture as a scan does (its reader, the kernel tracker 
 settings, the colour samples, the ray map) and pickles the tracked sequence, the tracker's settings, the
 ray map and the colours into CACHE.pkl (hundreds of MB at 1080p; never committed); later runs load it. Then
 the stages that follow tracking in :func:`gnomon.runs.scan.reconstruct` run ``--runs`` times in its order
-(the regions held to their planes and the planes tied, the shadow planes and triangulation, the fusion,
-the points and the mesh; the colours on a thread as there), each timed in wall and CPU seconds (the
-process's, all threads), and the minimum and median are printed: a change to these stages is measured
+(the regions held to their planes and the planes tied, the shadow planes and triangulation, the fusion with
+its screening and crop, the surface's points, the mesh; the colours on a thread as there; the coverage map
+untimed), each timed in wall and CPU seconds (the process's, all threads), and the minimum and median are
+printed: a change to these stages is measured
 here without the noise of decoding and tracking (docs/performance.md).
 
 ``--save`` writes the last run's arrays (held regions, planes, depths, σ, fused maps, points, normals, mesh,
@@ -91,15 +92,16 @@ def after_tracking(setup, tracked, ray_map, colours, times: dict[str, list[tuple
             fused = fuse_edges(edges, tracked, setup.max_depth_jump, levels)
             if setup.light.occluder_hides_light:
                 warnings.extend(screen_direct_light(fused, edges, tracked, levels))
-            cropped = crop_fused(fused, setup, ray_map)
-            points = surface_points(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, rgb.result(),
-                                    setup.max_depth_jump)
-            coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
-                                    ambiguous=tracked.times.ambiguous, conflict=fused.conflict,
-                                    unsupported=fused.unsupported, no_direct_light=fused.no_direct_light)
-            return fused, points, mesh_surface(points, setup.max_depth_jump), coverage
+            return fused, crop_fused(fused, setup, ray_map)
 
-        fused, points, surface, coverage = timed("fusion", fusion)
+        fused, cropped = timed("fusion", fusion)
+        points = timed("points", surface_points, ray_map, setup.pose, fused.depth, fused.sigma, fused.keep,
+                       rgb.result(), setup.max_depth_jump)
+        surface = timed("mesh", mesh_surface, points, setup.max_depth_jump)
+    times_of = tracked.times
+    coverage = coverage_map(times_of.valid, fused.keep, fused.undersampled, cropped, ambiguous=times_of.ambiguous,
+                            conflict=fused.conflict, unsupported=fused.unsupported,
+                            no_direct_light=fused.no_direct_light)
     return {"masks": np.stack([p.mask for p in setup.planes]), "planes": np.stack([e.planes for e in edges]),
             "depths": np.stack([e.depth for e in edges]), "sigmas": np.stack([e.sigma for e in edges]),
             "depth": fused.depth, "sigma": fused.sigma, "keep": fused.keep, "shadow_time": fused.shadow_time,
