@@ -1,14 +1,23 @@
 """σZ by first-order propagation (gnomon.geometry.uncertainty.depth_sigma): the kernel's per-pixel pass against
-the numpy definition, and the value on a plane whose depth moves at a known rate."""
+the numpy definition, and the value on a plane whose depth moves at a known rate; the image noise at each
+pixel's threshold (linear_noise_at_threshold), the kernel's lookup against numpy's."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from gnomon import _kernel
 from gnomon.camera.models import OpenCVCamera
+from gnomon.capture.tracking import decoding_lut
+from gnomon.errors import KernelParameterError
 from gnomon.geometry.triangulation import triangulate
-from gnomon.geometry.uncertainty import _depth_sigma_numpy, depth_sigma
+from gnomon.geometry.uncertainty import (
+    _depth_sigma_numpy,
+    _linear_noise_at_threshold_numpy,
+    depth_sigma,
+    linear_noise_at_threshold,
+)
 
 
 def _scene(seed: int) -> tuple[np.ndarray, ...]:
@@ -128,3 +137,29 @@ def test_a_time_error_no_image_noise_explains_reaches_the_depth_sigma(tmp_path) 
     # σZ now carries the scatter: the errors are a few σ, not tens (without it, ≈ 10 σ at the median)
     assert 1.4826 * np.median(err / sig) < 2.5
     assert np.median(err) > 5 * np.median(sig0)  # and the error is real
+
+
+def test_noise_at_threshold_from_the_kernel_equals_numpys_searchsorted() -> None:
+    """float32 levels against sRGB, gamma and linear tables (uint8 and uint16), the tables' own entries and
+    their float32 neighbours, NaN and ±inf included: the kernel's lookup gives numpy's values bit for bit; an
+    unsorted table is refused by the kernel (and left to numpy by the function)."""
+    rng = np.random.default_rng(5)
+    for lut in (decoding_lut("srgb", np.uint8), decoding_lut(2.2, np.uint16), decoding_lut(1.0, np.uint8)):
+        values = rng.uniform(-0.1, 1.1, 30000).astype(np.float32)
+        picks = lut[rng.integers(0, len(lut), 3000)]
+        values[:3000] = picks
+        values[3000:6000] = np.nextafter(picks, np.float32(2.0))
+        values[6000:9000] = np.nextafter(picks, np.float32(-1.0))
+        values[9000:9003] = [np.nan, np.inf, -np.inf]
+        values = values.reshape(150, 200)
+        for sigma_dn in (1.7, 0.4):
+            got = linear_noise_at_threshold(sigma_dn, values, lut)
+            want = _linear_noise_at_threshold_numpy(sigma_dn, values, lut)
+            assert got.dtype == np.float32 and got.shape == values.shape
+            assert got.tobytes() == want.tobytes()
+    unsorted = np.array([0.0, 0.5, 0.25], np.float32)
+    with pytest.raises(KernelParameterError):
+        _kernel.lut_lookup(unsorted, np.zeros(3), 1.0, np.zeros(4, np.float32))
+    values = np.array([[0.1, 0.3, 0.6]], np.float32)
+    assert np.array_equal(linear_noise_at_threshold(2.0, values, unsorted),
+                          _linear_noise_at_threshold_numpy(2.0, values, unsorted))

@@ -386,6 +386,16 @@ def deblock_interpolate(
     every other keeps its time. Element for element :func:`gnomon.capture.deblock._interpolate_numpy`; rows
     in parallel."""
 
+def lut_lookup(
+    lut: npt.NDArray[np.float32],
+    table: npt.NDArray[np.float64],
+    scale: float,
+    values: npt.NDArray[np.float32],
+) -> npt.NDArray[np.float32]:
+    """``(scale * table[np.searchsorted(lut, values).clip(0, N - 1)]).astype(np.float32)`` of the flat ``values``
+    (K,): ``lut`` (N,) sorted (increasing, NaN last; else ``KernelParameterError``), ``table`` (N,) one value
+    per entry. Element for element the numpy expression; values in parallel."""
+
 def fuse_supported(
     depths: npt.NDArray[np.float32],
     sigmas: npt.NDArray[np.float32],

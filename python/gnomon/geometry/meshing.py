@@ -28,6 +28,7 @@ from gnomon import _kernel
 
 __all__ = [
     "GridMesh",
+    "grid_faces",
     "grid_mesh",
     "grid_normals",
     "face_components",
@@ -79,14 +80,20 @@ def grid_mesh(points: np.ndarray, depth: np.ndarray, valid: np.ndarray, max_rela
     vertices = np.take(points.reshape(-1, 3), pixel_index, axis=0).astype(np.float32, copy=False)
     vn = None if normals is None else np.take(normals.reshape(-1, 3), pixel_index, axis=0).astype(np.float32,
                                                                                                   copy=False)
+    return GridMesh(vertices, grid_faces(depth, valid, max_relative_jump, sigma, sigma_factor), pixel_index, vn)
+
+
+def grid_faces(depth: np.ndarray, valid: np.ndarray, max_relative_jump: float, sigma: np.ndarray | None = None,
+               sigma_factor: float = 5.0) -> np.ndarray:
+    """:func:`grid_mesh`'s faces (F, 3) int32 alone, into the valid pixels in row-major order (for a caller that
+    has their vertices already)."""
     if depth.dtype == np.float32 and (sigma is None or sigma.dtype == np.float32):
         # the same faces from the kernel (f32 arithmetic, as numpy does on these maps)
         sig32 = np.zeros(depth.shape, np.float32) if sigma is None else np.ascontiguousarray(sigma)
-        faces = _kernel.grid_faces(np.ascontiguousarray(valid, dtype=np.uint8), np.ascontiguousarray(depth),
-                                   sig32, max_relative_jump, sigma_factor)
-    else:
-        faces = _grid_faces_numpy(depth, valid, max_relative_jump, sigma, sigma_factor)
-    return GridMesh(vertices, faces, pixel_index, vn)
+        faces: np.ndarray = _kernel.grid_faces(np.ascontiguousarray(valid, dtype=np.uint8),
+                                               np.ascontiguousarray(depth), sig32, max_relative_jump, sigma_factor)
+        return faces
+    return _grid_faces_numpy(depth, valid, max_relative_jump, sigma, sigma_factor)
 
 
 def _grid_faces_numpy(depth: np.ndarray, valid: np.ndarray, max_relative_jump: float,

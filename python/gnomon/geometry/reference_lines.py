@@ -39,9 +39,8 @@ FIT_K = 3.0
 FIT_ITERATIONS = 5
 
 __all__ = [
-    "PlaneInCamera", "ReferenceLines", "ReferencePlane", "fit_line_robust", "isochrone_crossings", "lines_on_plane",
-    "mask_crossings",
-    "measure_reference_lines", "ransac_line", "region_mask",
+    "LineMemo", "PlaneInCamera", "ReferenceLines", "ReferencePlane", "fit_line_robust", "isochrone_crossings",
+    "lines_on_plane", "mask_crossings", "measure_reference_lines", "ransac_line", "region_mask",
 ]
 # A frame's own fit sets the line's direction when its inliers span at least
 # this fraction of the longest lines seen on the plane; shorter lines keep
@@ -346,6 +345,34 @@ def measure_reference_lines(
     The plane's regions (its ``mask``) are used together: see :func:`lines_on_plane`.
     """
     return lines_on_plane(times, n_frames, reference.plane, reference.mask, camera, reference.name)
+
+
+class LineMemo:
+    """The lines last measured on each plane and time map, handed back when they are asked for again.
+
+    A scan's regions (:func:`gnomon.reconstruct.bare.off_plane`) end by measuring each plane's lines on its
+    final mask, and its edges then measure the same lines on the same times: :meth:`measure` returns the
+    stored :class:`ReferenceLines` when the times are the same array (identity: the caller must not write
+    into it meanwhile), the plane the same object, the mask equal, the camera the same and the frames as
+    many; otherwise it measures (:func:`measure_reference_lines`) and stores. One entry per (times, plane
+    name): threads measuring different planes or times may share it."""
+
+    def __init__(self) -> None:
+        self._lines: dict[tuple[int, str], tuple[np.ndarray, PlaneInCamera, np.ndarray, CameraModel, int,
+                                                 ReferenceLines]] = {}
+
+    def measure(self, times: np.ndarray, n_frames: int, reference: ReferencePlane,
+                camera: CameraModel) -> ReferenceLines:
+        key = (id(times), reference.name)
+        known = self._lines.get(key)
+        if known is not None:
+            k_times, k_plane, k_mask, k_camera, k_frames, lines = known
+            if (k_times is times and k_plane is reference.plane and k_camera is camera and k_frames == n_frames
+                    and np.array_equal(k_mask, reference.mask)):
+                return lines
+        lines = measure_reference_lines(times, n_frames, reference, camera)
+        self._lines[key] = (times, reference.plane, reference.mask.copy(), camera, n_frames, lines)
+        return lines
 
 
 def along_extent(along: np.ndarray) -> float:

@@ -17,7 +17,7 @@ from gnomon import _kernel
 from gnomon.camera.models import Pose
 from gnomon.geometry.meshing import (
     GridMesh,
-    grid_mesh,
+    grid_faces,
     grid_normals,
     remove_small_components,
 )
@@ -98,7 +98,8 @@ def surface_points(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np
     normals = grid_normals(world_grid, depth, valid, pose.camera_centre_world, max_relative_jump)
     index = np.flatnonzero(valid)  # the valid pixels, row-major: one gather (np.take) per array
     v, u = np.divmod(index, valid.shape[1])
-    uv = np.stack([u, v], axis=1).astype(np.float32)
+    uv = np.empty((index.size, 2), dtype=np.float32)  # the pixels' columns and rows, cast as astype casts them
+    uv[:, 0], uv[:, 1] = u, v
     return SurfacePoints(depth, sigma, valid, np.take(world_grid.reshape(-1, 3), index, axis=0),
                          np.take(rgb.reshape(-1, 3), index, axis=0), uv, np.take(normals.reshape(-1, 3), index, axis=0),
                          rgb, world_grid, normals)
@@ -106,8 +107,9 @@ def surface_points(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np
 
 def mesh_surface(points: SurfacePoints, max_relative_jump: float) -> Surface:
     """The cut grid mesh of a surface's points (:func:`gnomon.geometry.meshing.grid_mesh`, small pieces removed)."""
-    mesh = remove_small_components(grid_mesh(points.world_grid, points.depth, points.valid, max_relative_jump,
-                                             sigma=points.sigma, normals=points.normal_grid))
+    # grid_mesh's vertices and normals are the points' own (the valid pixels, row-major): not gathered again
+    faces = grid_faces(points.depth, points.valid, max_relative_jump, sigma=points.sigma)
+    mesh = remove_small_components(GridMesh(points.points_world, faces, np.flatnonzero(points.valid), points.normals))
     return Surface(points.depth, points.sigma, points.valid, points.points_world, points.colors, points.uv, mesh,
                    np.take(points.rgb.reshape(-1, 3), mesh.pixel_index, axis=0), points.normals, points.rgb)
 

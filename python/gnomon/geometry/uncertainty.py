@@ -40,7 +40,23 @@ FINE_STEP_DIVISOR = 64.0
 # between the two samples is then biased by the edge's shape.
 MIN_FRAMES_PER_TRANSITION = 2.0
 def linear_noise_at_threshold(sigma_dn: float, threshold_lin: np.ndarray, lut: np.ndarray) -> np.ndarray:
-    """σI carried to linear irradiance units at each pixel's threshold: σ_DN · dL/dDN."""
+    """σI carried to linear irradiance units at each pixel's threshold: σ_DN · dL/dDN.
+
+    A float32 map and table go to the kernel (``_kernel.lut_lookup``, pixels in parallel: the code's
+    binary search, element for element numpy's ``searchsorted``); :func:`_linear_noise_at_threshold_numpy`
+    is the definition."""
+    values = np.asarray(threshold_lin)
+    table = np.asarray(lut)
+    if (values.dtype == np.float32 and table.dtype == np.float32 and table.ndim == 1 and table.size
+            and not np.any(table[1:] < table[:-1]) and not np.isnan(table).any()):
+        slope = np.gradient(table.astype(np.float64))  # linear units per DN, at every code value
+        flat = _kernel.lut_lookup(table, slope, float(sigma_dn), np.ascontiguousarray(values).reshape(-1))
+        return flat.reshape(values.shape)
+    return _linear_noise_at_threshold_numpy(sigma_dn, threshold_lin, lut)
+
+
+def _linear_noise_at_threshold_numpy(sigma_dn: float, threshold_lin: np.ndarray, lut: np.ndarray) -> np.ndarray:
+    """:func:`linear_noise_at_threshold` in numpy (the kernel's ``lut_lookup`` gives the same on float32)."""
     slope = np.gradient(lut.astype(np.float64))  # linear units per DN, at every code value
     code = np.searchsorted(lut, threshold_lin).clip(0, len(lut) - 1)
     return (sigma_dn * slope[code]).astype(np.float32)

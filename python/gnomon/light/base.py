@@ -29,7 +29,7 @@ import numpy as np
 from gnomon.camera.models import CameraModel
 from gnomon.capture.tracking import ShadowTimes, TrackedSequence
 from gnomon.errors import Remark
-from gnomon.geometry.reference_lines import ReferenceLines, ReferencePlane, measure_reference_lines
+from gnomon.geometry.reference_lines import LineMemo, ReferenceLines, ReferencePlane, measure_reference_lines
 from gnomon.geometry.uncertainty import line_time_sigma
 
 __all__ = ["TIMESTAMP_MODES", "EdgePlanes", "EdgeTimes", "LightModel", "PlaneCompletion", "Recorder",
@@ -116,9 +116,12 @@ class ReferenceGeometry:
     camera: CameraModel
     planes: tuple[ReferencePlane, ...]
     n_frames: int  # frames fed to the tracker
+    memo: LineMemo | None = None  # lines already measured on the same times (the scan's regions')
 
     def lines(self, times: np.ndarray) -> list[ReferenceLines]:
         """The shadow line on every reference plane, at every tracker frame."""
+        if self.memo is not None:
+            return [self.memo.measure(times, self.n_frames, p, self.camera) for p in self.planes]
         return [measure_reference_lines(times, self.n_frames, p, self.camera) for p in self.planes]
 
 

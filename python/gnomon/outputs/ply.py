@@ -148,15 +148,16 @@ def _vertex_table(
         props += ["property float scalar_u", "property float scalar_v"]
 
     table = np.empty(n, dtype=np.dtype(fields))  # packed: no alignment padding
-    table["x"], table["y"], table["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-    if normals is not None:
-        table["nx"], table["ny"], table["nz"] = normals[:, 0], normals[:, 1], normals[:, 2]
-    if rgb is not None:
-        table["red"], table["green"], table["blue"] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
-    if sigma is not None:
-        table["scalar_sigma"] = table["quality"] = sigma
-    if uv is not None:
-        table["scalar_u"], table["scalar_v"] = uv[:, 0], uv[:, 1]
+    # Each array's rows copied into their bytes of the table at once (a field per array, viewed as raw
+    # bytes: one pass over the table per array instead of one per column; the same bytes).
+    parts = [a for a in (xyz, normals, rgb, sigma, sigma, uv) if a is not None]
+    widths = [a.itemsize * (a.shape[1] if a.ndim == 2 else 1) for a in parts]
+    groups = np.dtype({"names": [f"g{k}" for k in range(len(parts))],
+                       "formats": [np.dtype((np.void, w)) for w in widths],
+                       "offsets": np.cumsum([0, *widths[:-1]]).tolist(), "itemsize": table.dtype.itemsize})
+    raw = table.view(groups)
+    for k, (a, w) in enumerate(zip(parts, widths, strict=True)):
+        raw[f"g{k}"] = a.view(np.dtype((np.void, w))).reshape(n)
     return table, props
 
 
@@ -206,8 +207,10 @@ def write_mesh_ply(
     if f.size and (f.min() < 0 or f.max() >= len(table)):
         raise ValueError("faces index vertices out of range")
     face_table = np.empty(len(f), dtype=np.dtype([("n", "u1"), ("i", "<i4", (3,))]))
-    face_table["n"] = 3
-    face_table["i"] = f
+    raw = face_table.view(np.dtype({"names": ["n", "i"], "formats": ["u1", np.dtype((np.void, 12))], "offsets": [0, 1],
+                                    "itemsize": 13}))  # each face's three indices as one field of raw bytes
+    raw["n"] = 3
+    raw["i"] = np.ascontiguousarray(f, dtype="<i4").view(np.dtype((np.void, 12))).reshape(len(f))
     header = _header(
         [("vertex", len(table), props), ("face", len(f), ["property list uchar int vertex_indices"])],
         _check_comments(comments),

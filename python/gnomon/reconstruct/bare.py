@@ -22,7 +22,7 @@ import numpy as np
 
 from gnomon.config.setup import ScanSetup
 from gnomon.geometry.plane_times import off_plane_pieces, plane_points, times_at_points
-from gnomon.geometry.reference_lines import ReferencePlane, measure_reference_lines
+from gnomon.geometry.reference_lines import LineMemo, ReferencePlane, measure_reference_lines
 
 __all__ = ["MIN_PIECE_PX", "OffPlane", "hold_regions", "off_plane"]
 
@@ -53,51 +53,77 @@ class OffPlane:
 
 
 def off_plane(reference: ReferencePlane, maps: list[np.ndarray], n_frames: int, camera,
-              ray_map: np.ndarray) -> OffPlane:
-    """One plane's region without the pieces that do not follow the plane's own lines (see the module)."""
+              ray_map: np.ndarray, memo: LineMemo | None = None) -> OffPlane:
+    """One plane's region without the pieces that do not follow the plane's own lines (see the module).
+
+    Every round works on the given region's pixels and their box alone (grown by the closing's and the
+    margin's reach, so the pieces are the whole image's): their points on the plane are computed once,
+    each later round takes those of the pixels left. ``memo``: where the lines are measured (and kept: the
+    last round's, on the final mask, are those the scan's edges measure again on the same times)."""
     mask = reference.mask.copy()
     given = int(mask.sum())
     pieces: list[tuple[int, tuple[int, int, int, int]]] = []
     tolerance, typical = MIN_TOLERANCE, float("nan")
+    if given == 0:
+        return OffPlane(mask, given, 0, pieces, tolerance, typical)
     grow = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * MARGIN_PX + 1, 2 * MARGIN_PX + 1))
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    reach = MARGIN_PX + 1  # the closing (3 × 3) reads 2 px around a pixel, the margin's disc MARGIN_PX
+    v0, u0 = max(int(rows[0]) - reach, 0), max(int(cols[0]) - reach, 0)
+    v1, u1 = min(int(rows[-1]) + 1 + reach, mask.shape[0]), min(int(cols[-1]) + 1 + reach, mask.shape[1])
+    box = mask[v0:v1, u0:u1]  # a view: the rounds leave pixels out of ``mask`` through it
+    at = np.flatnonzero(mask)  # the given pixels (flat indices, row-major), gathered with np.take
+    v_all, u_all = np.divmod(at, mask.shape[1])
+    in_box = (v_all - v0) * (u1 - u0) + (u_all - u0)
+    ok_all, xy_all = plane_points(reference.plane, ray_map.reshape(-1, 3)[at])  # their points, for every edge
+    hits = np.zeros(at.size, dtype=bool)
+    hits[ok_all] = True
+    xy_of = np.full((at.size, 2), np.nan)
+    xy_of[ok_all] = xy_all
+    left = np.ones(at.size, dtype=bool)  # the given pixels still in the region
     for _ in range(ROUNDS):
-        v, u = np.nonzero(mask)
-        if u.size == 0:
-            break
-        ok, xy = plane_points(reference.plane, ray_map[v, u])  # the region's points, for every edge's lines
-        worst = np.full(u.size, -np.inf)
+        here = at[left]
+        ok = np.flatnonzero(hits[left])
+        xy = xy_of[left][ok]
+        worst = np.full(here.size, -np.inf)
         for times in maps:
-            lines = measure_reference_lines(times, n_frames, dataclasses.replace(reference, mask=mask), camera)
-            predicted = np.full(u.size, np.nan)
+            held = dataclasses.replace(reference, mask=mask)
+            lines = (measure_reference_lines(times, n_frames, held, camera) if memo is None
+                     else memo.measure(times, n_frames, held, camera))
+            predicted = np.full(here.size, np.nan)
             if np.count_nonzero(lines.found) >= 2:
                 predicted[ok] = times_at_points(lines, xy)
             with np.errstate(invalid="ignore"):
-                worst = np.fmax(worst, np.abs(times[v, u] - predicted))
+                worst = np.fmax(worst, np.abs(np.take(times.reshape(-1), here) - predicted))
         worst[~np.isfinite(worst)] = np.nan
-        residual = np.full(mask.shape, np.nan)
-        residual[v, u] = worst
+        residual = np.full(box.shape, np.nan)
+        residual.reshape(-1)[in_box[left]] = worst
         judged = worst[np.isfinite(worst)]
         if judged.size == 0:
             break
         typical = float(np.median(judged))
         tolerance = max(MIN_TOLERANCE, TOLERANCE_SIGMAS * 1.4826 * typical)
-        off, found = off_plane_pieces(residual, mask, tolerance, MIN_PIECE_PX)
+        off, found = off_plane_pieces(residual, box, tolerance, MIN_PIECE_PX)
         if not found:
             break
-        pieces += found
-        mask &= ~cv2.dilate(off.astype(np.uint8), grow).astype(bool)
+        pieces += [(area, (a + u0, b + v0, c + u0, d + v0)) for area, (a, b, c, d) in found]
+        box &= ~cv2.dilate(off.astype(np.uint8), grow).astype(bool)
+        left &= np.take(mask.reshape(-1), at)
+        if not left.any():
+            break
     pieces.sort(reverse=True)
     return OffPlane(mask, given, given - int(mask.sum()), pieces, tolerance, typical)
 
 
 def hold_regions(setup: ScanSetup, maps: list[np.ndarray], n_frames: int, ray_map: np.ndarray,
-                 warnings: list[str]) -> ScanSetup:
+                 warnings: list[str], memo: LineMemo | None = None) -> ScanSetup:
     """``setup`` with each plane's region held to the plane (:func:`off_plane`) on the edges' time ``maps``
     (:func:`gnomon.reconstruct.edges.edge_time_maps`), a warning per plane that lost pixels: how many,
-    where the largest piece lies, and what to do."""
+    where the largest piece lies, and what to do. ``memo``: :func:`off_plane`'s."""
     # the planes are independent: one thread each (numpy, OpenCV and the kernel release the GIL)
     with ThreadPoolExecutor(max_workers=2, thread_name_prefix="gnomon-regions") as pool:
-        helds = list(pool.map(lambda ref: off_plane(ref, maps, n_frames, setup.camera, ray_map), setup.planes))
+        helds = list(pool.map(lambda ref: off_plane(ref, maps, n_frames, setup.camera, ray_map, memo),
+                              setup.planes))
     planes = []
     for reference, held in zip(setup.planes, helds, strict=True):
         if held.left_out and held.pieces:

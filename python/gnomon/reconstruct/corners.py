@@ -17,7 +17,7 @@ import numpy as np
 from gnomon.config.setup import FOCAL_BLAME, MAX_PLANE_DEPTH_SHARE, ScanSetup
 from gnomon.errors import GnomonError
 from gnomon.geometry.plane_tie import MIN_TIE_FRAMES, CornerTie, tie_by_corner
-from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines, measure_reference_lines
+from gnomon.geometry.reference_lines import LineMemo, PlaneInCamera, ReferenceLines, measure_reference_lines
 
 __all__ = ["apply_ties", "combined_tie", "moved", "tie_camera_planes", "tie_lines", "tie_message", "tie_planes"]
 
@@ -98,17 +98,19 @@ def tie_lines(untied: tuple[tuple[str, str], ...],
     return out
 
 
-def tie_planes(setup: ScanSetup, maps: list[np.ndarray], n_frames: int, warnings: list[str]) -> ScanSetup:
+def tie_planes(setup: ScanSetup, maps: list[np.ndarray], n_frames: int, warnings: list[str],
+               memo: LineMemo | None = None) -> ScanSetup:
     """``setup`` with each untied plane (:attr:`ScanSetup.untied`) at the distance the shadow's corner gives
     it, its report entry saying how (``tie``: distance, σ, frames, corner angle), from the edges' time
     ``maps`` (:func:`gnomon.reconstruct.edges.edge_time_maps`); a plane that cannot be tied is a
-    :class:`GnomonError`. Appends a warning per plane whose tie is uncertain or inconsistent."""
+    :class:`GnomonError`. Appends a warning per plane whose tie is uncertain or inconsistent. ``memo``: lines
+    already measured on the same maps (:class:`~gnomon.geometry.reference_lines.LineMemo`)."""
     if not setup.untied:
         return setup
     refs = {p.name: p for p in setup.planes}
     names = {n for pair in setup.untied for n in pair}
-    lines_of = {n: [measure_reference_lines(t, n_frames, refs[n], setup.camera) for t in maps]
-                for n in names}
+    measure = measure_reference_lines if memo is None else memo.measure
+    lines_of = {n: [measure(t, n_frames, refs[n], setup.camera) for t in maps] for n in names}
     ties = tie_lines(setup.untied, lines_of)
     return apply_ties(setup, ties, warnings)
 

@@ -29,7 +29,7 @@ from gnomon.capture.tracking import (
 )
 from gnomon.config.setup import ScanSetup
 from gnomon.errors import FrameError, FrameNote
-from gnomon.geometry.reference_lines import ReferenceLines
+from gnomon.geometry.reference_lines import LineMemo, ReferenceLines
 from gnomon.geometry.surface import points_from_depth, ray_plane_angles
 from gnomon.geometry.triangulation import triangulate_depth
 from gnomon.geometry.uncertainty import (
@@ -108,11 +108,13 @@ class Levels:
     edges, the screening and the fusion use them), and each edge's times as :func:`edge_time` prepares
     them before its averaging across the sweep (the regions' maps and the edges share them).
 
-    For the tracked times as they are: a light that rewrites them (``choose_dips``) needs a new one."""
+    For the tracked times as they are: a light that rewrites them (``choose_dips``) needs a new one.
+    ``lines``: the reference lines measured on those times (the regions' last, which the edges reuse)."""
 
     def __init__(self, tracked: TrackedSequence):
         self.tracked = tracked
         self._edges: dict[str, PreparedEdge] = {}
+        self.lines = LineMemo()
 
     def edge(self, name: str, times: np.ndarray, slope: np.ndarray) -> PreparedEdge:
         """The edge ``name``'s :class:`PreparedEdge` (``times`` and ``slope`` (H, W) the tracker's), computed
@@ -397,8 +399,8 @@ def check_line_residuals(edge: EdgeResult, residuals: list[Any], path: Path, war
 
 def reconstruct_edges(setup: ScanSetup, tracked: TrackedSequence, ray_map: np.ndarray,
                        warnings: list[str], levels: Levels | None = None) -> list[EdgeResult]:
-    geometry = ReferenceGeometry(setup.camera, setup.planes, tracked.n_frames)
     levels = levels or Levels(tracked)
+    geometry = ReferenceGeometry(setup.camera, setup.planes, tracked.n_frames, levels.lines)
     levels.imax, levels.imin, levels.sigma_at_threshold  # noqa: B018 - computed once, before the threads share them
     # The edges are independent until they are fused: one thread each (numpy and the kernel release
     # the GIL; the other core is idle once the frames are decoded). Results and errors in edge order.

@@ -205,8 +205,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
     with timed(timings, "regions_s", cpu):  # the regions held to their planes, then planes tied at corners
         levels = Levels(tracked)  # each edge's times prepared once, for the regions and the edges
         maps = edge_time_maps(tracked, setup.edge, levels)
-        setup = hold_regions(setup, maps, tracked.n_frames, ray_map, warnings)
-        setup = tie_planes(setup, maps, tracked.n_frames, warnings)
+        setup = hold_regions(setup, maps, tracked.n_frames, ray_map, warnings, levels.lines)
+        setup = tie_planes(setup, maps, tracked.n_frames, warnings, levels.lines)
     check_contrast(tracked.times, tracked.noise_dn, setup.tracker.min_contrast, source.name)
     if tracked.dropped:
         warnings.append(dropped_frames_warning(tracked.dropped))

@@ -18,6 +18,7 @@
 //!   clipped fit, in numpy's float32 order;
 //! * [`ray_map`]: the unit ray of every pixel of OpenCV's 5-coefficient camera (Newton);
 //! * [`deblock_interpolate`]: a compressed video's shadow times between its codec blocks' centres;
+//! * [`lut_lookup`]: a per-code table at each level's code in a sorted decoding table;
 //! * [`Plane`], [`Ray`]: the geometry, in the camera frame.
 //!
 //! Pure Rust, no Python types; every function on user data returns
@@ -31,6 +32,7 @@ pub mod geometry;
 pub mod intensity;
 pub mod lines;
 pub mod live;
+pub mod lut;
 pub mod mesh;
 pub mod noise;
 pub mod retime;
@@ -48,6 +50,7 @@ pub use geometry::{Plane, Ray};
 pub use intensity::NORMALISED_SCALE;
 pub use lines::{frame_lines, isochrone_crossings, line_times, Crossings, FrameLines, LineParams};
 pub use live::{FinishedPixel, WatchParams};
+pub use lut::lut_lookup;
 pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, triangles, CleanMesh};
 pub use noise::{clipped_fit_step, noise_samples, pairwise_sum, ClipFit, NoiseSamples};
 pub use retime::{

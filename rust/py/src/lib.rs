@@ -15,6 +15,7 @@ mod deblock;
 mod errors;
 mod lines;
 mod live;
+mod lut;
 mod mesh;
 mod noise;
 mod results;
@@ -45,7 +46,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
         retime::average_across, triangulate::triangulate_depth, surface::world_points,
         camera::ray_map, surface::lit_median, noise::clipped_fit_step, noise::noise_samples,
         surface::fuse_supported, tracker::simd_path, tracker::simd_paths, lines::line_times,
-        deblock::deblock_interpolate,
+        deblock::deblock_interpolate, lut::lut_lookup,
     }
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
