@@ -20,7 +20,9 @@ frames, ``.npz``). Scenes:
   a lamp of real size for every shadow; shot and read noise), with the pixels the
   lamp never lights and those only bounced light changes in its truth;
 * ``facade_sun`` — :func:`simulate_facade_sun` (:mod:`gnomon.simulate.facade_sun`):
-  a pole's shadow swept by the sun (pvlib) over ground and a building facade;
+  a pole's shadow swept by the sun (pvlib) over ground and a building facade; with
+  ``bounce=True`` the sun and sky light bounced between street, facade and balconies
+  (:mod:`gnomon.simulate.outdoor_bounce`), frame by frame;
 * ``facade_day`` — the same facade over a whole day, night at both ends
   (``FacadeSunConfig.day()``): six cloud dips, a lamp post whose shadow is
   another moving darkening, the evening's fading sun.
