@@ -161,3 +161,16 @@ def test_bounced_light_conserves_energy_and_the_poles_shadow_dims_it(bounce_scen
     sw = sc.swept
     assert 0.0 < np.median(dip[sw]) < 0.01       # on the swept surface: well under a per cent
     assert sc.bounce_truth.share[sw].max() < 0.5  # the sun still lights what the pole's shadow sweeps
+
+
+@pytest.mark.parametrize("scene", ["facade_sun", "facade_day"])
+def test_the_command_line_asks_for_the_bounce_and_leaves_it_off_by_default(scene):
+    from gnomon.cli import build_parser
+    from gnomon.commands import simulate as simulate_command
+    from gnomon.simulate.facade_sun import FacadeSunConfig
+
+    argv = ["simulate", scene, "--out", "x"]
+    off = simulate_command._options(build_parser(argv).parse_args(argv))
+    on = simulate_command._options(build_parser(argv + ["--bounce"]).parse_args(argv + ["--bounce"]))
+    assert "bounce" not in off and not FacadeSunConfig().bounce
+    assert on["bounce"] is True
