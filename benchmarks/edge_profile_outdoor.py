@@ -15,15 +15,17 @@ passes the disc's centre at time ``tc``; the disc's hidden fraction is the band'
 by ρ and ``a`` by α (frames). When α > ρ (an umbra) each edge is the circular-segment profile alone; when α < ρ
 (beyond h = r/ρ = 10.7 m from the pole: the whole facade) the two edges overlap and the dip never reaches the
 shadow's level. The truth's enter and leave times (the pole's tangent planes through the disc's centre) are
-``tc − a`` and ``tc + a``. Each timed pixel's dip, from 3 frames before its mid-level enter crossing to 4 after its
-leave crossing, decoded to linear light and divided by the scan's own per-frame gain (the illumination
-normaliser's), is fitted by least squares with ``I(t) = hi·(1 − f) + lo·f`` (``hi``, ``lo`` linear, solved
-exactly; ``tc`` and ``a`` by Gauss–Newton from the mid-level crossings):
+``tc − a`` and ``tc + a`` (a pixel whose fit moves either by more than ``GUARD`` = 0.5 frame from its mid-level
+crossing keeps its crossings: a failed fit). Each timed pixel's dip, from 3 frames before its mid-level enter
+crossing to 4 after its leave crossing, decoded to linear light and divided by the scan's own per-frame gain
+(the illumination normaliser's), is fitted by least squares with ``I(t) = hi·(1 − f) + lo·f`` (``hi``, ``lo``
+linear, solved exactly; ``tc`` and ``a`` by Gauss–Newton from the mid-level crossings):
 
 * facade: ``w`` from the sun's path (the disc's centre leaves a vertical plane through the pole at
   ``cos e · dφ/dt``, φ the sun's azimuth in the world, e its elevation: the ephemeris the scan has);
-* desk: ``w`` is not known (the stick is moved by hand): fitted per pixel with ``tc`` and ``a``, then the median
-  over 15 × 15 px, and the fit again with it fixed (as ``edge_profile.py`` did with its Gaussian's width).
+* desk: ``w`` is not known (the stick is moved by hand): per pixel the one of ``W_CANDIDATES`` whose fit leaves
+  the least residual, then the median over 15 × 15 px, and the fit again with it fixed (as ``edge_profile.py``
+  did with its Gaussian's width).
 
 Compared with the truth on the swept pixels both methods time: the time error (frames) and the depth through the
 *true* shadow planes (% of the camera distance), per edge. ``--full``: the whole scan again with the profile's
@@ -56,6 +58,8 @@ from gnomon.runs.scan import ScanOptions, prepare_scan, run_scan, scan  # noqa: 
 
 BEFORE, AFTER = 3, 4
 MAX_SPAN = 14         # frames between the mid-level crossings beyond which a pixel is not fitted
+GUARD = 0.5           # frames: a fitted edge farther than this from its mid-level crossing is a failed fit
+W_CANDIDATES = (0.3, 0.45, 0.6, 0.8, 1.0, 1.3, 1.7)   # frames: the disc's radius tried where it is not known
 
 
 def disc_below(u: np.ndarray) -> np.ndarray:
@@ -152,12 +156,24 @@ def profile_times(d: Dips, w_pixels: np.ndarray | None, shape) -> tuple[np.ndarr
     """Fitted enter and leave (tracker frames) and the w used; w_pixels None: fitted per pixel then smoothed."""
     tc0, a0 = (d.enter + d.leave) / 2, np.maximum((d.leave - d.enter) / 2, 0.1)
     if w_pixels is None:
-        _, _, w_free, _ = fit_band(d.y, d.t, d.m, tc0, a0, np.full(len(tc0), 0.8), fit_w=True)
-        wmap = np.full(shape, float(np.median(w_free)))
-        wmap[d.vv, d.uu] = w_free
+        # w per pixel: the candidate of least residual (a free Gauss–Newton step in w wanders off: on the small
+        # desk it settled at 1.24 frames with 7 times the residual of w = 0.6), then the median over 15 × 15 px
+        best_r = np.full(len(tc0), np.inf)
+        w_best = np.full(len(tc0), W_CANDIDATES[0])
+        for wc in W_CANDIDATES:
+            _, _, _, rr = fit_band(d.y, d.t, d.m, tc0, a0, np.full(len(tc0), wc), iterations=8)
+            better = rr < best_r
+            best_r, w_best = np.where(better, rr, best_r), np.where(better, wc, w_best)
+        wmap = np.full(shape, float(np.median(w_best)))
+        wmap[d.vv, d.uu] = w_best
         w_pixels = median_filter(wmap, size=15)[d.vv, d.uu]
     tc, a, _, _ = fit_band(d.y, d.t, d.m, tc0, a0, w_pixels)
-    return tc - a, tc + a, w_pixels
+    enter, leave = tc - a, tc + a
+    # a fit that moved an edge by more than GUARD frames from its crossing failed (a cloud, a clipped span):
+    # that pixel keeps its mid-level crossings
+    failed = ~((np.abs(enter - d.enter) <= GUARD) & (np.abs(leave - d.leave) <= GUARD))
+    enter[failed], leave[failed] = d.enter[failed], d.leave[failed]
+    return enter, leave, w_pixels
 
 
 class Tap:

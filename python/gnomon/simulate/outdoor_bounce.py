@@ -250,12 +250,12 @@ class FacadeBounce:
 
     def summary(self) -> dict:
         p = self.patches
-        ground_share = float(np.mean(self.form.sum(axis=1)))
+        seen = float(np.mean(self.form.sum(axis=1)))     # the receivers' hemisphere share the patches fill
         return {"bounces": BOUNCES, "patches": len(p), "sub_samples": int(len(p.sub_points)),
                 "receiving_points": int(len(self.receivers.rx[0])), "patch_m": PATCH_M,
                 "patched_x_m": list(GROUND_X), "patched_street_y_m": list(GROUND_Y),
                 "far_street_x_m": list(FAR_X), "far_street_y_m": list(FAR_Y), "far_patch_m": FAR_PATCH_M,
-                "mean_form_factor_sum": ground_share}
+                "mean_form_factor_sum": seen}
 
 
 class AxisBox:
