@@ -85,6 +85,10 @@ def register(subparsers) -> None:
     p.add_argument("--read-noise", type=float, default=None, metavar="ELECTRONS",
                    help="room: read noise, electrons; default 3")
     p.add_argument("--no-bounce", action="store_true", help="room: no interreflection (direct light and ambient)")
+    p.add_argument("--bounce", action="store_true",
+                   help="facade_sun/facade_day: sun and sky light bounced twice between the street, the facade and "
+                        "its balconies, frame by frame (the pole's shadow on the street dims the facade), instead "
+                        "of a fixed ground-bounce share of the sky")
     p.add_argument("--views", type=int, default=4, help="desk_turns: how many places (2-12)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -108,6 +112,8 @@ def _options(args: argparse.Namespace) -> dict:
             opts["start"] = args.start
         if args.clouds is not None:
             opts["clouds"] = args.clouds
+        if args.bounce:
+            opts["bounce"] = True
         return opts
     opts.update(lamp_radius=args.lamp_radius, stick_radius=args.stick_radius)
     if args.scene in ("two_plane", "room"):

@@ -22,7 +22,9 @@ frames, ``.npz``). Scenes:
 * ``facade_sun`` — :func:`simulate_facade_sun` (:mod:`gnomon.simulate.facade_sun`):
   a pole's shadow swept by the sun (pvlib) over ground and a building facade; with ``roof_edge=True``
   (:func:`gnomon.simulate.roof_edge.simulate_roof_edge`) no pole, and the roof line across the street
-  casting a shadow that climbs the facade, each point stepping into it once;
+  casting a shadow that climbs the facade, each point stepping into it once; with ``bounce=True``
+  the sun and sky light bounced between street, facade and balconies
+  (:mod:`gnomon.simulate.outdoor_bounce`), frame by frame;
 * ``facade_day`` — the same facade over a whole day, night at both ends
   (``FacadeSunConfig.day()``): six cloud dips, a lamp post whose shadow is
   another moving darkening, the evening's fading sun.

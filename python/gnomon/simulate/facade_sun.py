@@ -94,7 +94,12 @@ Radiometry (linear, per pixel centre, per frame k)::
 * S_k the sky: 0.22·E at the start, slowly changing (±5 %, following the
   sun's elevation) and 30 % brighter per unit of cloud dip; a(n) =
   (1 + n_z)/2 + 0.25·(1 − n_z)/2 (sky + ground bounce), ao = 0.7 inside the
-  window recesses;
+  window recesses; with ``bounce`` (``--bounce``) a(n) = (1 + n_z)/2 and the
+  ground bounce is computed instead, per frame, between the street, the facade,
+  its balconies and ledge (two bounces, the pole's shadow on the street
+  included: :mod:`gnomon.simulate.outdoor_bounce`), added to the brackets as
+  ``E_ind,k``; the truth then has ``bounce_share``, ``bounce_dip``,
+  ``bounce_dip_frame`` and ``bounce_only``;
 * V_k the building visibility, f_k the pole's occluded fraction;
 * g_k the camera's auto-exposure gain, 1 ± 20 % along two slow sinusoids;
 * sky pixels (no surface): 0.85 · g_k/max g · S_k/max S.
@@ -198,7 +203,7 @@ import pandas as pd
 
 from gnomon.errors import GnomonError
 from gnomon.simulate import geometry as geo
-from gnomon.simulate import sensor, shadow
+from gnomon.simulate import outdoor_bounce, sensor, shadow
 from gnomon.util import atomic, toml_io
 
 # ----------------------------------------------------------------- fixed scene constants
@@ -298,6 +303,7 @@ class FacadeSunConfig:
     bump_frame: int | None = None        # None: 60 % of the way
     # No pole: the roof line across the street sweeps its shadow up the facade (gnomon.simulate.roof_edge).
     roof_edge: bool = False
+    bounce: bool = False                 # interreflection between street, facade and balconies (outdoor_bounce)
 
     @classmethod
     def day(cls, **overrides) -> FacadeSunConfig:
@@ -682,7 +688,8 @@ class FacadeSunScene:
         self.albedo_f = np.where(hit, albedo, 0.0)
         self.in_recess_f = hit & ((ids == WINDOW) | (ids == REVEAL))
         nz = self._n0[..., 2]
-        self.ambient_coef_f = np.where(hit, ((1 + nz) / 2 + GROUND_BOUNCE * (1 - nz) / 2)
+        ground_bounce = 0.0 if self.config.bounce else GROUND_BOUNCE   # computed instead (outdoor_bounce)
+        self.ambient_coef_f = np.where(hit, ((1 + nz) / 2 + ground_bounce * (1 - nz) / 2)
                                        * np.where(self.in_recess_f, RECESS_AO, 1.0), 0.0)
         # Points whose sun ray may meet a building occluder (the others never do).
         self._occ_candidates = hit & (self._P0[..., 1] <= OCCLUDER_Y_MAX + 1e-9) & (ids != POLE)
@@ -779,13 +786,30 @@ class FacadeSunScene:
             fade = np.ones(N)
         self.sky = SKY_FRACTION * (0.9 + 0.1 * el / el.max()) * (1 + 0.05 * np.sin(2 * np.pi * 0.7 * s + ph)) \
             * (1 + 0.3 * (1 - direct)) * fade
+        self.bounce = self._setup_bounce() if c.bounce else None
         # Scale: the brightest surface over all frames (building shadows ignored: a bound) is SURFACE_PEAK.
         peak = 0.0
         for k in range(N):
             cos_i = np.maximum(_dot(self._n0, self.sun_world[k]), 0.0)
-            L = self.albedo_f * (self.sky[k] * self.ambient_coef_f + self.sun_strength[k] * direct[k] * cos_i)
+            L = self.albedo_f * (self.sky[k] * self.ambient_coef_f + self.sun_strength[k] * direct[k] * cos_i
+                                 + self.indirect(k, pole=False))
             peak = max(peak, float(L[self.crop].max()) * self.gain[k])
         self.scale = SURFACE_PEAK / peak
+
+    def _setup_bounce(self) -> outdoor_bounce.FacadeBounce:
+        b = self.building
+        post = None
+        if self.post is not None:
+            post = (POST_BASE, POST_BASE + np.array([0.0, 0.0, POST_HEIGHT]), POST_RADIUS)
+        layout = outdoor_bounce.FacadeLayout(
+            roof_z=ROOF_Z, window_albedo=ALBEDO[WINDOW], boxes=b.boxes,
+            box_albedo=[ALBEDO[i] for i in b.box_ids], building=b, pole_base=self.Q, pole_top=self.Qtop,
+            pole_radius=self.config.pole_radius, post=post, sun_angular_radius=RHO)
+        return outdoor_bounce.FacadeBounce(self, layout)
+
+    def indirect(self, k: int, *, pole: bool = True) -> np.ndarray | float:
+        """The bounced irradiance at frame k on the padded grid (the scene's units; 0 without ``bounce``)."""
+        return 0.0 if self.bounce is None else self.bounce.irradiance(k, pole=pole)
 
     # ------------------------------------------------------------- the pole
     def _pole_planes(self) -> None:
@@ -1007,6 +1031,11 @@ class FacadeSunScene:
         self.cloud_free_passage = free
         self.regions = {"ground": self._regions(GROUND), "facade": self._regions(WALL)}
         self.gnomon_obs = self._gnomon_observation()
+        if self.bounce is not None:
+            self.bounce_truth = self.bounce.truth(
+                lambda k: (self.linear_image(k, blur=False, pole=False), self.scale * self.gain[k]), self.crop)
+            self.bounce_only = (self.hit_f[self.crop] & ~self.swept_surface
+                                & (self.bounce_truth.dip >= outdoor_bounce.BOUNCE_ONLY_DIP))
 
     # ------------------------------------------------------------- reference regions
     def _regions(self, oid: int, max_regions: int = 3) -> list[list[int]]:
@@ -1067,7 +1096,7 @@ class FacadeSunScene:
         f = self.pole_occlusion(k) if pole else 0.0
         direct = self.sun_strength[k] * self.direct_factor[k] * cos_i * vis * (1.0 - f) \
             * (1.0 - self.post_occlusion(k))
-        L = self.albedo_f * (self.sky[k] * self.ambient_coef_f + direct) * self.scale
+        L = self.albedo_f * (self.sky[k] * self.ambient_coef_f + direct + self.indirect(k, pole=pole)) * self.scale
         sky_level = SKY_RADIANCE * (self.sky[k] / self.sky.max())
         L = np.where(self.hit_f, L, sky_level / (self.gain.max()))
         return self._finish(L * self.gain[k], blur, self.motion[k] if blur else None)
@@ -1154,6 +1183,9 @@ class FacadeSunScene:
             "pole_top": self.Qtop.copy(),
             "pole_radius": np.float64(self.config.pole_radius),
             "camera_motion_px": self.motion.copy(),
+            **({"bounce_share": self.bounce_truth.share, "bounce_dip": self.bounce_truth.dip,
+                "bounce_dip_frame": self.bounce_truth.dip_frame, "bounce_only": self.bounce_only}
+               if self.bounce is not None else {}),
         }
 
     def field_log(self) -> dict:
@@ -1223,6 +1255,8 @@ class FacadeSunScene:
             "swept_by_object": by_object,
             "cloud_free_passage_pixels": int(self.cloud_free_passage.sum()),
             "object_ids": {str(k): v for k, v in OBJECT_NAMES.items()},
+            **({"bounce": {**self.bounce.summary(), "bounce_only_pixels": int(self.bounce_only.sum())}}
+               if self.bounce is not None else {}),
             "facade": {"plane": "y = 0", "roof_z": ROOF_Z, "recess_depth": RECESS_DEPTH,
                        "window_width": WINDOW_WIDTH, "window_pitch": WINDOW_PITCH,
                        "window_rows_z": [list(r) for r in WINDOW_ROWS],

@@ -30,8 +30,8 @@ import numpy as np
 
 from gnomon.simulate import geometry as geo
 
-__all__ = ["Patches", "box_patches", "concat_patches", "cylinder_patches", "form_factors", "plane_patches",
-           "sphere_patches", "segment_blocked"]
+__all__ = ["Patches", "ReceiverGrid", "box_patches", "concat_patches", "cylinder_patches", "form_factors",
+           "plane_patches", "receiver_grid", "sphere_patches", "segment_blocked"]
 
 SURFACE_OFFSET = 1e-3  # mm: points are moved off their surface along the normal before a visibility test
 
@@ -191,3 +191,62 @@ def form_factors(points: np.ndarray, normals: np.ndarray, patches: Patches, soli
             F[ri[blocked], ji[blocked]] = 0.0
         out[r0:r0 + chunk] = F
     return out
+
+
+@dataclass(frozen=True)
+class ReceiverGrid:
+    """Where bounced light is gathered and how each pixel takes it: the receiving points ``rx`` (rows, cols of
+    the image grid), the pixels that hit a surface ``pixel_index`` (rows, cols), and per such pixel the four
+    receiving points ``nodes`` (P, 4) it interpolates and their ``weights`` (P, 4) float32 (adding up to 1)."""
+
+    rx: tuple[np.ndarray, np.ndarray]
+    pixel_index: tuple[np.ndarray, np.ndarray]
+    nodes: np.ndarray
+    weights: np.ndarray
+
+    def spread(self, at_rx: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+        """A value given at the receiving points (R,) → the image grid (``shape``), 0 where no surface."""
+        out = np.zeros(shape, dtype=np.float32)
+        out[self.pixel_index] = np.einsum("ij,ij->i", at_rx[self.nodes], self.weights)
+        return out
+
+
+def receiver_grid(hit: np.ndarray, ids: np.ndarray, normals: np.ndarray, step: int, normal_cos: float
+                  ) -> ReceiverGrid:
+    """Receiving points every ``step``-th pixel of an image grid (H, W) (the last row and column included), and
+    the pixels that have none of their own surface around them; each pixel that ``hit`` a surface takes the
+    bilinear weights of the grid points around it that lie on the same object (``ids``) with a normal within
+    ``acos(normal_cos)`` of its own (``normals`` (H, W, 3)), or its own receiving point where none does."""
+    Hf, Wf = hit.shape
+    rows = np.unique(np.r_[np.arange(0, Hf, step), Hf - 1])
+    cols = np.unique(np.r_[np.arange(0, Wf, step), Wf - 1])
+    node_v, node_u = np.meshgrid(rows, cols, indexing="ij")
+    node_id = np.full(node_v.shape, -1, dtype=np.int64)
+    node_ok = hit[node_v, node_u]
+    node_id[node_ok] = np.arange(int(node_ok.sum()))
+    rx_v, rx_u = [node_v[node_ok]], [node_u[node_ok]]
+    n_nodes = int(node_ok.sum())
+    vv, uu = np.nonzero(hit)
+    i0 = np.clip(np.searchsorted(rows, vv, side="right") - 1, 0, len(rows) - 1)
+    j0 = np.clip(np.searchsorted(cols, uu, side="right") - 1, 0, len(cols) - 1)
+    i1, j1 = np.minimum(i0 + 1, len(rows) - 1), np.minimum(j0 + 1, len(cols) - 1)
+    fy = np.where(i1 > i0, (vv - rows[i0]) / np.maximum(rows[i1] - rows[i0], 1), 0.0)
+    fx = np.where(j1 > j0, (uu - cols[j0]) / np.maximum(cols[j1] - cols[j0], 1), 0.0)
+    idx = np.zeros((len(vv), 4), dtype=np.int64)
+    wts = np.zeros((len(vv), 4))
+    for k, (ii, jj, w) in enumerate(((i0, j0, (1 - fy) * (1 - fx)), (i0, j1, (1 - fy) * fx),
+                                     (i1, j0, fy * (1 - fx)), (i1, j1, fy * fx))):
+        nv, nu = rows[ii], cols[jj]
+        good = (node_id[ii, jj] >= 0) & (ids[nv, nu] == ids[vv, uu]) & \
+            (np.einsum("ij,ij->i", normals[nv, nu], normals[vv, uu]) >= normal_cos)
+        idx[:, k] = np.where(good, node_id[ii, jj], 0)
+        wts[:, k] = np.where(good, w, 0.0)
+    total = wts.sum(axis=1)
+    lone = total < 1e-9
+    idx[lone, 0] = n_nodes + np.arange(int(lone.sum()))
+    wts[lone] = [1.0, 0.0, 0.0, 0.0]
+    total[lone] = 1.0
+    rx_v.append(vv[lone])
+    rx_u.append(uu[lone])
+    return ReceiverGrid((np.concatenate(rx_v), np.concatenate(rx_u)), (vv, uu), idx,
+                        (wts / total[:, None]).astype(np.float32))

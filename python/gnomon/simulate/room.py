@@ -234,42 +234,11 @@ class RoomScene(TwoPlaneScene):
         self.sub_direct = np.where(ok, np.maximum(cos_s, 0.0) / d2, 0.0)
         # Receiving points: every RECEIVER_STEP-th pixel of the padded grid, and the pixels that have none
         # of their own surface around them.
-        hit, ids, nf = self.hit_f, self.object_id_f, self.normals_f
-        Hf, Wf = hit.shape
-        st = RECEIVER_STEP
-        rows = np.unique(np.r_[np.arange(0, Hf, st), Hf - 1])
-        cols = np.unique(np.r_[np.arange(0, Wf, st), Wf - 1])
-        node_v, node_u = np.meshgrid(rows, cols, indexing="ij")
-        node_id = np.full(node_v.shape, -1, dtype=np.int64)
-        node_ok = hit[node_v, node_u]
-        node_id[node_ok] = np.arange(int(node_ok.sum()))
-        rx_v, rx_u = [node_v[node_ok]], [node_u[node_ok]]
-        n_nodes = int(node_ok.sum())
-        vv, uu = np.nonzero(hit)
-        i0 = np.clip(np.searchsorted(rows, vv, side="right") - 1, 0, len(rows) - 1)
-        j0 = np.clip(np.searchsorted(cols, uu, side="right") - 1, 0, len(cols) - 1)
-        i1, j1 = np.minimum(i0 + 1, len(rows) - 1), np.minimum(j0 + 1, len(cols) - 1)
-        fy = np.where(i1 > i0, (vv - rows[i0]) / np.maximum(rows[i1] - rows[i0], 1), 0.0)
-        fx = np.where(j1 > j0, (uu - cols[j0]) / np.maximum(cols[j1] - cols[j0], 1), 0.0)
-        idx = np.zeros((len(vv), 4), dtype=np.int64)
-        wts = np.zeros((len(vv), 4))
-        for k, (ii, jj, w) in enumerate(((i0, j0, (1 - fy) * (1 - fx)), (i0, j1, (1 - fy) * fx),
-                                         (i1, j0, fy * (1 - fx)), (i1, j1, fy * fx))):
-            nv, nu = rows[ii], cols[jj]
-            good = (node_id[ii, jj] >= 0) & (ids[nv, nu] == ids[vv, uu]) & \
-                (np.einsum("ij,ij->i", nf[nv, nu], nf[vv, uu]) >= NORMAL_COS)
-            idx[:, k] = np.where(good, node_id[ii, jj], 0)
-            wts[:, k] = np.where(good, w, 0.0)
-        total = wts.sum(axis=1)
-        lone = total < 1e-9
-        idx[lone, 0] = n_nodes + np.arange(int(lone.sum()))
-        wts[lone] = [1.0, 0.0, 0.0, 0.0]
-        total[lone] = 1.0
-        rx_v.append(vv[lone])
-        rx_u.append(uu[lone])
-        self.rx = (np.concatenate(rx_v), np.concatenate(rx_u))
-        self.pixel_index = (vv, uu)
-        self.pixel_nodes, self.pixel_weights = idx, (wts / total[:, None]).astype(np.float32)
+        grid = radiosity.receiver_grid(self.hit_f, self.object_id_f, self.normals_f, RECEIVER_STEP, NORMAL_COS)
+        self.receivers = grid
+        self.rx, self.pixel_index = grid.rx, grid.pixel_index
+        self.pixel_nodes, self.pixel_weights = grid.nodes, grid.weights
+        nf = self.normals_f
         self.form = radiosity.form_factors(self.points_f[self.rx], nf[self.rx], patches, solids)
 
     def _inside_solids(self, X: np.ndarray) -> np.ndarray:
@@ -298,10 +267,7 @@ class RoomScene(TwoPlaneScene):
 
     def _gather(self, radiosity_j: np.ndarray) -> np.ndarray:
         """The bounced irradiance (E = 1) on the padded grid from the patches' radiosity (J,)."""
-        at_rx = self.form @ radiosity_j.astype(np.float32)
-        out = np.zeros(self.hit_f.shape, dtype=np.float32)
-        out[self.pixel_index] = np.einsum("ij,ij->i", at_rx[self.pixel_nodes], self.pixel_weights)
-        return out
+        return self.receivers.spread(self.form @ radiosity_j.astype(np.float32), self.hit_f.shape)
 
     def indirect_full(self, t: float) -> np.ndarray:
         """The bounced radiance on the padded grid at (fractional) time t."""
