@@ -181,6 +181,7 @@ def test_the_watch_opens_the_dips_the_scan_keeps(tmp_path):
     assert report["tracking"]["live"]["points_logged"] >= 0.8 * final
 
 
+@pytest.mark.slow  # its field log is a simulated, scanned capture's (desk_scan: 2.7 s)
 def test_a_camera_that_is_not_there_is_one_line_on_the_process_stderr(desk_scan):
     """OpenCV warns on stderr itself when a camera index cannot be opened ('can't open camera by
     index'); the command's own line is the only one (a process of its own: OpenCV's log level is
