@@ -377,6 +377,33 @@ def test_tiled_scan_equals_untiled_with_less_memory_per_worker(cluster, tmp_path
         assert peak - start < mem["peak"] - mem["start"], (peak, start, mem)
 
 
+@pytest.mark.slow
+def test_a_tiled_scan_with_no_worker_left_stops_in_one_line(cluster, tmp_path, capsys, monkeypatch):
+    """Every worker gone (killed, crashed) and none coming back: the scan does not wait for ever on its
+    tiles; once the scheduler has listed no worker for NO_WORKER_TIMEOUT_S (here 3 s) it stops with one
+    line naming the scheduler, exit code 2, nothing written."""
+    from gnomon.cli import main
+    from gnomon.util import dask_wait
+
+    log = write_tiny_capture(tmp_path / "cap")
+    monkeypatch.setattr(dask_wait, "NO_WORKER_TIMEOUT_S", 3.0)
+    try:
+        for p in cluster.workers:
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+                p.wait(timeout=30)
+        capsys.readouterr()
+        t0 = time.monotonic()
+        code = main(["scan", str(log), "--out", str(tmp_path / "out"), "--tiles", "2x2",
+                     "--scheduler", cluster.address, "--quiet"])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1, err
+        assert "no worker for 3 s" in err[0] and cluster.address.split("//")[1] in err[0], err
+        assert time.monotonic() - t0 < 60 and not (tmp_path / "out").exists()
+    finally:
+        cluster.fresh_workers(2)
+
+
 def test_tiles_flag_errors_are_one_line(tmp_path, capsys):
     from gnomon.cli import main
 

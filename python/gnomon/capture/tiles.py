@@ -190,8 +190,7 @@ class TiledTracker:
 
     def __call__(self, source, settings, shape: tuple[int, int], *, skip: np.ndarray | None = None,
                  on_frame=None, progress: bool = False, where: str = "[camera]"):
-        from distributed import as_completed
-
+        from gnomon.util.dask_wait import completed
         from gnomon.util.progress import Progress
 
         t0 = time.perf_counter()
@@ -207,7 +206,7 @@ class TiledTracker:
             self._record_frames(source, on_frame)
         done = []
         with Progress("tiles", len(futures), enabled=progress) as bar:
-            for fut in as_completed(futures):
+            for fut in completed(self.client, futures, what=f"{source.name}: the tiles"):
                 done.append(fut.result())  # a GnomonError on a worker is raised here, as in an untiled scan
                 bar.update(len(done))
         del futures  # the workers may forget the tiles' maps now

@@ -456,8 +456,7 @@ def run_batch(plan: BatchPlan, *, scheduler: str | None = None, workers: int | N
     raised (not of a bad input, which is a result); a worker lost mid-task is
     rescheduled by the scheduler (``distributed.scheduler.allowed-failures``).
     """
-    from distributed import as_completed
-
+    from gnomon.util.dask_wait import completed
     from gnomon.util.progress import Progress
 
     client, cluster = connect_client(scheduler, workers, timeout_s)
@@ -475,7 +474,7 @@ def run_batch(plan: BatchPlan, *, scheduler: str | None = None, workers: int | N
         jobs: dict[str, ScanJob | MergeJob] = {j.name: j for j in plan.scans}
         jobs.update({m.name: m for m in plan.merges})
         with Progress("batch", len(futures), enabled=progress) as bar:
-            for fut in as_completed(list(futures.values())):
+            for fut in completed(client, list(futures.values()), what="the batch"):
                 name = names[fut.key]
                 try:
                     res = fut.result()

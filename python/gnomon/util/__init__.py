@@ -2,8 +2,9 @@
 (:mod:`~gnomon.util.atomic`), TOML read and written (:mod:`~gnomon.util.toml_io`), inputs validated at
 the edge with one-line errors (:mod:`~gnomon.util.validate`), robust line and plane fits and a small
 Levenberg–Marquardt solver (:mod:`~gnomon.util.fitting`), the χ² tail (:mod:`~gnomon.util.chi2`), a
-progress bar, stage timings, signals held off a block of code (:mod:`~gnomon.util.interrupts`), and a
-producer thread feeding its consumer (:mod:`~gnomon.util.threads`).
+progress bar, stage timings, signals held off a block of code (:mod:`~gnomon.util.interrupts`), a
+producer thread feeding its consumer (:mod:`~gnomon.util.threads`), and a cluster's futures as they
+complete, never waiting on a cluster with no worker left (:mod:`~gnomon.util.dask_wait`).
 Each is loaded when first used: the command line starts without numpy.
 """
 
