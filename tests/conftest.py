@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import sys
 from pathlib import Path
 
 import cv2
@@ -23,6 +24,16 @@ os.environ.setdefault("CI", "1")
 os.environ["TELEMETRY_ENABLED"] = "false"
 os.environ.pop("DISPLAY", None)
 os.environ.pop("WAYLAND_DISPLAY", None)
+
+
+@pytest.fixture(autouse=True)
+def _sys_path_as_it_was():
+    """Whatever a test puts on sys.path (a benchmark script it loads puts the source tree first) is taken
+    off after it: the subprocesses later tests start inherit sys.path as PYTHONPATH, and in a clean clone
+    the source tree's gnomon has no compiled kernel (the installed one has)."""
+    saved = list(sys.path)
+    yield
+    sys.path[:] = saved
 
 
 def write_tiny_capture(folder: Path, *, n_frames: int = 24, width: int = 48, height: int = 36,

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,11 @@ def bench():
                                                   ROOT / "benchmarks" / "edge_profile_outdoor.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    saved = list(sys.path)
+    try:
+        spec.loader.exec_module(module)
+    finally:  # the script puts the source tree first on sys.path: not for the tests after (their subprocesses)
+        sys.path[:] = saved
     return module
 
 
