@@ -41,7 +41,7 @@ def completed(client: Any, futures: Iterable[Any], *, what: str) -> Iterator[Any
             pending = [f for f in pending if f in not_done]
             yield from (f for f in list(done))
             continue
-        if client.scheduler_info(n_workers=-1).get("workers"):
+        if client.scheduler_info().get("workers"):
             workerless_since = None
             continue
         now = time.monotonic()
