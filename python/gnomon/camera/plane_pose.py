@@ -60,6 +60,23 @@ class MarkerDetection:
     # hand-drawn cross, :func:`search_crosses`: x_score its ink's isotropy, asymmetry 1 − its point symmetry)
 
 
+@dataclass(frozen=True)
+class MarkKind:
+    """How a kind of mark is named to the user and written into a field log: ``plural`` / ``singular`` in
+    messages, ``key`` the marker table's pixel key (a checker's ``pixel_hint`` is refined again by the scan;
+    a cross is found once and for all and given as ``pixel``), with ``digits`` decimals."""
+
+    plural: str
+    singular: str
+    key: str
+    digits: int
+
+
+MARK_KINDS = {"checker": MarkKind("printed 2x2 checkers", "2x2 checker", "pixel_hint", 1),
+              "cross": MarkKind("hand-drawn crosses", "cross", "pixel", 2)}
+""":attr:`MarkerDetection.kind` → its :class:`MarkKind`."""
+
+
 def _circle_profile(img: np.ndarray, centre: tuple[float, float], radius: float, n: int = 64) -> np.ndarray:
     th = np.arange(n) * (2 * np.pi / n)
     mx = (centre[0] + radius * np.cos(th)).astype(np.float32).reshape(1, -1)
@@ -338,8 +355,8 @@ def split_marks(dets: Sequence[MarkerDetection]) -> MarkGroups:
     between the planes, and with a mark missing no split can be told from another."""
     dets = sorted(dets, key=lambda d: d.pixel[1])
     n = len(dets)
-    crosses = bool(dets) and dets[0].kind == "cross"
-    marks, mark = ("hand-drawn crosses", "clean cross") if crosses else ("printed 2x2 checkers", "clean 2x2 checker")
+    kind = MARK_KINDS[dets[0].kind if dets else "checker"]
+    marks, mark = kind.plural, f"clean {kind.singular}"
     v = np.array([d.pixel[1] for d in dets])
     gaps = np.diff(v)
     if n == 7 and max(gaps[2], gaps[3]) >= SEVEN_MARKS_GAP_RATIO * min(gaps[2], gaps[3]):

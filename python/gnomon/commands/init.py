@@ -344,16 +344,19 @@ def corrupt_frames(files: list[Path]) -> list[tuple[Path, str]]:
     return bad
 
 
+def _mark_pixel(mark) -> str:
+    """``key = [u, v]`` of a found mark, with its kind's key and decimals (plane_pose.MARK_KINDS)."""
+    from gnomon.camera.plane_pose import MARK_KINDS
+
+    kind = MARK_KINDS[mark.kind]
+    return f"{kind.key} = [{mark.pixel[0]:.{kind.digits}f}, {mark.pixel[1]:.{kind.digits}f}]"
+
+
 def _found_plane(name: str, what: str, marks, first_id: int, drawing: str, regions_help: bool,
                  units_line: bool) -> str:
     """A [[planes]] table whose markers were found in the first frame (pixels as found, no plane_xy)."""
     regions = _regions_lines(name, regions_help)
-    # a checker's hint is refined again by the scan; a cross is found here once and for all (find_cross)
-    def mark_line(i: int, m) -> str:
-        key, digits = ("pixel", 2) if m.kind == "cross" else ("pixel_hint", 1)
-        return f"  {{ id = {first_id + i}, {key} = [{m.pixel[0]:.{digits}f}, {m.pixel[1]:.{digits}f}] }}"
-
-    lines = ",\n".join(mark_line(i, m) for i, m in enumerate(marks))
+    lines = ",\n".join(f"  {{ id = {first_id + i}, {_mark_pixel(m)} }}" for i, m in enumerate(marks))
     distance = (f"# mark_distance = {{ between = [{first_id}, {first_id + 1}], length = L }}  # one measured "
                 "spacing sets the lengths (then [capture] units = \"mm\")\n") if units_line else ""
     return FOUND_PLANE.format(what=f"The {name}. {what}", howto=FOUND_MARKERS_HOWTO.format(drawing=drawing),
@@ -469,7 +472,7 @@ def run(args: argparse.Namespace) -> int:
     howto = MARKERS_HOWTO.format(units=units)
     found_note, found = "", None  # found: the marks init assigned to the desk and the wall, if any
     if light == "two-plane":
-        from gnomon.camera.plane_pose import search_crosses, search_markers, split_marks
+        from gnomon.camera.plane_pose import MARK_KINDS, search_crosses, search_markers, split_marks
 
         groups = split_marks(search_markers(first.grey))
         if not groups.lower and len(groups.found) < 4:  # no printed checkers: hand-drawn crosses, then
@@ -492,19 +495,15 @@ def run(args: argparse.Namespace) -> int:
                           f"(drawn in {drawing.name})")
             if not groups.complete:
                 short = "desk" if len(groups.lower) < 4 else "wall"
-                mark = "cross" if groups.lower[0].kind == "cross" else "2x2 checker"
-                found_note += (f"; the {short}'s fourth mark is not a clean {mark} (or hidden): add it to its "
-                               "markers, pixel = [u, v]")
+                found_note += (f"; the {short}'s fourth mark is not a clean {MARK_KINDS[groups.lower[0].kind].singular}"
+                               " (or hidden): add it to its markers, pixel = [u, v]")
         else:
             found_note = f"; {groups.why}: give the markers' pixels by hand"
             if groups.found:
-                crosses_found = groups.found[0].kind == "cross"
-                found_note += (f" (the {'crosses' if crosses_found else 'checkers'} found are listed in the "
-                               "desk's table)")
-                key = "pixel" if crosses_found else "pixel_hint"
-                howto += (f"# {'Hand-drawn crosses' if crosses_found else 'Printed 2x2 checkers'} found in the first "
-                          "frame (copy each into its plane's markers):\n"
-                          + "".join(f"#   {key} = [{m.pixel[0]:.1f}, {m.pixel[1]:.1f}]\n" for m in groups.found))
+                plural = MARK_KINDS[groups.found[0].kind].plural
+                found_note += f" (the {plural} found are listed in the desk's table)"
+                howto += (f"# {plural[0].upper() + plural[1:]} found in the first frame (copy each into its plane's "
+                          "markers):\n" + "".join(f"#   {_mark_pixel(m)}\n" for m in groups.found))
     if light in ("two-plane", "sun"):
         if found is None:
             named = ("desk", "wall") if light == "two-plane" else ("ground", "facade")

@@ -80,12 +80,12 @@ def detect_missing_tips(log: PencilLog) -> tuple[PencilLog, list[str]]:
             raise GnomonError(f"{log.path}: [pencil] photo {name} is {photo_raw.shape[1]}x{photo_raw.shape[0]}, "
                               f"the empty desk {empty_raw.shape[1]}x{empty_raw.shape[0]}")
         photo, source = lut[photo_raw], f"{log.path}: {name}"
-        how = ""
-        if not np.all(np.isfinite(bases[i])):
+        if np.all(np.isfinite(bases[i])):
+            how, top_px = "", tops_of(bases[i][None])[0]
+        else:
             standing = find_pencil_base(photo, empty, tops_of, source=source)
-            bases[i] = standing.base_px
+            bases[i], top_px = standing.base_px, standing.top_px
             how = f", the pencil found with it (fit {standing.fit:.2f})"
-        top_px = tops_of(bases[i][None])[0]
         if not np.all(np.isfinite(top_px)):
             raise GnomonError(f"{log.path}: [pencil] photo {name}: the base pixel does not see the plane")
         found = detect_pencil(photo, empty, bases[i], top_px, source=source)

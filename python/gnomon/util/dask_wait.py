@@ -39,7 +39,7 @@ def completed(client: Any, futures: Iterable[Any], *, what: str) -> Iterator[Any
         if done:
             workerless_since = None
             pending = [f for f in pending if f in not_done]
-            yield from (f for f in list(done))
+            yield from done
             continue
         if client.scheduler_info().get("workers"):
             workerless_since = None
