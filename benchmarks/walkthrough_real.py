@@ -1,7 +1,8 @@
 """The README's walk-through on public real captures, as a newcomer runs it: no field log typed, no file
 edited but the marks `gnomon init` asks for (a script, not a test).
 
-    PYTHONPATH=python python benchmarks/walkthrough_real.py [--brandonhung DIR] [--afiretony DIR] [--out DIR]
+    PYTHONPATH=python python benchmarks/walkthrough_real.py [--brandonhung DIR] [--afiretony DIR] [--man DIR]
+        [--out DIR]
 
 The checkouts are never committed here and never downloaded by tests. For each capture, in its own folder,
 with copies of its frames and board photos, each command timed:
@@ -25,6 +26,11 @@ A command that refuses (exit code 2) ends that capture; its one line is printed 
 * ``--afiretony``: afiretony/Computational-Photography, a student's own 1080p captures (see AFIRETONY).
   No outline of the objects: each plane scored inside the mask `gnomon regions` proposed (the bare plane
   the scan used), per mille of the desk's distance, with the desk-wall angle.
+* ``--man``: Vincent-2017/mlShadowScan, ``data/man/v1`` (200 frames 1024x768 of a plaster bust in the set-up
+  the CMU frog comes from: Lanman & Taubin's swept-plane course data, with its ``data/calib`` photos, the same
+  files as the frog's); no benchmark uses it. Scored as the frog's second sweep is (the bust and its
+  shadows outlined by hand on its first frame, the boxes' faces of real_captures.py: the marks lie within 5 px
+  of the frog's), and also inside the masks `gnomon regions` proposed.
 """
 
 from __future__ import annotations
@@ -63,9 +69,9 @@ class Refused(Exception):
     """A command exited with code 2: its one line is the capture's outcome."""
 
 
-def gnomon(args: list[str], cwd: Path) -> float:
-    """Run ``gnomon ARGS`` in ``cwd`` as a user does (a process); its wall time in seconds. Exit code 2 raises
-    :class:`Refused` with the command's error line."""
+def gnomon(args: list[str], cwd: Path, output: list[str] | None = None) -> float:
+    """Run ``gnomon ARGS`` in ``cwd`` as a user does (a process); its wall time in seconds (its output lines
+    appended to ``output``). Exit code 2 raises :class:`Refused` with the command's error line."""
     print("$ gnomon " + " ".join(args), flush=True)
     t = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "gnomon", *args], cwd=cwd, env=_env(), text=True,
@@ -73,6 +79,8 @@ def gnomon(args: list[str], cwd: Path) -> float:
     elapsed = time.perf_counter() - t
     tail = [line for line in (done.stdout + done.stderr).splitlines() if not line.startswith(("tracking:", "scan:"))]
     print("\n".join("  " + line for line in tail[-12:]), flush=True)
+    if output is not None:
+        output.extend(tail)
     if done.returncode == 2:
         raise Refused(next((line for line in tail if line.startswith("gnomon: error")), tail[-1] if tail else ""))
     if done.returncode != 0:
@@ -117,13 +125,26 @@ def walk(work: Path, frames: Path, board: Path, board_size: str, added: dict[str
         times["init"] = gnomon(["init", "frames", "--camera", "camera.toml"], work)
         for plane, pixels in (added or {}).items():
             add_marks(work / "field_log.toml", plane, pixels)
-        times["regions"] = gnomon(["regions", "field_log.toml", "--quiet"], work)
+        regions_output: list[str] = []
+        times["regions"] = gnomon(["regions", "field_log.toml", "--quiet"], work, regions_output)
         times["scan"] = gnomon(["scan", "field_log.toml", "--out", "scan", "--quiet"], work)
     except Refused as refused:
         return {"times": times, "refused": str(refused)}
     print("commands' wall time: " + ", ".join(f"{k} {v:.1f} s" for k, v in times.items())
           + f"; {sum(times.values()):.1f} s in all")
-    return {"times": times, "refused": ""}
+    return {"times": times, "refused": "", "gaps": line_gaps(regions_output)}
+
+
+def line_gaps(regions_output: list[str]) -> dict[str, list[tuple[int, int]]]:
+    """The frames in which `gnomon regions` found no line of a plane's own (its warning "no line in frames
+    A–B, C–D of its sweep", the first six spans), plane name -> spans (frame indices from 0, inclusive: the
+    files' numbers less one)."""
+    gaps = {}
+    for line in regions_output:
+        found = re.match(r"warning: plane '(\w+)': no line in frames ([0-9–, ]+)", line)
+        if found:
+            gaps[found[1]] = [(int(a), int(b)) for a, b in re.findall(r"(\d+)–(\d+)", found[2])]
+    return gaps
 
 
 def add_marks(log: Path, plane: str, pixels: list) -> None:
@@ -183,12 +204,39 @@ def score_regions(work: Path) -> None:
 
 def frog_v2(mirror: Path, out: Path) -> None:
     """BrandonHung343/15-463-HW-6: data/frog/v2 with data/calib, scored as real_captures.py scores the frog."""
+    course_setup("frog v2", out / "frog_v2", mirror / "data" / "frog" / "v2", mirror / "data" / "calib", V2_FROG,
+                 V2_SHADOWS)
+
+
+# Vincent-2017/mlShadowScan data/man/v1: the bust (head, chest and the black pedestal) and its cast shadows
+# (left of the head on desk and wall, under the chest, below the chest's edge, right of the pedestal),
+# hand-drawn on its first frame (pixels), for scoring only.
+MAN = [(303, 385), (318, 340), (345, 318), (390, 312), (425, 322), (445, 345), (470, 372), (488, 400), (505, 425),
+       (540, 405), (590, 392), (650, 388), (700, 392), (715, 420), (740, 440), (770, 428), (795, 440), (808, 470),
+       (805, 530), (790, 585), (760, 615), (725, 628), (690, 622), (660, 590), (640, 575), (580, 575), (520, 600),
+       (495, 622), (460, 612), (445, 585), (442, 540), (455, 505), (430, 490), (380, 492), (345, 470), (318, 440)]
+MAN_SHADOWS = [[(238, 455), (265, 425), (310, 420), (330, 460), (380, 495), (440, 500), (450, 520), (420, 525),
+                (330, 515), (262, 512), (240, 495)],
+               [(430, 590), (470, 615), (500, 640), (470, 650), (430, 630)],
+               [(500, 600), (520, 585), (560, 578), (640, 578), (660, 590), (680, 615), (690, 645), (670, 648),
+                (650, 612), (620, 614), (560, 610), (525, 620), (500, 642)],
+               [(650, 600), (700, 628), (760, 622), (790, 600), (800, 620), (770, 650), (700, 652), (660, 635)]]
+
+
+def man(mirror: Path, out: Path) -> None:
+    """Vincent-2017/mlShadowScan: data/man/v1 with data/calib, scored as the frog's second sweep is."""
+    course_setup("man", out / "man", mirror / "data" / "man" / "v1", mirror / "data" / "calib", MAN, MAN_SHADOWS)
+
+
+def course_setup(name: str, work: Path, frames: Path, board: Path, outline: list, shadows: list) -> None:
+    """A sweep of the course's desk-and-wall set-up walked through and scored: inside each plane's marks less
+    the object and its shadows (``outline``, ``shadows``: pixels of the first frame) and the boxes' faces, in
+    mm through the course's measured desk rectangle; then inside the masks `gnomon regions` proposed."""
     import cv2
 
-    work = out / "frog_v2"
-    result = walk(work, mirror / "data" / "frog" / "v2", mirror / "data" / "calib", "8x6")
+    result = walk(work, frames, board, "8x6")
     if result["refused"]:
-        print(f"frog v2: refused: {result['refused']}")
+        print(f"{name}: refused: {result['refused']}")
         return
     planes = planes_of(work)
     print_planes(planes, FROG_RECT[1] / FROG_RECT[0])
@@ -199,17 +247,35 @@ def frog_v2(mirror: Path, out: Path) -> None:
     # regions the scan used), less the object, its shadows, the marks and the boxes' faces (score_scan)
     shape = np.load(work / "scan" / "depth.npy").shape
     masks = {}
-    for name, p in planes.items():
+    for plane, p in planes.items():
         hull = cv2.convexHull(np.round(np.array(p["pixels"])).astype(np.int32))
-        masks[name] = cv2.fillConvexPoly(np.zeros(shape, np.uint8), hull, 1).astype(bool)
+        masks[plane] = cv2.fillConvexPoly(np.zeros(shape, np.uint8), hull, 1).astype(bool)
     with tempfile.TemporaryDirectory() as tmp:
-        scored = score_scan("frog v2 (walk-through)", in_mm(work / "scan", scale, Path(tmp)), work / "camera.toml",
-                            None, V2_FROG, V2_SHADOWS, other_faces=FROG_OTHER_FACES, region_masks=masks)
+        scored = score_scan(f"{name} (walk-through)", in_mm(work / "scan", scale, Path(tmp)), work / "camera.toml",
+                            None, outline, shadows, other_faces=FROG_OTHER_FACES, region_masks=masks)
     print("\n".join(scored.lines()))
     for p in scored.planes:
         print(f"  {p.name} planarity per mille of the desk's distance ({scale:.0f} mm): median "
               f"{1000 * p.median_abs / scale:.2f}, RMS {1000 * p.rms / scale:.2f}; RMS / (1.4826 median) "
               f"{p.rms / (1.4826 * p.median_abs):.2f}")
+    # where a plane had no line of its own, its shadow planes were completed from the other plane's line and
+    # the light (light/two_plane.py): the bare pixels crossed then, scored apart from the rest
+    crossed = np.load(work / "scan" / "shadow_time.npy")  # frame indices from 0, as the gaps' are
+    for plane, spans in result["gaps"].items():
+        in_gap = np.zeros(shape, bool)
+        for a, b in spans:
+            in_gap |= (crossed >= a - 0.5) & (crossed <= b + 0.5)
+        with tempfile.TemporaryDirectory() as tmp:
+            mm = in_mm(work / "scan", scale, Path(tmp))
+            parts = [score_scan(name, mm, work / "camera.toml", None, outline, shadows, other_faces=FROG_OTHER_FACES,
+                                region_masks={**masks, plane: masks[plane] & sel}) for sel in (in_gap, ~in_gap)]
+        (inside,), (outside,) = ([p for p in part.planes if p.name == plane] for part in parts)
+        print(f"  {plane}: its bare pixels crossed in the frames where it had no line "
+              f"({', '.join(f'{a}-{b}' for a, b in spans)}): {inside.swept} swept, planarity median "
+              f"{inside.median_abs:.2f} mm, RMS {inside.rms:.2f} mm; the rest: {outside.swept}, median "
+              f"{outside.median_abs:.2f} mm, RMS {outside.rms:.2f} mm")
+    print("inside the masks `gnomon regions` proposed:")
+    score_regions(work)
 
 
 # afiretony/Computational-Photography assignments/assgn6/data: a student's own captures (1080p phone video, a
@@ -238,12 +304,15 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--brandonhung", type=Path, help="checkout of BrandonHung343/15-463-HW-6")
     ap.add_argument("--afiretony", type=Path, help="checkout of afiretony/Computational-Photography")
+    ap.add_argument("--man", type=Path, help="checkout of Vincent-2017/mlShadowScan")
     ap.add_argument("--out", type=Path, default=Path("walkthrough_real"))
     args = ap.parse_args(argv)
     if args.brandonhung:
         frog_v2(args.brandonhung, args.out)
     if args.afiretony:
         afiretony(args.afiretony, args.out)
+    if args.man:
+        man(args.man, args.out)
     return 0
 
 if __name__ == "__main__":
