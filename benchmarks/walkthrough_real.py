@@ -52,7 +52,7 @@ sys.path.insert(0, str(ROOT / "python"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from real_captures import FROG_OTHER_FACES, FROG_RECT  # noqa: E402
-from score import score_scan  # noqa: E402
+from score import _polygon_mask, score_scan  # noqa: E402
 
 # The second sweep's frog lies otherwise than the first's: its outline and its cast shadows, hand-drawn on the
 # first frame of data/frog/v2 (pixels), for scoring only (grown by score_scan's keep-out margin).
@@ -145,6 +145,21 @@ def line_gaps(regions_output: list[str]) -> dict[str, list[tuple[int, int]]]:
         if found:
             gaps[found[1]] = [(int(a), int(b)) for a, b in re.findall(r"(\d+)–(\d+)", found[2])]
     return gaps
+
+
+def bare_lines(work: Path, plane: dict, bare: np.ndarray, crossed: np.ndarray) -> np.ndarray:
+    """The frames in which the shadow times over ``bare`` (pixels of one plane only) fit a line on that plane
+    (:func:`gnomon.geometry.reference_lines.lines_on_plane`, as the scan fits its lines), (n_frames,) bool."""
+    from gnomon.camera.calibration import load_camera_file
+    from gnomon.camera.models import Pose
+    from gnomon.geometry.reference_lines import PlaneInCamera, lines_on_plane
+
+    pose = Pose.from_rvec_tvec(np.array(plane["rvec"]), np.array(plane["tvec"]))
+    in_camera = PlaneInCamera.from_world(np.zeros(3), np.array([0.0, 0.0, 1.0]), pose)
+    n_frames = len(list((work / "frames").iterdir()))
+    lines = lines_on_plane(crossed.astype(np.float64), n_frames, in_camera, bare,
+                           load_camera_file(work / "camera.toml"), plane["plane"])
+    return lines.found
 
 
 def add_marks(log: Path, plane: str, pixels: list) -> None:
@@ -274,6 +289,11 @@ def course_setup(name: str, work: Path, frames: Path, board: Path, outline: list
               f"({', '.join(f'{a}-{b}' for a, b in spans)}): {inside.swept} swept, planarity median "
               f"{inside.median_abs:.2f} mm, RMS {inside.rms:.2f} mm; the rest: {outside.swept}, median "
               f"{outside.median_abs:.2f} mm, RMS {outside.rms:.2f} mm")
+        bare = masks[plane] & ~_polygon_mask(shape, [outline, *shadows, *FROG_OTHER_FACES.values()], 12)
+        found = bare_lines(work, planes[plane], bare, crossed)
+        gap_frames = [t for a, b in spans for t in range(a, b + 1)]
+        print(f"    the scan's shadow times over the bare {plane} (its marks' outline less the outlines) fit a line of "
+              f"its own in {sum(found[t] for t in gap_frames)} of those {len(gap_frames)} frames")
     print("inside the masks `gnomon regions` proposed:")
     score_regions(work)
 
