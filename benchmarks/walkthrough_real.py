@@ -274,7 +274,8 @@ def course_setup(name: str, work: Path, frames: Path, board: Path, outline: list
               f"{1000 * p.median_abs / scale:.2f}, RMS {1000 * p.rms / scale:.2f}; RMS / (1.4826 median) "
               f"{p.rms / (1.4826 * p.median_abs):.2f}")
     # where a plane had no line of its own, its shadow planes were completed from the other plane's line and
-    # the light (light/two_plane.py): the bare pixels crossed then, scored apart from the rest
+    # the light (light/two_plane.py): the bare pixels crossed then, scored apart from the rest. The gaps are
+    # regions' leaving edge's; shadow_time.npy is the mean of the two edges' times (a few frames earlier)
     crossed = np.load(work / "scan" / "shadow_time.npy")  # frame indices from 0, as the gaps' are
     for plane, spans in result["gaps"].items():
         in_gap = np.zeros(shape, bool)
@@ -285,15 +286,16 @@ def course_setup(name: str, work: Path, frames: Path, board: Path, outline: list
             parts = [score_scan(name, mm, work / "camera.toml", None, outline, shadows, other_faces=FROG_OTHER_FACES,
                                 region_masks={**masks, plane: masks[plane] & sel}) for sel in (in_gap, ~in_gap)]
         (inside,), (outside,) = ([p for p in part.planes if p.name == plane] for part in parts)
-        print(f"  {plane}: its bare pixels crossed in the frames where it had no line "
+        print(f"  {plane}: its bare pixels whose shadow time falls in the frames where it had no line "
               f"({', '.join(f'{a}-{b}' for a, b in spans)}): {inside.swept} swept, planarity median "
               f"{inside.median_abs:.2f} mm, RMS {inside.rms:.2f} mm; the rest: {outside.swept}, median "
               f"{outside.median_abs:.2f} mm, RMS {outside.rms:.2f} mm")
         bare = masks[plane] & ~_polygon_mask(shape, [outline, *shadows, *FROG_OTHER_FACES.values()], 12)
         found = bare_lines(work, planes[plane], bare, crossed)
         gap_frames = [t for a, b in spans for t in range(a, b + 1)]
-        print(f"    the scan's shadow times over the bare {plane} (its marks' outline less the outlines) fit a line of "
-              f"its own in {sum(found[t] for t in gap_frames)} of those {len(gap_frames)} frames")
+        print(f"    the scan's shadow times (the two edges' mean) over the bare {plane} (its marks' outline less the "
+              f"outlines) fit a line of its own in {sum(found[t] for t in gap_frames)} of those {len(gap_frames)} "
+              "frames")
     print("inside the masks `gnomon regions` proposed:")
     score_regions(work)
 
