@@ -408,6 +408,63 @@ def test_short_lines_off_the_sweep_are_moved_to_where_their_long_neighbours_put_
     np.testing.assert_allclose(x[21:], x0 + speed * np.arange(21, n), atol=1e-9)
 
 
+def test_frames_without_a_line_between_long_ones_get_the_one_near_the_sweep() -> None:
+    """:func:`gnomon.runs.regions.follow_the_sweep` with ``fill_gaps``: frames that lost their line (an object
+    beside a short stretch of the plane's shadow took the fit) get the line their crossings near the
+    prediction of the long lines around them make, not the object's crossings beside it; a frame with no
+    crossings stays without one, and so does a gap longer than MAX_FOLLOW_GAP; without ``fill_gaps`` nothing
+    changes."""
+    from gnomon.camera.models import OpenCVCamera, Pose
+    from gnomon.geometry.reference_lines import PlaneInCamera, ReferenceLines
+    from gnomon.runs.regions import MAX_FOLLOW_GAP, follow_the_sweep
+
+    cam = OpenCVCamera(200, 150, 180.0, 180.0, 99.5, 74.5, (0.0,) * 5)
+    pose = Pose.from_rvec_tvec(np.array([np.pi, 0.0, 0.0]), np.array([0.0, 0.0, 400.0]))  # looking down
+    plane = PlaneInCamera.from_world(np.zeros(3), np.array([0.0, 0.0, 1.0]), pose)
+    x0, speed, n, k = -150.0, 5.0, 61, 0.25  # the desk's line x + k·y = x0 + speed·t (world mm)
+    rays = pose.R.T @ cam.ray_map().reshape(-1, 3).T
+    c = pose.camera_centre_world
+    on_desk = c[:, None] + rays * (-c[2] / rays[2])
+    desk_x, desk_y = on_desk[0].reshape(150, 200), on_desk[1].reshape(150, 200)
+    times = ((desk_x + k * desk_y - x0) / speed).astype(np.float32)
+    times[np.abs(times - 40.0) < 0.5] = np.nan  # frame 40: no crossings anywhere
+    # an object over most of the shadow's length in frames 24-36: its pixels (y > -20 mm) cross 30 mm later
+    obj = (desk_y > -20.0) & (np.abs(times - 30.0) < 6.0)
+    times[obj] += np.float32(30.0 / speed)
+    assert obj.sum() > 2 * (np.abs(times - 30.0) < 6.0).sum() / 3
+    along = np.array([-k, 1.0, 0.0]) / np.hypot(k, 1.0)
+    point = np.array([pose.world_to_camera(np.array([x0 + speed * t, 0.0, 0.0])) for t in range(n)])
+    direction = np.tile(pose.R @ along, (n, 1))
+    lost = np.zeros(n, dtype=bool)
+    lost[list(range(26, 35)) + [40]] = True
+
+    def lines_with(missing: np.ndarray) -> ReferenceLines:
+        pts = point.copy()
+        pts[missing] = np.nan
+        return ReferenceLines("desk", plane, pts, direction.copy(), np.full(n, 0.1), np.full(n, 50),
+                              [np.zeros((0, 2))] * n, np.zeros(n, dtype=bool), [np.zeros((0, 3))] * n)
+
+    def world_x(lines: ReferenceLines) -> np.ndarray:  # x + k·y of each line's point: x0 + speed·t on the desk's
+        return np.array([pose.camera_to_world(p)[:2] @ [1.0, k] if np.isfinite(p[0]) else np.nan
+                         for p in lines.point])
+
+    mask = np.ones((150, 200), dtype=bool)
+    same = follow_the_sweep(lines_with(lost), times, n, mask, cam, tolerance=0.5)
+    assert np.array_equal(same.found, ~lost)
+    filled = follow_the_sweep(lines_with(lost), times, n, mask, cam, tolerance=0.5, fill_gaps=True)
+    x = world_x(filled)
+    np.testing.assert_allclose(x[26:35], x0 + speed * np.arange(26, 35), atol=0.5)  # the desk's, not the object's
+    assert np.isnan(x[40]) and filled.extrapolated[26:35].all()
+    np.testing.assert_allclose(x[~lost], x0 + speed * np.arange(n)[~lost], atol=1e-9)  # the others untouched
+    np.testing.assert_allclose(filled.direction[26:35], direction[26:35], atol=1e-9)
+    wide = np.ones(n, dtype=bool)
+    wide[[0, MAX_FOLLOW_GAP + 1]] = False  # long lines MAX_FOLLOW_GAP + 1 frames apart: too far to follow
+    assert follow_the_sweep(lines_with(wide), times, n, mask, cam, tolerance=0.5, fill_gaps=True).found.sum() == 2
+    wide[MAX_FOLLOW_GAP + 1], wide[MAX_FOLLOW_GAP] = True, False  # MAX_FOLLOW_GAP apart: filled
+    within = follow_the_sweep(lines_with(wide), times, n, mask, cam, tolerance=0.5, fill_gaps=True)
+    assert within.found[:MAX_FOLLOW_GAP + 1].all()
+
+
 def _wall_with_a_box(front_mm: float) -> dict:
     """A wall z = 1000 mm (camera frame) swept by a lamp's shadow edge as in ``_fast_sweep_with_a_fold`` (times
     exact, both edges), with a box's face ``front_mm`` in front of it over rows 40–70, columns 80–120 (0: no

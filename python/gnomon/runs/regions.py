@@ -29,7 +29,10 @@ surface off the plane has no shadow time or another one. So:
    the seed (another surface parallel to the plane: a box's face in front of
    the wall), and stay ``margin_px`` away from everything else (blur,
    penumbra);
-4. refit the lines over that mask and repeat once.
+4. refit the lines over that mask plus what the shadow crossed in frames that had no line (a frame that
+   lost its line would otherwise lose its stripe, and with it the crossings that could give it the line
+   back), a frame without a line between long ones taking the line its crossings near their prediction
+   make (:func:`follow_the_sweep` with ``fill_gaps``), and repeat.
 
 Inputs are plain values (shadow-time maps, planes in the camera frame, seeds,
 the camera model); :mod:`gnomon.commands.regions` reads the field log, runs the
@@ -68,6 +71,9 @@ SMOOTH_STEP = 2.0
 # follow_the_sweep: a short line's crossings within this many RANSAC tolerances of the line its long
 # neighbours predict are the plane's (an object's top, tens of mm higher, lies farther off).
 FOLLOW_WINDOW = 10.0
+# follow_the_sweep(fill_gaps=True): a frame without a line gets one only between long lines at most this many
+# frames apart (a hand's sweep is smooth over a second or so, not over the whole capture).
+MAX_FOLLOW_GAP = 40
 
 
 @dataclass
@@ -171,7 +177,7 @@ def shadow_lines(times: np.ndarray, n_frames: int, planes: list[PlaneInCamera], 
     lines = [lines_on_plane(times, n_frames, p, m, camera, nm, ransac_tolerance=tol, max_scatter=None)
              for p, m, nm, tol in zip(planes, masks, names, tolerance, strict=True)]
     if len(planes) < 2:
-        return [follow_the_sweep(lines[0], times, n_frames, masks[0], camera, tolerance[0])]
+        return [follow_the_sweep(lines[0], times, n_frames, masks[0], camera, tolerance[0], fill_gaps=True)]
     pts, lab, frm, pixs = [], [], [], []
     for k, (plane, mask) in enumerate(zip(planes, masks, strict=True)):
         f, pix = mask_crossings(times, mask, n_frames)
@@ -216,11 +222,13 @@ def shadow_lines(times: np.ndarray, n_frames: int, planes: list[PlaneInCamera], 
             ln.pixels[t] = pixel[idx][mine]
             ln.points[t] = points[idx][mine]
             ln.extrapolated[t] = False
-    return lines
+    return [follow_the_sweep(ln, times, n_frames, m, camera, tol, fill_gaps=True, hold_short=False)
+            for ln, m, tol in zip(lines, masks, tolerance, strict=True)]
 
 
 def follow_the_sweep(lines: ReferenceLines, times: np.ndarray, n_frames: int, mask: np.ndarray,
-                     camera: CameraModel, tolerance: float) -> ReferenceLines:
+                     camera: CameraModel, tolerance: float, *, fill_gaps: bool = False,
+                     hold_short: bool = True) -> ReferenceLines:
     """One plane's short lines held to the sweep: each frame whose line was too short to set its own
     direction (``extrapolated``) and lies more than 3 ``tolerance`` (world units) off the line its nearest
     long lines before and after predict (offset and direction interpolated in time) is refitted to its
@@ -233,11 +241,23 @@ def follow_the_sweep(lines: ReferenceLines, times: np.ndarray, n_frames: int, ma
     crosses an object with a flat top (a bowl upside down), that top's isochrone is one straight run with
     more crossings than the desk's two stretches on either side, and the RANSAC line is the object's. The
     sweep moves smoothly, so the long lines around such frames say where the desk's line is.
+
+    ``fill_gaps``: also the frames with no line at all between two long lines at most
+    ``MAX_FOLLOW_GAP`` frames apart get one the same way, when at least ``MIN_POINTS`` of their
+    crossings near the prediction lie within 3 ``tolerance`` of their median offset: where an object
+    beside the plane's short stretch of shadow took a frame's RANSAC line (or its joint shadow plane)
+    from it, the stretch is still there, and a region left without its stripe loses it for good.
+    ``hold_short=False`` leaves the short lines as they are (two planes' joint shadow planes judged them).
     """
     plane = lines.plane
     long_ = np.flatnonzero(lines.found & ~lines.extrapolated)
-    short = np.flatnonzero(lines.found & lines.extrapolated)
-    if len(long_) < 2 or not len(short):
+    short = np.flatnonzero(lines.found & lines.extrapolated) if hold_short else np.zeros(0, dtype=np.int64)
+    missing = np.zeros(0, dtype=np.int64)
+    if fill_gaps and len(long_) >= 2:
+        inside = np.zeros(n_frames, dtype=bool)
+        inside[long_[0]:long_[-1] + 1] = True
+        missing = np.flatnonzero(inside & ~lines.found)
+    if len(long_) < 2 or not (len(short) or len(missing)):
         return lines
     frame, pix = mask_crossings(times, mask, n_frames)
     on = plane.intersect(camera.rays(pix)) if len(frame) else np.zeros((0, 3))
@@ -246,23 +266,31 @@ def follow_the_sweep(lines: ReferenceLines, times: np.ndarray, n_frames: int, ma
     xy = plane.to_plane_coords(on)
     centres = plane.to_plane_coords(lines.point)
     d2 = np.stack([lines.direction @ plane.e1, lines.direction @ plane.e2], axis=1)
-    for t in short.tolist():
+    is_missing = np.zeros(n_frames, dtype=bool)
+    is_missing[missing] = True
+    for t in sorted(short.tolist() + missing.tolist()):
         before, after = long_[long_ < t], long_[long_ > t]
         if not len(before) or not len(after):
             continue
         a, b = int(before[-1]), int(after[0])
+        if is_missing[t] and b - a > MAX_FOLLOW_GAP:
+            continue
         w = (t - a) / (b - a)
         da, db = d2[a], d2[b] * (1.0 if d2[a] @ d2[b] >= 0 else -1.0)
         d = (1.0 - w) * da + w * db
         d /= np.linalg.norm(d)
         n = np.array([-d[1], d[0]])
         predicted = (1.0 - w) * float(centres[a] @ n) + w * float(centres[b] @ n)
-        if abs(float(centres[t] @ n) - predicted) <= 3.0 * tolerance:
+        if not is_missing[t] and abs(float(centres[t] @ n) - predicted) <= 3.0 * tolerance:
             continue
         mine = np.flatnonzero(frame == t)
         near = mine[np.abs(xy[mine] @ n - predicted) <= FOLLOW_WINDOW * tolerance]
+        if is_missing[t] and len(near) >= MIN_POINTS:  # a line, not a scatter: most near their median
+            offsets = xy[near] @ n
+            near = near[np.abs(offsets - np.median(offsets)) <= 3.0 * tolerance]
         if len(near) < MIN_POINTS:
-            lines.point[t], lines.direction[t], lines.rms[t], lines.count[t] = np.nan, np.nan, np.nan, 0
+            if not is_missing[t]:
+                lines.point[t], lines.direction[t], lines.rms[t], lines.count[t] = np.nan, np.nan, np.nan, 0
             continue
         offsets = xy[near] @ n
         along = xy[near] @ d
@@ -274,7 +302,20 @@ def follow_the_sweep(lines: ReferenceLines, times: np.ndarray, n_frames: int, ma
         lines.count[t] = len(near)
         lines.pixels[t] = pix[near]
         lines.points[t] = on[near]
+        lines.extrapolated[t] = True
     return lines
+
+
+def crossed_without_line(times: np.ndarray, found: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the pixels whose shadow time (frames) lies next to a frame without a line (``found``
+    (N,) per frame): a line there would predict them, so a region that drops them must not also drop
+    the crossings that could give that frame its line."""
+    n = len(found)
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(times) & (times > -1.0) & (times < n)
+        lo = np.clip(np.floor(np.where(ok, times, 0.0)).astype(np.int64), 0, n - 1)
+    hi = np.minimum(lo + 1, n - 1)
+    return ok & ~(found[lo] & found[hi])
 
 
 def pixel_footprint(plane: PlaneInCamera, camera: CameraModel, where: np.ndarray) -> float:
@@ -384,6 +425,7 @@ def propose_regions(
         residuals = []
         fit_on = [current[k] | (unreached[k] & (nearest == k) & swept) for k in range(len(planes))]
         worst: list[np.ndarray | None] = [None] * len(planes)
+        lost = [np.zeros(ray_map.shape[:2], dtype=bool) for _ in planes]
         preds: list[np.ndarray] = [np.full(ray_map.shape[:2], np.nan)] * len(planes)
         for times in time_maps:
             lines = shadow_lines(times, n_frames, planes, fit_on, camera, names,
@@ -392,11 +434,13 @@ def propose_regions(
                 found[k] = int(ln.found.sum())
                 found_frames[k] = ln.found
                 preds[k] = predicted_times(ln, ray_map)
+                lost[k] |= crossed_without_line(times, ln.found)
                 r = np.abs(times - preds[k])  # NaN where either is missing
                 w = worst[k]
                 worst[k] = r if w is None else np.maximum(w, r)
         for k in range(len(planes)):
-            unreached[k] = ~np.isfinite(preds[k])
+            # refitted next time: what no line reached, and what the shadow crossed in a frame without one
+            unreached[k] = ~np.isfinite(preds[k]) | lost[k]
             w = worst[k]
             assert w is not None
             residuals.append(np.where(nearest == k, w, np.nan))
