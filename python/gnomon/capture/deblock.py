@@ -58,9 +58,11 @@ def _steps(times: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
     """|step| between neighbours along ``axis`` (frames), 0 where there is none or it exceeds ``MAX_STEP``,
     and where there is one."""
     with np.errstate(invalid="ignore"):
-        d = np.abs(np.diff(times, axis=axis))
+        d = np.diff(times, axis=axis)
+        np.abs(d, out=d)
         counted = d <= MAX_STEP
-    return np.where(counted, d, 0.0), counted
+    np.copyto(d, 0.0, where=~counted)  # in place: the values np.where(counted, d, 0.0) gives
+    return d, counted
 
 
 def _step_profile(steps: tuple[np.ndarray, np.ndarray], axis: int, size: int) -> np.ndarray:
