@@ -147,10 +147,12 @@ def pixel_time_sigma(slope: np.ndarray, tracked: TrackedSequence, levels: Levels
     """σ of each pixel's shadow time (frames): image noise over the slope, and edge sampling."""
     levels = levels or Levels(tracked)
     sigma_lin = levels.sigma_at_threshold
-    contrast_lin = 2.0 * (levels.imax - tracked.times.threshold)
+    contrast_lin = levels.imax - tracked.times.threshold
+    np.multiply(2.0, contrast_lin, out=contrast_lin)  # 2·(Imax − threshold), in its own new array
     with np.errstate(invalid="ignore", divide="ignore"):
-        sigma_t_noise = np.where(slope > 0, sigma_lin / slope, np.nan)
-    return np.hypot(sigma_t_noise, interpolation_time_sigma(contrast_lin, slope))
+        sigma_t_noise = np.divide(sigma_lin, slope)  # np.where(slope > 0, σ / slope, NaN), in place
+        np.copyto(sigma_t_noise, np.nan, where=~(slope > 0))
+    return np.hypot(sigma_t_noise, interpolation_time_sigma(contrast_lin, slope), out=sigma_t_noise)
 
 
 def edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: TrackedSequence,
