@@ -295,6 +295,18 @@ def test_markers_that_do_not_fit_say_whether_the_camera_or_the_marks_are_at_faul
     misdrawn = focal_diagnosis(calibrated, marks, film(1000.0, moved), 2.0)
     assert "not where their plane coordinates put them" in misdrawn
     assert focal_diagnosis(calibrated, marks, film(1000.0, marks), 2.0) == ""
+    # the other planes' factors, given as a call, are asked for only when the clause would blame the camera
+    # (each costs a search of its own), and then say the same as given at once
+    asked: list[int] = []
+
+    def others() -> dict[str, float]:
+        asked.append(1)
+        return {"wall": 1.0}
+
+    assert focal_diagnosis(calibrated, marks, film(1000.0, moved), 2.0, others) == misdrawn and not asked
+    lazily = focal_diagnosis(calibrated, corners, film(1400.0, corners), 2.0, others)
+    assert asked == [1] and lazily == focal_diagnosis(calibrated, corners, film(1400.0, corners), 2.0, {"wall": 1.0})
+    assert "the other planes' marks do not agree on it (wall × 1.00 alone)" in lazily
 
 
 def _board_video(path, cam, poses, *, still: int, moving: int, seed: int) -> list[str]:

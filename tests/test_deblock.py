@@ -77,3 +77,21 @@ def test_the_kernel_interpolates_float32_maps_as_numpy_does_bit_for_bit() -> Non
     changed = np.isfinite(kernel) & (kernel != blocky32)
     assert 0.5 < changed[plane].mean() < 0.8
     assert np.nanmax(np.abs(kernel - truth)[plane & changed]) < 0.03
+
+
+def test_block_min_max_are_numpys_whole_axis_reductions() -> None:
+    """deblock_times' blocks' least and greatest times (deblock._block_min_max, one walk over the blocks'
+    pixel offsets) equal blocks.min/max(axis=(1, 3)) bit for bit, NaN where a block has one, for 8 and 16
+    pixel blocks."""
+    from gnomon.capture.deblock import _block_min_max
+
+    rng = np.random.default_rng(5)
+    for b in (8, 16):
+        t = rng.uniform(0.0, 90.0, (9 * b, 13 * b))
+        t[rng.random(t.shape) < 0.002] = np.nan
+        blocks = t.reshape(9, b, 13, b)
+        lo, hi = _block_min_max(blocks)
+        with np.errstate(invalid="ignore"):
+            assert np.array_equal(lo, blocks.min(axis=(1, 3)), equal_nan=True)
+            assert np.array_equal(hi, blocks.max(axis=(1, 3)), equal_nan=True)
+        assert 0 < np.isnan(lo).sum() < lo.size

@@ -163,3 +163,24 @@ def test_noise_at_threshold_from_the_kernel_equals_numpys_searchsorted() -> None
     values = np.array([[0.1, 0.3, 0.6]], np.float32)
     assert np.array_equal(linear_noise_at_threshold(2.0, values, unsorted),
                           _linear_noise_at_threshold_numpy(2.0, values, unsorted))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_interpolation_time_sigma_is_its_formula_bit_for_bit(dtype) -> None:
+    """interpolation_time_sigma (computed in place in one array) is 0.035·(1.5 / max(w, 0.5))³ with
+    w = contrast / slope where the slope is positive, NaN elsewhere, as float32, bit for bit: float32 and
+    float64 inputs, zero, negative and NaN slopes, edges shorter than half a frame (the floor)."""
+    from gnomon.geometry.uncertainty import interpolation_time_sigma
+
+    rng = np.random.default_rng(2)
+    contrast = rng.uniform(0.0, 2.0, (60, 70)).astype(dtype)
+    slope = rng.uniform(-0.2, 3.0, (60, 70)).astype(dtype)
+    slope[::7, ::5] = 0.0
+    slope[1::9, ::4] = np.nan
+    contrast[2::11, ::3] = np.nan
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(slope > 0, contrast / slope, np.nan)
+        want = (0.035 * (1.5 / np.maximum(w, 0.5)) ** 3).astype(np.float32)
+    got = interpolation_time_sigma(contrast, slope)
+    assert got.dtype == np.float32 and got.tobytes() == want.tobytes()
+    assert np.isnan(got).any() and (got == np.float32(0.035 * 27)).any()  # NaN slopes, the half-frame floor

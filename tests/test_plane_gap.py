@@ -61,3 +61,52 @@ def test_capture_frames_are_the_interpolated_indices(skipped: bool) -> None:
     out = _capture_frames(times, used)
     assert out.dtype == np.float64
     assert np.array_equal(out.view(np.uint64), ref.view(np.uint64))
+
+
+def _edge(name: str, have: np.ndarray, times: np.ndarray, depth: np.ndarray):
+    from gnomon.reconstruct.edges import EdgeResult
+
+    planes = np.where(have[:, None], np.array([[0.0, 0.0, 1.0, 500.0]]), np.nan)
+    return EdgeResult(name, times, [], planes, depth.copy(), depth.copy(), 0, np.ones_like(times))
+
+
+def test_plane_coverage_taken_on_the_edges_threads_says_what_the_check_says() -> None:
+    """The scan takes each edge's plane coverage on its thread (plane_coverage) and says it afterwards in edge
+    order (check_plane_coverage with the coverage given): the same warnings, the same points dropped, as the
+    check taking them itself; numbers against a direct count (frames of the sweep's 2nd–98th percentile of
+    times with a plane; points more than MAX_PLANE_GAP frames from any)."""
+    from gnomon.errors import FrameError
+    from gnomon.reconstruct.edges import check_plane_coverage, plane_coverage
+
+    rng = np.random.default_rng(3)
+    n = 80
+    have = np.ones(n, dtype=bool)
+    have[30:70] = False  # 40 frames without a plane: half the sweep, a long gap
+    times = rng.uniform(0.0, n - 1.0, (30, 40)).astype(np.float32)
+    depth = rng.uniform(100.0, 900.0, times.shape).astype(np.float32)
+    edges = [_edge("enter", have, times, depth), _edge("leave", np.ones(n, dtype=bool), times, depth)]
+    given = [plane_coverage(e) for e in [_edge("enter", have, times, depth), _edge("leave", np.ones(n, bool), times,
+                                                                                     depth)]]
+    said_given: list[str] = []
+    said: list[str] = []
+    check_plane_coverage(edges, "log.toml", said)
+    again = [_edge("enter", have, times, depth), _edge("leave", np.ones(n, dtype=bool), times, depth)]
+    for e, c in zip(again, given, strict=True):  # as the threads leave them: the far points already dropped
+        assert c is not None
+        e.depth[:] = edges[[x.name for x in edges].index(e.name)].depth
+    check_plane_coverage(again, "log.toml", said_given, given)
+    assert said == said_given and len(said) == 2
+    lo, hi = np.percentile(times[np.isfinite(times)], [2, 98])
+    span = np.arange(int(np.floor(lo)), min(int(np.ceil(hi)) + 1, n))
+    far = _direct(times, depth, have)
+    assert given[0] is not None and given[1] is not None
+    assert (given[0].measured, given[0].frames, given[0].dropped) == (int(have[span].sum()), span.size, int(far.sum()))
+    assert given[1].dropped == 0 and given[1].share == 1.0
+    assert f"{int(far.sum())} points dropped" in said[0] and "rarely crossed" in said[1]
+    assert np.array_equal(np.isnan(edges[0].depth), far) and not np.isnan(edges[1].depth).any()
+    have[:60] = False  # a fifth of the sweep or less: an error, the same either way
+    with pytest.raises(FrameError, match="too few to scan"):
+        check_plane_coverage([_edge("enter", have, times, depth)], "log.toml", [])
+    with pytest.raises(FrameError, match="too few to scan"):
+        check_plane_coverage([_edge("enter", have, times, depth)], "log.toml", [],
+                             [plane_coverage(_edge("enter", have, times, depth))])

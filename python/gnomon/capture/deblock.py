@@ -58,9 +58,11 @@ def _steps(times: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
     """|step| between neighbours along ``axis`` (frames), 0 where there is none or it exceeds ``MAX_STEP``,
     and where there is one."""
     with np.errstate(invalid="ignore"):
-        d = np.abs(np.diff(times, axis=axis))
+        d = np.diff(times, axis=axis)
+        np.abs(d, out=d)
         counted = d <= MAX_STEP
-    return np.where(counted, d, 0.0), counted
+    np.copyto(d, 0.0, where=~counted)  # in place: the values np.where(counted, d, 0.0) gives
+    return d, counted
 
 
 def _step_profile(steps: tuple[np.ndarray, np.ndarray], axis: int, size: int) -> np.ndarray:
@@ -117,8 +119,7 @@ def deblock_times(times: np.ndarray, grid: BlockGrid) -> np.ndarray:
     if nby < 2 or nbx < 2:
         return t.astype(np.float32)
     blocks = t[grid.v0:grid.v0 + nby * b, grid.u0:grid.u0 + nbx * b].reshape(nby, b, nbx, b)
-    with np.errstate(invalid="ignore"):
-        lo, hi = blocks.min(axis=(1, 3)), blocks.max(axis=(1, 3))
+    lo, hi = _block_min_max(blocks)
     mean = blocks.mean(axis=(1, 3))
     good = np.isfinite(lo) & np.isfinite(hi) & (hi - lo <= 0.1)
     value = np.where(good, mean, np.nan)
@@ -131,6 +132,23 @@ def deblock_times(times: np.ndarray, grid: BlockGrid) -> np.ndarray:
         return _kernel.deblock_interpolate(np.ascontiguousarray(times), np.ascontiguousarray(value), b, grid.u0,
                                            grid.v0, span_max)
     return _interpolate_numpy(t, value, grid, span_max)
+
+
+def _block_min_max(blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each block's least and greatest time (NaN when any is NaN) of ``blocks`` (blocks down, size, blocks
+    across, size): ``blocks.min(axis=(1, 3))`` and ``.max`` in one walk over the blocks' pixel offsets, each an
+    element-wise minimum and maximum over all blocks at once (the strided whole-axis reductions cost twice as
+    much; the order changes no minimum or maximum but the sign of a zero, which the blocks' spread does not
+    see; NaN wins either way)."""
+    lo = blocks[:, 0, :, 0].copy()
+    hi = lo.copy()
+    with np.errstate(invalid="ignore"):
+        for i in range(blocks.shape[1]):
+            for j in range(blocks.shape[3]):
+                if i or j:
+                    np.minimum(lo, blocks[:, i, :, j], out=lo)
+                    np.maximum(hi, blocks[:, i, :, j], out=hi)
+    return lo, hi
 
 
 def _interpolate_numpy(t: np.ndarray, value: np.ndarray, grid: BlockGrid, span_max: float) -> np.ndarray:

@@ -301,7 +301,7 @@ FOCAL_FACTORS = np.geomspace(0.5, 2.0, 57)
 
 
 def focal_diagnosis(camera: Any, points: np.ndarray, pixels: np.ndarray, limit_rms_px: float,
-                    others: dict[str, float] | None = None) -> str:
+                    others: dict[str, float] | Callable[[], dict[str, float]] | None = None) -> str:
     """Why a plane's points do not fit it, as far as the camera's focal length can tell (one clause).
 
     ``camera`` an :class:`~gnomon.camera.models.OpenCVCamera` (other models: no
@@ -322,7 +322,9 @@ def focal_diagnosis(camera: Any, points: np.ndarray, pixels: np.ndarray, limit_r
     alone, :func:`best_focal_factor`) then decides. The camera is blamed only
     when another plane agrees on the factor (within :data:`FOCAL_AGREEMENT`);
     otherwise the clause says that the planes disagree and the marks are off.
-    Without ``others`` (None) the clause only warns that 4 points cannot tell.
+    Without ``others`` (None) the clause only warns that 4 points cannot tell. ``others`` may be a call
+    that returns them: it is called only when the clause would blame the focal length (each other plane's
+    factor costs a search of its own).
     """
     if not isinstance(camera, OpenCVCamera) or len(pixels) < 4:
         return ""
@@ -368,13 +370,15 @@ FOCAL_BLAME = "the camera's calibration does not fit these frames"
 
 
 def _focal_clause(camera: OpenCVCamera, factor: float, best_rms: float, here: float, limit_rms_px: float,
-                  alone_tells: bool, others: dict[str, float] | None, marks_off: str) -> str:
+                  alone_tells: bool, others: dict[str, float] | Callable[[], dict[str, float]] | None,
+                  marks_off: str) -> str:
     """The clause of :func:`focal_diagnosis` (and of marks taken as a rectangle) from a plane's best factor.
     ``alone_tells``: the plane's own points can tell a focal length from a misplaced mark (more than the
     parameters they fix)."""
     if not np.isfinite(factor):
         return ""
     if best_rms <= limit_rms_px and best_rms < 0.25 * here and abs(factor - 1.0) > 0.02:
+        others = others() if callable(others) else others  # asked for only here
         agree = {n: k for n, k in (others or {}).items() if abs(k / factor - 1.0) < FOCAL_AGREEMENT}
         fits = f"they fit to {best_rms:.1f} px rms with the focal length × {factor:.2f}"
         if alone_tells or agree or not others:
@@ -528,7 +532,7 @@ def check_plane_markers(log: FieldLog, plane: PlaneSpec, pp: PlanePose, declared
     residuals = f"residuals {pp.rms_px:.1f} px rms, {lengths.max():.1f} px at most"
     expected = float(np.sqrt(np.mean(sigmas**2) * limit / (2 * n)))
     failing = statistic > limit or (np.isfinite(tilt) and tilt > MAX_PLANE_TILT_DEG)
-    why = focal_diagnosis(log.camera, plane.marker_world(), pp.pixels, expected, others and others()) if (
+    why = focal_diagnosis(log.camera, plane.marker_world(), pp.pixels, expected, others) if (
         failing and plane.markers and len(plane.markers) == n) else ""
     if np.isfinite(tilt) and tilt > MAX_PLANE_TILT_DEG:
         what = (f"the plane through its markers is {tilt:.0f}° from the declared one" if declared is not None
@@ -598,7 +602,7 @@ def check_rectangle_marks(log: FieldLog, plane: PlaneSpec, pp: PlanePose,
     if statistic > limit and isinstance(log.camera, OpenCVCamera):  # the marks misfit: is the camera at fault?
         factor, best_rms, here = best_focal_factor(
             log.camera, lambda cam: fit_rectangle_pose(cam, pp.pixels, sigmas).rms_px)
-        why = _focal_clause(log.camera, factor, best_rms, here, expected, False, others and others(),
+        why = _focal_clause(log.camera, factor, best_rms, here, expected, False, others,
                             "the marks are not a rectangle's corners")
     if "calibration does not fit" in why:
         advice = ("calibrate the camera as it was set for the capture, or fit its focal length to the planes' "

@@ -96,7 +96,7 @@ def predicted_times(lines: ReferenceLines, ray_map: np.ndarray) -> np.ndarray:
 def plane_points(plane: PlaneInCamera, ray_map: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Where the rays ``ray_map`` (..., 3) (camera frame) meet ``plane``: the flat indices of the rays
     that meet it (in front of the camera) and their points in the plane's coordinates (K, 2)."""
-    pts = plane.intersect(ray_map.reshape(-1, 3).astype(np.float64))
+    pts = plane.intersect(np.asarray(ray_map.reshape(-1, 3), dtype=np.float64))  # read only: no copy needed
     ok = np.flatnonzero(np.isfinite(pts[:, 0]))
     return ok, plane.to_plane_coords(pts[ok])
 

@@ -147,10 +147,12 @@ def pixel_time_sigma(slope: np.ndarray, tracked: TrackedSequence, levels: Levels
     """σ of each pixel's shadow time (frames): image noise over the slope, and edge sampling."""
     levels = levels or Levels(tracked)
     sigma_lin = levels.sigma_at_threshold
-    contrast_lin = 2.0 * (levels.imax - tracked.times.threshold)
+    contrast_lin = levels.imax - tracked.times.threshold
+    np.multiply(2.0, contrast_lin, out=contrast_lin)  # 2·(Imax − threshold), in its own new array
     with np.errstate(invalid="ignore", divide="ignore"):
-        sigma_t_noise = np.where(slope > 0, sigma_lin / slope, np.nan)
-    return np.hypot(sigma_t_noise, interpolation_time_sigma(contrast_lin, slope))
+        sigma_t_noise = np.divide(sigma_lin, slope)  # np.where(slope > 0, σ / slope, NaN), in place
+        np.copyto(sigma_t_noise, np.nan, where=~(slope > 0))
+    return np.hypot(sigma_t_noise, interpolation_time_sigma(contrast_lin, slope), out=sigma_t_noise)
 
 
 def edge_time(name: str, times: np.ndarray, slope: np.ndarray, tracked: TrackedSequence,
@@ -307,7 +309,37 @@ def min_contrast_dn(min_contrast: float | None, noise_dn: float) -> float:
     return contrast_floor(min_contrast, noise_dn)
 
 
-def check_plane_coverage(edges: list[EdgeResult], path: Path, warnings: list[str]) -> None:
+@dataclass(frozen=True)
+class PlaneCoverage:
+    """How an edge's measured shadow planes cover its sweep (:func:`plane_coverage`): ``measured`` of the
+    sweep's ``frames`` have a plane (``share`` of them), ``dropped`` points were too far from any."""
+
+    measured: int
+    frames: int
+    share: float
+    dropped: int
+
+
+def plane_coverage(e: EdgeResult) -> PlaneCoverage | None:
+    """The planes' coverage of the frames the edge's pixels saw the shadow in (the 2nd to 98th percentile of
+    their times), its points whose time is more than ``MAX_PLANE_GAP`` frames from any measured plane
+    dropped from ``e.depth`` (NaN); None when there is nothing to check (no plane or time, planes given)."""
+    have = np.isfinite(e.planes[:, 0])
+    t = e.times[np.isfinite(e.times)]
+    if not e.measured or t.size == 0 or not have.any():
+        return None
+    lo, hi = np.percentile(t, [2, 98])
+    span = np.arange(max(int(np.floor(lo)), 0), min(int(np.ceil(hi)) + 1, len(have)))
+    if span.size == 0:
+        return None
+    far = far_from_planes(e.times, e.depth, have)
+    if far.any():
+        e.depth[far] = np.nan
+    return PlaneCoverage(int(have[span].sum()), span.size, float(have[span].mean()), int(far.sum()))
+
+
+def check_plane_coverage(edges: list[EdgeResult], path: Path, warnings: list[str],
+                         coverage: list[PlaneCoverage | None] | None = None) -> None:
     """The measured shadow planes must cover the frames in which the pixels saw the shadow.
 
     A pixel's depth comes from the planes of the frames around its shadow
@@ -315,28 +347,21 @@ def check_plane_coverage(edges: list[EdgeResult], path: Path, warnings: list[str
     reference regions) the depth is interpolated over the gap and is
     meaningless. Points whose time falls in a gap longer than ``MAX_PLANE_GAP``
     frames are dropped; when the planes cover less than half of the sweep a
-    warning says so, and below a fifth the scan is an error.
+    warning says so, and below a fifth the scan is an error. ``coverage``: each edge's
+    :func:`plane_coverage`, already taken (on the edges' threads); else taken here, edge by edge.
     """
-    for e in edges:
-        have = np.isfinite(e.planes[:, 0])
-        t = e.times[np.isfinite(e.times)]
-        if not e.measured or t.size == 0 or not have.any():
+    for k, e in enumerate(edges):
+        c = coverage[k] if coverage is not None else plane_coverage(e)
+        if c is None:
             continue
-        lo, hi = np.percentile(t, [2, 98])
-        span = np.arange(max(int(np.floor(lo)), 0), min(int(np.ceil(hi)) + 1, len(have)))
-        if span.size == 0:
-            continue
-        share = float(have[span].mean())
-        far = far_from_planes(e.times, e.depth, have)
-        if far.any():
-            e.depth[far] = np.nan
-            warnings.append(f"{e.name} edge: {int(far.sum())} points dropped: their shadow time is more than "
+        if c.dropped:
+            warnings.append(f"{e.name} edge: {c.dropped} points dropped: their shadow time is more than "
                             f"{MAX_PLANE_GAP:g} frames from any measured shadow plane")
-        msg = (f"{e.name} edge: shadow planes were measured in {int(have[span].sum())} of the {span.size} frames "
-               f"of the sweep ({100 * share:.0f} %); the shadow rarely crossed the [[planes]] regions")
-        if share < MIN_PLANE_SHARE_ERROR:
+        msg = (f"{e.name} edge: shadow planes were measured in {c.measured} of the {c.frames} frames "
+               f"of the sweep ({100 * c.share:.0f} %); the shadow rarely crossed the [[planes]] regions")
+        if c.share < MIN_PLANE_SHARE_ERROR:
             raise FrameError(f"{path}: {msg}: too few to scan (check the regions are bare and swept)")
-        if share < MIN_PLANE_SHARE_WARN:
+        if c.share < MIN_PLANE_SHARE_WARN:
             warnings.append(msg)
 
 
@@ -409,10 +434,15 @@ def reconstruct_edges(setup: ScanSetup, tracked: TrackedSequence, ray_map: np.nd
         enter = pool.submit(edge_time, "enter", st.enter, st.enter_slope, tracked, levels)
         leave = pool.submit(edge_time, "leave", st.leave, st.leave_slope, tracked, levels)
         times = setup.light.edges(enter.result(), leave.result(), setup.edge)
-        done = list(pool.map(lambda e: reconstruct_edge_checked(e, setup.light.shadow_planes(e, geometry), ray_map,
-                                                                 setup, tracked, levels), times))
-    edges = [e for e, _ in done]
-    for e, residuals in done:
+
+        def one(e: EdgeTimes) -> tuple[EdgeResult, list[Any], PlaneCoverage | None]:
+            result, residuals = reconstruct_edge_checked(e, setup.light.shadow_planes(e, geometry), ray_map, setup,
+                                                         tracked, levels)
+            return result, residuals, plane_coverage(result)  # said below, in edge order
+
+        done = list(pool.map(one, times))
+    edges = [e for e, _, _ in done]
+    for e, residuals, _ in done:
         check_line_residuals(e, residuals, setup.inputs.field_log, warnings)
     for e in edges:
         if e.degenerate:
@@ -420,7 +450,7 @@ def reconstruct_edges(setup: ScanSetup, tracked: TrackedSequence, ray_map: np.nd
         for note in e.notes:  # a FrameNote keeps its kind and frames
             text = f"{e.name} edge: {note}"
             warnings.append(note.reworded(text) if isinstance(note, FrameNote) else text)
-    check_plane_coverage(edges, setup.inputs.field_log, warnings)
+    check_plane_coverage(edges, setup.inputs.field_log, warnings, [c for _, _, c in done])
     n_planes = max(int(np.isfinite(e.planes[:, 0]).sum()) for e in edges)
     if n_planes < 2:
         raise FrameError(
