@@ -81,6 +81,7 @@ def test_plane_from_aruco_markers_without_hints(scene, name):
     assert pp.warnings == ()
 
 
+@pytest.mark.slow  # its fixture renders the scene: seconds (the fast loop stays under a minute)
 def test_edge_fit_beats_opencvs_corners_under_gamma(scene):
     """Gamma-encoded input: OpenCV's corners sit inside the squares; the edge fit on linear values does not."""
     sc, img = scene
@@ -98,6 +99,7 @@ def test_edge_fit_beats_opencvs_corners_under_gamma(scene):
     assert rms(e_fit) < 0.25 and rms(e_fit) < 0.5 * rms(e_plain)
 
 
+@pytest.mark.slow  # the rendered scene (module fixture)
 def test_missing_and_foreign_markers(scene):
     sc, img = scene
     desk = sc.planes[0]
@@ -114,6 +116,7 @@ def test_missing_and_foreign_markers(scene):
         aruco.plane_pose_from_aruco(img, cam, _markers(desk), "DICT_9X9_1", SIZE)
 
 
+@pytest.mark.slow  # the rendered scene (module fixture)
 def test_charuco_board_partly_covered(scene):
     """A ChArUco board on the desk with an object standing on part of it still gives the plane."""
     sc, img = scene

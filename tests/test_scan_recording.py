@@ -80,6 +80,7 @@ def test_calibration_and_merge_runs_leave_recordings(tmp_path, scanned, capsys) 
         assert proc.returncode == 0, proc.stderr
 
 
+@pytest.mark.slow  # its fixture simulates and scans the desk scene
 def test_scan_warnings_are_on_the_frame_timeline(scanned) -> None:
     """The default layout's Warnings view shows the TextLog on the `frame` timeline: every warning of
     the report is there, at frame 0 (the run's start), so it is listed at every frame."""
