@@ -247,11 +247,14 @@ def grid_faces(
     faces, element for element (float32 arithmetic)."""
 
 def clean_faces(
-    n_vertices: int, faces: npt.NDArray[np.int32], min_vertices: int
+    n_vertices: int, faces: npt.NDArray[np.int32], min_vertices: int,
+    pixels: npt.NDArray[np.int64] | None = None, width: int = 0,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64]]:
     """Drop edge-connected pieces of fewer than ``min_vertices`` vertices and give each
     fan meeting only at a vertex its own copy: the new faces (F', 3) and the input
-    vertex each new vertex copies (V',), as :func:`gnomon.geometry.meshing.remove_small_components`."""
+    vertex each new vertex copies (V',), as :func:`gnomon.geometry.meshing.remove_small_components`.
+    ``pixels``: each vertex's row-major pixel (strictly increasing) in a grid ``width`` wide, for a mesh
+    on the pixel grid: the same result through the grid's edge slots (faster); any other mesh as without."""
 
 @overload
 def obj_text(

@@ -109,7 +109,8 @@ def mesh_surface(points: SurfacePoints, max_relative_jump: float) -> Surface:
     """The cut grid mesh of a surface's points (:func:`gnomon.geometry.meshing.grid_mesh`, small pieces removed)."""
     # grid_mesh's vertices and normals are the points' own (the valid pixels, row-major): not gathered again
     faces = grid_faces(points.depth, points.valid, max_relative_jump, sigma=points.sigma)
-    mesh = remove_small_components(GridMesh(points.points_world, faces, np.flatnonzero(points.valid), points.normals))
+    mesh = remove_small_components(GridMesh(points.points_world, faces, np.flatnonzero(points.valid), points.normals),
+                                   width=points.valid.shape[1])
     return Surface(points.depth, points.sigma, points.valid, points.points_world, points.colors, points.uv, mesh,
                    np.take(points.rgb.reshape(-1, 3), mesh.pixel_index, axis=0), points.normals, points.rgb)
 
