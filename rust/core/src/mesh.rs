@@ -147,6 +147,9 @@ pub struct VertexPixels<'a> {
 struct GridEdges<'a> {
     pixel: &'a [i64],
     width: i64,
+    /// Each slot's faces (saturating at 255) and each vertex's interior edges, over all the
+    /// faces: [`GridEdges::link`]'s, taken by [`GridEdges::interior`].
+    counted: Option<(Vec<u8>, Vec<u32>)>,
 }
 
 impl<'a> GridEdges<'a> {
@@ -162,6 +165,7 @@ impl<'a> GridEdges<'a> {
         let table = GridEdges {
             pixel: grid.pixel,
             width,
+            counted: None,
         };
         let steps_ok = faces
             .par_iter()
@@ -186,9 +190,14 @@ impl<'a> GridEdges<'a> {
         4 * a.min(b) as usize + self.step(a, b).unwrap_or(0)
     }
 
-    /// Link the faces that share an edge (each to the first earlier face with it).
-    fn link(&self, faces: &[[i32; 3]], sets: &mut UnionFind) {
-        let mut first = vec![u32::MAX; 4 * self.pixel.len()];
+    /// Link the faces that share an edge (each to the first earlier face with it), and count
+    /// every edge's faces and the interior edges (in two or more faces) at each vertex, kept in
+    /// the table for [`GridEdges::interior`].
+    fn link(&mut self, faces: &[[i32; 3]], sets: &mut UnionFind) {
+        let n = self.pixel.len();
+        let mut first = vec![u32::MAX; 4 * n];
+        let mut count = vec![0u8; 4 * n];
+        let mut interior = vec![0u32; n];
         for (i, f) in faces.iter().enumerate() {
             for (a, b) in edges(f) {
                 let s = self.slot(a, b);
@@ -197,12 +206,41 @@ impl<'a> GridEdges<'a> {
                 } else {
                     sets.union(first[s], i as u32);
                 }
+                count[s] = count[s].saturating_add(1);
+                if count[s] == 2 {
+                    interior[a as usize] += 1;
+                    interior[b as usize] += 1;
+                }
             }
+        }
+        self.counted = Some((count, interior));
+    }
+
+    /// Interior edges (in two or more of the faces `keep` marks) at each vertex: those of all
+    /// the faces ([`GridEdges::link`]'s), less the edges that the faces not kept leave in one
+    /// face (a count that falls from 2 to 1); counted again over the kept faces when `link`
+    /// did not run or an edge has too many faces for its count (255).
+    fn interior(&mut self, faces: &[[i32; 3]], keep: &[bool]) -> Vec<u32> {
+        match self.counted.take() {
+            Some((mut count, mut interior)) if !count.contains(&u8::MAX) => {
+                for (f, _) in faces.iter().zip(keep).filter(|(_, &k)| !k) {
+                    for (a, b) in edges(f) {
+                        let s = self.slot(a, b);
+                        count[s] -= 1;
+                        if count[s] == 1 {
+                            interior[a as usize] -= 1;
+                            interior[b as usize] -= 1;
+                        }
+                    }
+                }
+                interior
+            }
+            _ => self.interior_of_kept(faces, keep),
         }
     }
 
-    /// Interior edges (in two or more of the faces `keep` marks) at each vertex.
-    fn interior(&self, faces: &[[i32; 3]], keep: &[bool]) -> Vec<u32> {
+    /// [`GridEdges::interior`] counted over the kept faces alone.
+    fn interior_of_kept(&self, faces: &[[i32; 3]], keep: &[bool]) -> Vec<u32> {
         let mut count = vec![0u8; 4 * self.pixel.len()];
         let mut interior = vec![0u32; self.pixel.len()];
         for (f, _) in faces.iter().zip(keep).filter(|(_, &k)| k) {
@@ -229,14 +267,14 @@ enum EdgeTable<'a> {
 }
 
 impl EdgeTable<'_> {
-    fn link(&self, faces: &[[i32; 3]], sets: &mut UnionFind) {
+    fn link(&mut self, faces: &[[i32; 3]], sets: &mut UnionFind) {
         match self {
             EdgeTable::Grid(t) => t.link(faces, sets),
             EdgeTable::Buckets(b) => b.link(sets),
         }
     }
 
-    fn interior(&self, faces: &[[i32; 3]], keep: &[bool]) -> Vec<u32> {
+    fn interior(&mut self, faces: &[[i32; 3]], keep: &[bool]) -> Vec<u32> {
         match self {
             EdgeTable::Grid(t) => t.interior(faces, keep),
             EdgeTable::Buckets(b) => b.interior(keep),
@@ -449,7 +487,7 @@ pub fn clean_grid_faces(
         }
     }
     // Pieces: faces sharing an edge.
-    let table = match grid.and_then(|g| GridEdges::new(g, faces)) {
+    let mut table = match grid.and_then(|g| GridEdges::new(g, faces)) {
         Some(t) => EdgeTable::Grid(t),
         None => EdgeTable::Buckets(EdgeBuckets::new(n_vertices, faces)),
     };
@@ -457,9 +495,12 @@ pub fn clean_grid_faces(
     table.link(faces, &mut sets);
     let root = sets.into_roots();
     let mut vertex_piece = vec![u32::MAX; n_vertices];
+    // Each vertex's faces (< 2^32: at most 3·faces), all of them here, the kept ones below.
+    let mut degree = vec![0u32; n_vertices];
     for (f, &r) in faces.iter().zip(&root) {
         for &v in f {
             vertex_piece[v as usize] = r;
+            degree[v as usize] += 1;
         }
     }
     // A piece's vertices, at most `n_vertices` (< 2^31: they are i32 indices).
@@ -473,24 +514,24 @@ pub fn clean_grid_faces(
         .map(|&r| size[r as usize] as usize >= min_vertices)
         .collect();
     drop((root, size));
+    for (f, _) in faces.iter().zip(&keep).filter(|(_, &k)| !k) {
+        for &v in f {
+            degree[v as usize] -= 1;
+        }
+    }
     let interior = table.interior(faces, &keep);
     drop(table);
-    Ok(split_fans(n_vertices, faces, &keep, &interior))
+    Ok(split_fans(faces, &keep, &interior, degree))
 }
 
 /// The faces `keep` marks, renumbered, with every fan of triangles at a vertex beyond its first
 /// given its own copy of the vertex (see [`clean_faces`]); `interior[v]`: the edges at `v` in two
-/// or more of the kept faces.
+/// or more of the kept faces; `degree[v]`: the kept faces at `v` (one per vertex).
 ///
-/// Invariant: vertex indices of `faces` are in `0..n_vertices`. The kept vertices are numbered
+/// Invariant: vertex indices of `faces` are in `0..degree.len()` (the vertices). The kept vertices are numbered
 /// in their order (a monotonic renumbering, so edges compare equal before and after it).
-fn split_fans(n_vertices: usize, faces: &[[i32; 3]], keep: &[bool], interior: &[u32]) -> CleanMesh {
-    let mut degree = vec![0u32; n_vertices];
-    for (f, _) in faces.iter().zip(keep).filter(|(_, &k)| k) {
-        for &v in f {
-            degree[v as usize] += 1;
-        }
-    }
+fn split_fans(faces: &[[i32; 3]], keep: &[bool], interior: &[u32], degree: Vec<u32>) -> CleanMesh {
+    let n_vertices = degree.len();
     let mut remap = vec![-1i32; n_vertices];
     let used = degree.iter().filter(|&&d| d > 0).count();
     let mut source: Vec<i64> = Vec::with_capacity(used);
@@ -945,7 +986,13 @@ mod tests {
                 .iter()
                 .map(|&r| size[r as usize] >= min_vertices)
                 .collect();
-            let expected = split_fans(n, &faces, &keep, &buckets.interior(&keep));
+            let mut degree = vec![0u32; n];
+            for (f, _) in faces.iter().zip(&keep).filter(|(_, &k)| k) {
+                for &v in f {
+                    degree[v as usize] += 1;
+                }
+            }
+            let expected = split_fans(&faces, &keep, &buckets.interior(&keep), degree);
             assert_eq!(clean, expected);
             assert_eq!(clean.faces.len(), keep.iter().filter(|&&k| k).count());
         }
@@ -1002,7 +1049,7 @@ mod tests {
     fn grid_slots_are_the_buckets_links_and_interior_edges() {
         let (faces, pixel) = random_grid_mesh(14, 13, 9);
         let n = pixel.len();
-        let table = GridEdges::new(
+        let mut table = GridEdges::new(
             VertexPixels {
                 pixel: &pixel,
                 width: 13,
@@ -1024,7 +1071,34 @@ mod tests {
         }
         let mut next = lcg(5);
         let keep: Vec<bool> = faces.iter().map(|_| next(4) != 0).collect();
+        // from link's counts less the dropped faces', and counted over the kept faces alone
+        assert_eq!(
+            table.interior_of_kept(&faces, &keep),
+            buckets.interior(&keep)
+        );
         assert_eq!(table.interior(&faces, &keep), buckets.interior(&keep));
+        assert!(table.counted.is_none());
+        assert_eq!(table.interior(&faces, &keep), buckets.interior(&keep));
+    }
+
+    #[test]
+    fn an_edge_of_many_faces_is_counted_over_the_kept_faces() {
+        // one triangle repeated 300 times (its edges' counts saturate) beside another, four
+        // vertices, and a piece of three to drop
+        let (w, pixel): (usize, Vec<i64>) = (5, (0..25).collect());
+        let mut faces = vec![[0, 5, 6]; 300];
+        faces.push([0, 6, 1]);
+        faces.push([12, 17, 18]);
+        let grid = VertexPixels {
+            pixel: &pixel,
+            width: w,
+        };
+        let clean = clean_grid_faces(25, &faces, 3, Some(grid)).unwrap();
+        assert_eq!(clean, clean_faces(25, &faces, 3).unwrap());
+        assert_eq!(clean.faces.len(), 302);
+        let fewer = clean_grid_faces(25, &faces, 4, Some(grid)).unwrap();
+        assert_eq!(fewer, clean_faces(25, &faces, 4).unwrap());
+        assert_eq!(fewer.faces.len(), 301);
     }
 
     #[test]
