@@ -434,9 +434,9 @@ def clipped_fit_step(
     floats), each float32 operation and mean numpy's, in its order; None when fewer than ``min_kept`` are kept."""
 
 def lit_median(stack: npt.NDArray[np.uint8], lit: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
-    """(H, W, 3): per pixel and channel the median of the ``stack`` (K, H, W, 3) samples it is ``lit`` (K, H, W)
-    in (all K where it is lit in none), ``(s[(n−1)//2] + s[n//2] + 1) // 2`` of the n sorted samples, as
-    :meth:`gnomon.capture.texture.LitColour.finish` defines it; chunks of pixels in parallel."""
+    """(H, W, C): per pixel and channel the median of the ``stack`` (K, H, W, C; C 3 for RGB, 1 for grey) samples
+    it is ``lit`` (K, H, W) in (all K where it is lit in none), ``(s[(n−1)//2] + s[n//2] + 1) // 2`` of the n
+    sorted samples, as :meth:`gnomon.capture.texture.LitColour.finish` defines it; chunks of pixels in parallel."""
 
 def world_points(
     rays: npt.NDArray[np.float64],

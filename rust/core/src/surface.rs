@@ -176,34 +176,49 @@ pub fn fuse_supported(
 /// The median of n lit samples is `(s[(n−1)/2] + s[n/2] + 1) / 2` of the sorted
 /// samples (integer, rounding half up). Chunks of pixels in parallel.
 pub fn lit_median(stack: &[u8], lit: &[u8], frames: usize) -> Result<Vec<u8>, KernelError> {
+    lit_median_channels(stack, lit, frames, 3)
+}
+
+/// [`lit_median`] of samples with `channels` values each (`stack`: `K·P·channels`; 1 for
+/// grey frames, whose median is then taken once per pixel instead of once per repeated
+/// channel), the output `P·channels`.
+pub fn lit_median_channels(
+    stack: &[u8],
+    lit: &[u8],
+    frames: usize,
+    channels: usize,
+) -> Result<Vec<u8>, KernelError> {
     if frames == 0 || lit.len() % frames != 0 {
         return Err(KernelError::parameter(
             "frames",
             format!("{frames} does not divide the {} lit flags", lit.len()),
         ));
     }
+    if channels == 0 {
+        return Err(KernelError::parameter("channels", "at least one"));
+    }
     let pixels = lit.len() / frames;
-    if stack.len() != 3 * lit.len() {
+    if stack.len() != channels * lit.len() {
         return Err(KernelError::LengthMismatch {
-            what: "stack (3 per lit flag)",
-            expected: 3 * lit.len(),
+            what: "stack (one sample per channel and lit flag)",
+            expected: channels * lit.len(),
             got: stack.len(),
         });
     }
-    let mut out = vec![0u8; 3 * pixels];
+    let mut out = vec![0u8; channels * pixels];
     const PIXELS_PER_CHUNK: usize = 8192;
-    out.par_chunks_mut(3 * PIXELS_PER_CHUNK)
+    out.par_chunks_mut(channels * PIXELS_PER_CHUNK)
         .enumerate()
         .for_each(|(chunk, out)| {
             let mut values = vec![0u8; frames];
-            for (i, o) in out.chunks_exact_mut(3).enumerate() {
+            for (i, o) in out.chunks_exact_mut(channels).enumerate() {
                 let p = chunk * PIXELS_PER_CHUNK + i;
                 let any = (0..frames).any(|k| lit[k * pixels + p] != 0);
                 for (c, o) in o.iter_mut().enumerate() {
                     let mut n = 0;
                     for k in 0..frames {
                         if !any || lit[k * pixels + p] != 0 {
-                            values[n] = stack[3 * (k * pixels + p) + c];
+                            values[n] = stack[channels * (k * pixels + p) + c];
                             n += 1;
                         }
                     }
@@ -454,6 +469,17 @@ mod tests {
         assert_eq!(got, vec![20, 200, 7, 49, 102, 5]);
         assert!(lit_median(&stack[..23], &lit, 4).is_err());
         assert!(lit_median(&stack, &lit, 3).is_err());
+        // one channel: each pixel's median of its grey samples, the same as of three equal channels
+        let grey: Vec<u8> = stack.iter().step_by(3).copied().collect();
+        let once = lit_median_channels(&grey, &lit, 4, 1).unwrap();
+        assert_eq!(once, vec![20, 49]);
+        let tripled: Vec<u8> = grey.iter().flat_map(|&g| [g, g, g]).collect();
+        assert_eq!(
+            lit_median(&tripled, &lit, 4).unwrap(),
+            vec![20, 20, 20, 49, 49, 49]
+        );
+        assert!(lit_median_channels(&grey, &lit, 4, 0).is_err());
+        assert!(lit_median_channels(&grey[..7], &lit, 4, 1).is_err());
     }
 
     #[test]

@@ -6,7 +6,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
 use crate::arrays::Extent::{Any, Exactly};
-use crate::arrays::{borrow, camera_rays, grid, grid3, image, on_slices};
+use crate::arrays::{borrow, camera_rays, grid, grid3, image, on_slices, shape_error};
+use crate::errors::KernelArrayError;
 
 /// Fused depth and σ of K estimates per pixel, neighbour-supported only, and each pixel's code
 /// (0 none, 1 kept, 2 conflict, 3 unsupported), each (H, W) (see `gnomon_core::fuse_supported`).
@@ -27,8 +28,8 @@ pub(crate) fn fuse_supported<'py>(
     PyTuple::new(py, [depth.into_any(), sigma.into_any(), code.into_any()])
 }
 
-/// Per pixel and channel, the median of the frames it is lit in: (H, W, 3) uint8 (see
-/// `gnomon_core::lit_median`).
+/// Per pixel and channel, the median of the frames it is lit in: (H, W, C) uint8 of a stack
+/// (K, H, W, C), C 3 (RGB) or 1 (grey) (see `gnomon_core::lit_median_channels`).
 #[pyfunction]
 #[pyo3(signature = (stack, lit))]
 pub(crate) fn lit_median<'py>(
@@ -36,9 +37,16 @@ pub(crate) fn lit_median<'py>(
 ) -> PyResult<Bound<'py, PyArray3<u8>>> {
     let lit = borrow::<u8, 3>(lit, "lit", [Any("K"), Any("H"), Any("W")])?;
     let (k, h, w) = (lit.shape()[0], lit.shape()[1], lit.shape()[2]);
-    let stack = borrow::<u8, 4>(stack, "stack", [Exactly(k), Exactly(h), Exactly(w), Exactly(3)])?;
-    let rgb = on_slices!(py, [stack, lit] => gnomon_core::lit_median(stack, lit, k))?;
-    grid3(py, rgb, h, w)
+    let stack = borrow::<u8, 4>(stack, "stack", [Exactly(k), Exactly(h), Exactly(w), Any("C")])?;
+    let channels = stack.shape()[3];
+    if channels != 1 && channels != 3 {
+        return Err(KernelArrayError::new_err(format!(
+            "stack: expected 1 or 3 channels, got {channels}"
+        )));
+    }
+    let out = on_slices!(py, [stack, lit] => gnomon_core::lit_median_channels(stack, lit, k, channels))?;
+    let array = numpy::ndarray::Array3::from_shape_vec((h, w, channels), out).map_err(shape_error)?;
+    Ok(array.into_pyarray(py))
 }
 
 /// World-frame points (H, W, 3) float32 of a depth map, NaN off the surface (see
