@@ -438,6 +438,15 @@ def lit_median(stack: npt.NDArray[np.uint8], lit: npt.NDArray[np.uint8]) -> npt.
     it is ``lit`` (K, H, W) in (all K where it is lit in none), ``(s[(n−1)//2] + s[n//2] + 1) // 2`` of the n
     sorted samples, as :meth:`gnomon.capture.texture.LitColour.finish` defines it; chunks of pixels in parallel."""
 
+def lit_median_between(
+    stack: npt.NDArray[np.uint8], times: npt.NDArray[np.float64], start: npt.NDArray[np.float64],
+    end: npt.NDArray[np.float64], margin: float,
+) -> npt.NDArray[np.uint8]:
+    """:func:`lit_median` with each pixel's lit frames found from its shadow interval: kept frame k (capture frame
+    ``times[k]``) is shadowed where ``min(s, e) − margin ≤ times[k] ≤ max(s, e) + margin``, ``s``, ``e`` the
+    pixel's ``start`` and ``end`` (H, W) with a NaN one taken as the other (both NaN: never), as
+    :meth:`gnomon.capture.texture.LitColour.finish` defines it."""
+
 def world_points(
     rays: npt.NDArray[np.float64],
     depth: npt.NDArray[np.float32],

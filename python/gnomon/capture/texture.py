@@ -88,10 +88,11 @@ class LitColour:
 
     def _lit_median_kernel(self, stack: np.ndarray, keys: list[int], shadow_start: np.ndarray,
                            shadow_end: np.ndarray, margin: float) -> np.ndarray:
-        """(H, W, C) uint8: :meth:`finish`'s medians of a (K, H, W, C) stack, C 1 or 3, in the kernel."""
-        lit = self._lit(keys, shadow_start, shadow_end, margin)
-        # a bool array's bytes are its 0/1 values: viewed as uint8, not converted
-        return _kernel.lit_median(np.ascontiguousarray(self._u8(stack)), np.ascontiguousarray(lit).view(np.uint8))
+        """(H, W, C) uint8: :meth:`finish`'s medians of a (K, H, W, C) stack, C 1 or 3, in the kernel (each pixel's
+        lit frames there too, as :meth:`_lit` finds them)."""
+        return _kernel.lit_median_between(np.ascontiguousarray(self._u8(stack)), np.asarray(keys, dtype=np.float64),
+                                          np.ascontiguousarray(shadow_start, dtype=np.float64),
+                                          np.ascontiguousarray(shadow_end, dtype=np.float64), float(margin))
 
     @staticmethod
     def _u8(stack: np.ndarray) -> np.ndarray:

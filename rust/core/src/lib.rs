@@ -62,8 +62,8 @@ pub use retime::{
 pub use sample::Sample;
 pub use simd::SimdPath;
 pub use surface::{
-    fuse_supported, grid_normals, lit_median, lit_median_channels, stl_records, world_points,
-    STL_RECORD_BYTES,
+    fuse_supported, grid_normals, lit_median, lit_median_between, lit_median_channels, stl_records,
+    world_points, STL_RECORD_BYTES,
 };
 pub use tracker::{
     find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,

@@ -452,6 +452,76 @@ pub fn stl_records(vertices: &[f32], faces: &[i32]) -> Result<Vec<u8>, KernelErr
     Ok(out)
 }
 
+/// [`lit_median_channels`] with each pixel's lit frames found from its shadow interval
+/// (`gnomon.capture.texture.LitColour.finish`): kept frame `k` (at capture frame `times[k]`)
+/// is shadowed at a pixel when `min(s, e) − margin ≤ times[k] ≤ max(s, e) + margin`, `s` and
+/// `e` the pixel's `start` and `end` (P each, f64) with a NaN one taken as the other; with
+/// both NaN no frame is shadowed. The same f64 comparisons as the numpy definition's.
+pub fn lit_median_between(
+    stack: &[u8],
+    times: &[f64],
+    start: &[f64],
+    end: &[f64],
+    margin: f64,
+    channels: usize,
+) -> Result<Vec<u8>, KernelError> {
+    let (frames, pixels) = (times.len(), start.len());
+    if end.len() != pixels {
+        return Err(KernelError::LengthMismatch {
+            what: "end (one per pixel)",
+            expected: pixels,
+            got: end.len(),
+        });
+    }
+    if frames == 0 || channels == 0 || stack.len() != frames * pixels * channels {
+        return Err(KernelError::LengthMismatch {
+            what: "stack (one sample per frame, pixel and channel)",
+            expected: frames * pixels * channels,
+            got: stack.len(),
+        });
+    }
+    let mut out = vec![0u8; channels * pixels];
+    const PIXELS_PER_CHUNK: usize = 8192;
+    out.par_chunks_mut(channels * PIXELS_PER_CHUNK)
+        .enumerate()
+        .for_each(|(chunk, out)| {
+            let mut values = vec![0u8; frames];
+            let mut lit = vec![false; frames];
+            for (i, o) in out.chunks_exact_mut(channels).enumerate() {
+                let p = chunk * PIXELS_PER_CHUNK + i;
+                let (s0, e0) = (start[p], end[p]);
+                let (s, e) = (
+                    if s0.is_nan() { e0 } else { s0 },
+                    if e0.is_nan() { s0 } else { e0 },
+                );
+                // np.minimum / np.maximum: NaN when either is (then no comparison holds)
+                let (lo, hi) = if s.is_nan() || e.is_nan() {
+                    (f64::NAN, f64::NAN)
+                } else {
+                    (s.min(e) - margin, s.max(e) + margin)
+                };
+                for (l, &t) in lit.iter_mut().zip(times) {
+                    *l = !(t >= lo && t <= hi);
+                }
+                let any = lit.iter().any(|&l| l);
+                for (c, o) in o.iter_mut().enumerate() {
+                    let mut n = 0;
+                    for (k, &l) in lit.iter().enumerate() {
+                        if !any || l {
+                            values[n] = stack[channels * (k * pixels + p) + c];
+                            n += 1;
+                        }
+                    }
+                    let v = &mut values[..n];
+                    v.sort_unstable();
+                    let (a, b) = (u16::from(v[(n - 1) / 2]), u16::from(v[n / 2]));
+                    *o = (a + b).div_ceil(2) as u8;
+                }
+            }
+        });
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -480,6 +550,29 @@ mod tests {
         );
         assert!(lit_median_channels(&grey, &lit, 4, 0).is_err());
         assert!(lit_median_channels(&grey[..7], &lit, 4, 1).is_err());
+    }
+
+    #[test]
+    fn lit_median_between_finds_the_lit_frames_from_the_interval() {
+        // 4 frames at 0, 10, 20, 30 of 4 pixels, one channel
+        let times = [0.0, 10.0, 20.0, 30.0];
+        let stack: Vec<u8> = (0..4u8)
+            .flat_map(|k| [10 * k, 100 + k, 7 * k, 40 - k])
+            .collect();
+        let nan = f64::NAN;
+        // pixel 0: shadowed 9..21 (frames 1, 2): lit 0, 30 -> (0 + 30 + 1) / 2 = 15;
+        // pixel 1: end unknown, start 0 (frame 0 shadowed): 101, 102, 103 -> 102;
+        // pixel 2: no times: every frame lit -> 0, 7, 14, 21 -> (7 + 14 + 1) / 2 = 11;
+        // pixel 3: shadowed in every frame (-5..35): all four -> 40..37 -> (38 + 39 + 1) / 2 = 39
+        let start = [10.0, 0.0, nan, -5.0];
+        let end = [20.0, nan, nan, 35.0];
+        let got = lit_median_between(&stack, &times, &start, &end, 1.0, 1).unwrap();
+        assert_eq!(got, vec![15, 102, 11, 39]);
+        // the lit flags written out, through lit_median_channels
+        let lit = [1, 0, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 1, 1, 1, 0];
+        assert_eq!(lit_median_channels(&stack, &lit, 4, 1).unwrap(), got);
+        assert!(lit_median_between(&stack, &times, &start, &end[..3], 1.0, 1).is_err());
+        assert!(lit_median_between(&stack[..15], &times, &start, &end, 1.0, 1).is_err());
     }
 
     #[test]

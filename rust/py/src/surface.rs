@@ -44,8 +44,38 @@ pub(crate) fn lit_median<'py>(
             "stack: expected 1 or 3 channels, got {channels}"
         )));
     }
-    let out = on_slices!(py, [stack, lit] => gnomon_core::lit_median_channels(stack, lit, k, channels))?;
-    let array = numpy::ndarray::Array3::from_shape_vec((h, w, channels), out).map_err(shape_error)?;
+    let out =
+        on_slices!(py, [stack, lit] => gnomon_core::lit_median_channels(stack, lit, k, channels))?;
+    let array =
+        numpy::ndarray::Array3::from_shape_vec((h, w, channels), out).map_err(shape_error)?;
+    Ok(array.into_pyarray(py))
+}
+
+/// [`lit_median`] with the lit frames found per pixel from its shadow interval: `times` (K,)
+/// the kept frames' capture frames, `start` and `end` (H, W) float64 (see
+/// `gnomon_core::lit_median_between`); (H, W, C) uint8.
+#[pyfunction]
+#[pyo3(signature = (stack, times, start, end, margin))]
+pub(crate) fn lit_median_between<'py>(
+    py: Python<'py>, stack: &Bound<'py, PyAny>, times: &Bound<'py, PyAny>,
+    start: &Bound<'py, PyAny>, end: &Bound<'py, PyAny>, margin: f64,
+) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    let (start, h, w) = grid::<f64>(start, "start")?;
+    let end = borrow::<f64, 2>(end, "end", [Exactly(h), Exactly(w)])?;
+    let times = borrow::<f64, 1>(times, "times", [Any("K")])?;
+    let k = times.shape()[0];
+    let stack = borrow::<u8, 4>(stack, "stack", [Exactly(k), Exactly(h), Exactly(w), Any("C")])?;
+    let channels = stack.shape()[3];
+    if channels != 1 && channels != 3 {
+        return Err(KernelArrayError::new_err(format!(
+            "stack: expected 1 or 3 channels, got {channels}"
+        )));
+    }
+    let out = on_slices!(py, [stack, times, start, end] => {
+        gnomon_core::lit_median_between(stack, times, start, end, margin, channels)
+    })?;
+    let array =
+        numpy::ndarray::Array3::from_shape_vec((h, w, channels), out).map_err(shape_error)?;
     Ok(array.into_pyarray(py))
 }
 
