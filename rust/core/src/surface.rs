@@ -205,19 +205,34 @@ pub fn lit_median_channels(
             got: stack.len(),
         });
     }
+    Ok(lit_medians(stack, frames, pixels, channels, |p, flags| {
+        for (k, f) in flags.iter_mut().enumerate() {
+            *f = lit[k * pixels + p] != 0;
+        }
+    }))
+}
+
+/// Each pixel's and channel's median of its lit samples (`stack`: `K·P·channels`), the lit
+/// frames of pixel `p` written by `lit_at(p, flags)` (K flags): the rule of [`lit_median`].
+fn lit_medians<F>(stack: &[u8], frames: usize, pixels: usize, channels: usize, lit_at: F) -> Vec<u8>
+where
+    F: Fn(usize, &mut [bool]) + Sync,
+{
     let mut out = vec![0u8; channels * pixels];
     const PIXELS_PER_CHUNK: usize = 8192;
     out.par_chunks_mut(channels * PIXELS_PER_CHUNK)
         .enumerate()
         .for_each(|(chunk, out)| {
             let mut values = vec![0u8; frames];
+            let mut lit = vec![false; frames];
             for (i, o) in out.chunks_exact_mut(channels).enumerate() {
                 let p = chunk * PIXELS_PER_CHUNK + i;
-                let any = (0..frames).any(|k| lit[k * pixels + p] != 0);
+                lit_at(p, &mut lit);
+                let any = lit.iter().any(|&l| l);
                 for (c, o) in o.iter_mut().enumerate() {
                     let mut n = 0;
-                    for k in 0..frames {
-                        if !any || lit[k * pixels + p] != 0 {
+                    for (k, &l) in lit.iter().enumerate() {
+                        if !any || l {
                             values[n] = stack[channels * (k * pixels + p) + c];
                             n += 1;
                         }
@@ -229,7 +244,7 @@ pub fn lit_median_channels(
                 }
             }
         });
-    Ok(out)
+    out
 }
 
 /// World-frame points `H·W·3` (f32) of a camera depth map, NaN off the surface.
@@ -480,46 +495,22 @@ pub fn lit_median_between(
             got: stack.len(),
         });
     }
-    let mut out = vec![0u8; channels * pixels];
-    const PIXELS_PER_CHUNK: usize = 8192;
-    out.par_chunks_mut(channels * PIXELS_PER_CHUNK)
-        .enumerate()
-        .for_each(|(chunk, out)| {
-            let mut values = vec![0u8; frames];
-            let mut lit = vec![false; frames];
-            for (i, o) in out.chunks_exact_mut(channels).enumerate() {
-                let p = chunk * PIXELS_PER_CHUNK + i;
-                let (s0, e0) = (start[p], end[p]);
-                let (s, e) = (
-                    if s0.is_nan() { e0 } else { s0 },
-                    if e0.is_nan() { s0 } else { e0 },
-                );
-                // np.minimum / np.maximum: NaN when either is (then no comparison holds)
-                let (lo, hi) = if s.is_nan() || e.is_nan() {
-                    (f64::NAN, f64::NAN)
-                } else {
-                    (s.min(e) - margin, s.max(e) + margin)
-                };
-                for (l, &t) in lit.iter_mut().zip(times) {
-                    *l = !(t >= lo && t <= hi);
-                }
-                let any = lit.iter().any(|&l| l);
-                for (c, o) in o.iter_mut().enumerate() {
-                    let mut n = 0;
-                    for (k, &l) in lit.iter().enumerate() {
-                        if !any || l {
-                            values[n] = stack[channels * (k * pixels + p) + c];
-                            n += 1;
-                        }
-                    }
-                    let v = &mut values[..n];
-                    v.sort_unstable();
-                    let (a, b) = (u16::from(v[(n - 1) / 2]), u16::from(v[n / 2]));
-                    *o = (a + b).div_ceil(2) as u8;
-                }
-            }
-        });
-    Ok(out)
+    Ok(lit_medians(stack, frames, pixels, channels, |p, flags| {
+        let (s0, e0) = (start[p], end[p]);
+        let (s, e) = (
+            if s0.is_nan() { e0 } else { s0 },
+            if e0.is_nan() { s0 } else { e0 },
+        );
+        // np.minimum / np.maximum: NaN when either is (then no comparison holds)
+        let (lo, hi) = if s.is_nan() || e.is_nan() {
+            (f64::NAN, f64::NAN)
+        } else {
+            (s.min(e) - margin, s.max(e) + margin)
+        };
+        for (f, &t) in flags.iter_mut().zip(times) {
+            *f = !(t >= lo && t <= hi);
+        }
+    }))
 }
 
 #[cfg(test)]

@@ -38,17 +38,10 @@ pub(crate) fn lit_median<'py>(
     let lit = borrow::<u8, 3>(lit, "lit", [Any("K"), Any("H"), Any("W")])?;
     let (k, h, w) = (lit.shape()[0], lit.shape()[1], lit.shape()[2]);
     let stack = borrow::<u8, 4>(stack, "stack", [Exactly(k), Exactly(h), Exactly(w), Any("C")])?;
-    let channels = stack.shape()[3];
-    if channels != 1 && channels != 3 {
-        return Err(KernelArrayError::new_err(format!(
-            "stack: expected 1 or 3 channels, got {channels}"
-        )));
-    }
+    let channels = colour_channels(stack.shape()[3])?;
     let out =
         on_slices!(py, [stack, lit] => gnomon_core::lit_median_channels(stack, lit, k, channels))?;
-    let array =
-        numpy::ndarray::Array3::from_shape_vec((h, w, channels), out).map_err(shape_error)?;
-    Ok(array.into_pyarray(py))
+    pixel_channels(py, out, h, w, channels)
 }
 
 /// [`lit_median`] with the lit frames found per pixel from its shadow interval: `times` (K,)
@@ -65,17 +58,28 @@ pub(crate) fn lit_median_between<'py>(
     let times = borrow::<f64, 1>(times, "times", [Any("K")])?;
     let k = times.shape()[0];
     let stack = borrow::<u8, 4>(stack, "stack", [Exactly(k), Exactly(h), Exactly(w), Any("C")])?;
-    let channels = stack.shape()[3];
-    if channels != 1 && channels != 3 {
-        return Err(KernelArrayError::new_err(format!(
-            "stack: expected 1 or 3 channels, got {channels}"
-        )));
-    }
+    let channels = colour_channels(stack.shape()[3])?;
     let out = on_slices!(py, [stack, times, start, end] => {
         gnomon_core::lit_median_between(stack, times, start, end, margin, channels)
     })?;
-    let array =
-        numpy::ndarray::Array3::from_shape_vec((h, w, channels), out).map_err(shape_error)?;
+    pixel_channels(py, out, h, w, channels)
+}
+
+/// A colour stack's channels: 1 (grey) or 3 (RGB), else an error.
+fn colour_channels(channels: usize) -> PyResult<usize> {
+    if channels == 1 || channels == 3 {
+        Ok(channels)
+    } else {
+        Err(KernelArrayError::new_err(format!("stack: expected 1 or 3 channels, got {channels}")))
+    }
+}
+
+/// A row-major (height, width, channels) core result as a numpy array.
+fn pixel_channels<'py>(
+    py: Python<'py>, data: Vec<u8>, height: usize, width: usize, channels: usize,
+) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    let array = numpy::ndarray::Array3::from_shape_vec((height, width, channels), data)
+        .map_err(shape_error)?;
     Ok(array.into_pyarray(py))
 }
 
