@@ -43,3 +43,25 @@ def test_points_without_a_finite_sigma_or_depth_are_not_judged() -> None:
     sigma = np.array([[np.nan, 100.0, 1.0, 100.0]], dtype=np.float32)
     # a depth behind the camera is judged by |Z| as well
     assert beyond_trust(depth, sigma, 0.02).tolist() == [[False, False, False, True]]
+
+
+def test_mean_ignoring_nan_is_the_nansum_over_the_finite_count() -> None:
+    from gnomon.reconstruct.fused import mean_ignoring_nan
+
+    rng = np.random.default_rng(4)
+    for dtype, k in ((np.float32, 2), (np.float32, 1), (np.float32, 3), (np.float64, 2)):
+        maps = [(rng.random((30, 40)) * 300).astype(dtype) for _ in range(k)]
+        for m in maps:
+            m[rng.random(m.shape) < 0.3] = np.nan
+        maps[0][0, :4] = [np.inf, -0.0, 1e-45, np.nan]
+        maps[-1][0, :4] = [5.0, -0.0, 1e-45, np.nan]
+        # the definition: the stack's nansum (NaN as 0, ±inf kept) over the finite values' count, in float64
+        stack = np.stack(maps)
+        n = np.isfinite(stack).sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            expected = np.where(n > 0, np.nansum(stack, axis=0) / np.maximum(n, 1), np.nan).astype(np.float32)
+        got = mean_ignoring_nan(maps)
+        assert got.dtype == np.float32
+        np.testing.assert_array_equal(got, expected)
+        assert np.array_equal(np.signbit(got), np.signbit(expected))
+        assert np.isnan(got).sum() == (n == 0).sum() > 0

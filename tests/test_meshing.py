@@ -83,12 +83,33 @@ def test_kernel_faces_and_clean_up_equal_the_numpy_definitions() -> None:
         np.testing.assert_array_equal(mesh.faces, _grid_faces_numpy(depth, valid, 0.02, sigma, 5.0))
         assert non_manifold_vertex_count(mesh.faces) > 0  # the split of bow-ties is exercised
         for min_vertices in (1, 5, 50):
-            fast = remove_small_components(mesh, min_vertices)
             ref = _remove_small_components_numpy(mesh, min_vertices)
-            np.testing.assert_array_equal(fast.faces, ref.faces)
-            np.testing.assert_array_equal(fast.pixel_index, ref.pixel_index)
-            np.testing.assert_array_equal(fast.vertices, ref.vertices)
-            assert non_manifold_vertex_count(fast.faces) == 0
+            # the edges bucketed (any mesh), and found by their place on the pixel grid (width given)
+            for fast in (remove_small_components(mesh, min_vertices),
+                         remove_small_components(mesh, min_vertices, width=valid.shape[1])):
+                np.testing.assert_array_equal(fast.faces, ref.faces)
+                np.testing.assert_array_equal(fast.pixel_index, ref.pixel_index)
+                np.testing.assert_array_equal(fast.vertices, ref.vertices)
+                assert non_manifold_vertex_count(fast.faces) == 0
+
+
+def test_clean_up_on_the_grid_falls_back_for_a_mesh_off_it() -> None:
+    from gnomon import _kernel
+    from gnomon.geometry.meshing import GridMesh, _remove_small_components_numpy, remove_small_components
+
+    depth, sigma, valid = _bumpy_surface(7)
+    mesh = grid_mesh(grid_points(depth), depth, valid, 0.02, sigma=sigma)
+    n, w = len(mesh.vertices), valid.shape[1]
+    # a face joining far pixels (no grid step): the same pieces as the numpy definition finds
+    far = np.vstack([mesh.faces, [[0, n // 2, n - 1]]]).astype(np.int32)
+    off = GridMesh(mesh.vertices, far, mesh.pixel_index, mesh.normals)
+    ref = _remove_small_components_numpy(off, 5)
+    fast = remove_small_components(off, 5, width=w)
+    np.testing.assert_array_equal(fast.faces, ref.faces)
+    np.testing.assert_array_equal(fast.pixel_index, ref.pixel_index)
+    assert len(ref.faces) > 0
+    with pytest.raises(Exception, match="pixels"):
+        _kernel.clean_faces(n, far, 5, mesh.pixel_index[1:].astype(np.int64), w)
 
 
 def test_kernel_obj_text_equals_the_numpy_text() -> None:

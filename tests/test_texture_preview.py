@@ -63,6 +63,27 @@ def test_kernel_medians_equal_the_numpy_definition() -> None:
         np.testing.assert_array_equal(fast, slow)
 
 
+def test_grey_medians_once_per_pixel_equal_the_numpy_definition() -> None:
+    """Grey frames (8 and 16 bit): the kernel's one median per pixel, repeated, is the definition's median of
+    the three equal channels."""
+    rng = np.random.default_rng(8)
+    h, w = 29, 41
+    for dtype, top in ((np.uint8, 256), (np.uint16, 65536)):
+        for kept in (3, 4):
+            picks = np.arange(kept) * 5
+            colour = LitColour(picks)
+            for k in picks:
+                colour.add(int(k), rng.integers(0, top, (h, w)).astype(dtype))
+            start = rng.uniform(-5, 5 * kept, (h, w))
+            end = start + rng.uniform(0, 12, (h, w))
+            start[rng.random((h, w)) < 0.1] = np.nan
+            fast = colour.finish(start, end)
+            slow = colour.finish(start, end, kernel=False)
+            assert fast.dtype == np.uint8 and fast.shape == (h, w, 3)
+            np.testing.assert_array_equal(fast, slow)
+            assert len(np.unique(fast)) > 20  # the medians vary: not one value everywhere
+
+
 def test_grey_and_16_bit_frames_and_no_shadow_times() -> None:
     lit = LitColour(np.array([0, 2]))
     lit.add(0, np.full((2, 3), 1000 << 4, np.uint16))

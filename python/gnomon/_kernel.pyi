@@ -247,11 +247,14 @@ def grid_faces(
     faces, element for element (float32 arithmetic)."""
 
 def clean_faces(
-    n_vertices: int, faces: npt.NDArray[np.int32], min_vertices: int
+    n_vertices: int, faces: npt.NDArray[np.int32], min_vertices: int,
+    pixels: npt.NDArray[np.int64] | None = None, width: int = 0,
 ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.int64]]:
     """Drop edge-connected pieces of fewer than ``min_vertices`` vertices and give each
     fan meeting only at a vertex its own copy: the new faces (F', 3) and the input
-    vertex each new vertex copies (V',), as :func:`gnomon.geometry.meshing.remove_small_components`."""
+    vertex each new vertex copies (V',), as :func:`gnomon.geometry.meshing.remove_small_components`.
+    ``pixels``: each vertex's row-major pixel (strictly increasing) in a grid ``width`` wide, for a mesh
+    on the pixel grid: the same result through the grid's edge slots (faster); any other mesh as without."""
 
 @overload
 def obj_text(
@@ -431,9 +434,18 @@ def clipped_fit_step(
     floats), each float32 operation and mean numpy's, in its order; None when fewer than ``min_kept`` are kept."""
 
 def lit_median(stack: npt.NDArray[np.uint8], lit: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
-    """(H, W, 3): per pixel and channel the median of the ``stack`` (K, H, W, 3) samples it is ``lit`` (K, H, W)
-    in (all K where it is lit in none), ``(s[(n−1)//2] + s[n//2] + 1) // 2`` of the n sorted samples, as
-    :meth:`gnomon.capture.texture.LitColour.finish` defines it; chunks of pixels in parallel."""
+    """(H, W, C): per pixel and channel the median of the ``stack`` (K, H, W, C; C 3 for RGB, 1 for grey) samples
+    it is ``lit`` (K, H, W) in (all K where it is lit in none), ``(s[(n−1)//2] + s[n//2] + 1) // 2`` of the n
+    sorted samples, as :meth:`gnomon.capture.texture.LitColour.finish` defines it; chunks of pixels in parallel."""
+
+def lit_median_between(
+    stack: npt.NDArray[np.uint8], times: npt.NDArray[np.float64], start: npt.NDArray[np.float64],
+    end: npt.NDArray[np.float64], margin: float,
+) -> npt.NDArray[np.uint8]:
+    """:func:`lit_median` with each pixel's lit frames found from its shadow interval: kept frame k (capture frame
+    ``times[k]``) is shadowed where ``min(s, e) − margin ≤ times[k] ≤ max(s, e) + margin``, ``s``, ``e`` the
+    pixel's ``start`` and ``end`` (H, W) with a NaN one taken as the other (both NaN: never), as
+    :meth:`gnomon.capture.texture.LitColour.finish` defines it."""
 
 def world_points(
     rays: npt.NDArray[np.float64],

@@ -66,20 +66,15 @@ class LitColour:
             raise ValueError("no colour frame was kept")
         keys = sorted(self._frames)
         stack = np.stack([self._frames[k] for k in keys])  # (K, H, W[, 3])
+        if stack.ndim == 3 and kernel:  # grey: each pixel's median once, as the three equal channels' medians
+            grey = self._lit_median_kernel(stack[..., None], keys, shadow_start, shadow_end, margin)
+            return np.repeat(grey, 3, axis=2)
         if stack.ndim == 3:
             stack = np.repeat(stack[..., None], 3, axis=3)
-        if stack.dtype == np.uint16:
-            stack = (stack >> 8).astype(np.uint8)
-        stack = stack.astype(np.uint8, copy=False)
-        start = np.asarray(shadow_start, dtype=np.float64)
-        end = np.asarray(shadow_end, dtype=np.float64)
-        start, end = np.where(np.isnan(start), end, start), np.where(np.isnan(end), start, end)
-        t = np.asarray(keys, dtype=np.float64)[:, None, None]
-        with np.errstate(invalid="ignore"):
-            shadowed = (t >= np.minimum(start, end) - margin) & (t <= np.maximum(start, end) + margin)
-        lit = ~shadowed
-        if kernel:  # the same medians per pixel (rows in parallel)
-            return _kernel.lit_median(np.ascontiguousarray(stack), np.ascontiguousarray(lit, dtype=np.uint8))
+        if kernel:
+            return self._lit_median_kernel(stack, keys, shadow_start, shadow_end, margin)
+        lit = self._lit(keys, shadow_start, shadow_end, margin)
+        stack = self._u8(stack)
         lit[:, ~lit.any(axis=0)] = True  # shadowed in every kept frame: use them all
         n = lit.sum(axis=0)  # (H, W), ≥ 1
         # Median of the lit samples: shadowed ones sort last, take the middle of the first n.
@@ -90,3 +85,29 @@ class LitColour:
         a = np.take_along_axis(values, np.broadcast_to(lo, (1,) + values.shape[1:]), axis=0)[0]
         b = np.take_along_axis(values, np.broadcast_to(hi, (1,) + values.shape[1:]), axis=0)[0]
         return ((a + b + 1) // 2).astype(np.uint8)
+
+    def _lit_median_kernel(self, stack: np.ndarray, keys: list[int], shadow_start: np.ndarray,
+                           shadow_end: np.ndarray, margin: float) -> np.ndarray:
+        """(H, W, C) uint8: :meth:`finish`'s medians of a (K, H, W, C) stack, C 1 or 3, in the kernel (each pixel's
+        lit frames there too, as :meth:`_lit` finds them)."""
+        return _kernel.lit_median_between(np.ascontiguousarray(self._u8(stack)), np.asarray(keys, dtype=np.float64),
+                                          np.ascontiguousarray(shadow_start, dtype=np.float64),
+                                          np.ascontiguousarray(shadow_end, dtype=np.float64), float(margin))
+
+    @staticmethod
+    def _u8(stack: np.ndarray) -> np.ndarray:
+        """The samples as uint8 (uint16 by their high byte)."""
+        if stack.dtype == np.uint16:
+            stack = (stack >> 8).astype(np.uint8)
+        return stack.astype(np.uint8, copy=False)
+
+    @staticmethod
+    def _lit(keys: list[int], shadow_start: np.ndarray, shadow_end: np.ndarray, margin: float) -> np.ndarray:
+        """(K, H, W) bool: whether each pixel is lit in each kept frame (see :meth:`finish`)."""
+        start = np.asarray(shadow_start, dtype=np.float64)
+        end = np.asarray(shadow_end, dtype=np.float64)
+        start, end = np.where(np.isnan(start), end, start), np.where(np.isnan(end), start, end)
+        t = np.asarray(keys, dtype=np.float64)[:, None, None]
+        with np.errstate(invalid="ignore"):
+            shadowed = (t >= np.minimum(start, end) - margin) & (t <= np.maximum(start, end) + margin)
+        return ~shadowed

@@ -34,10 +34,14 @@ __all__ = [
     "face_components",
     "component_labels",
     "remove_small_components",
+    "clean_faces",
     "split_non_manifold_vertices",
     "non_manifold_vertex_count",
     "face_normals",
 ]
+
+# Pieces of the mesh with fewer vertices are dropped (specks, torn slivers): remove_small_components' default.
+MIN_PIECE_VERTICES = 50
 
 
 @dataclass
@@ -348,17 +352,33 @@ def split_non_manifold_vertices(mesh: GridMesh) -> GridMesh:
     return GridMesh(mesh.vertices[old], faces, mesh.pixel_index[old], normals)
 
 
-def remove_small_components(mesh: GridMesh, min_vertices: int = 50) -> GridMesh:
+def remove_small_components(mesh: GridMesh, min_vertices: int = MIN_PIECE_VERTICES,
+                            width: int | None = None) -> GridMesh:
     """Drop edge-connected pieces with fewer than ``min_vertices`` vertices (specks, torn slivers).
 
     Vertices in no face are dropped too (the point cloud still has them), and
     the vertices where kept pieces touch only at a point are split
     (:func:`split_non_manifold_vertices`): the result has no non-manifold vertex.
+    ``width``: the pixel grid's width when the mesh is on it (see :func:`clean_faces`).
     """
-    faces, source = _kernel.clean_faces(len(mesh.vertices), np.ascontiguousarray(mesh.faces, dtype=np.int32),
-                                        int(min_vertices))
+    faces, source = clean_faces(len(mesh.vertices), mesh.faces, mesh.pixel_index, min_vertices, width)
     return GridMesh(np.take(mesh.vertices, source, axis=0), faces, np.take(mesh.pixel_index, source),
                     None if mesh.normals is None else np.take(mesh.normals, source, axis=0))
+
+
+def clean_faces(n_vertices: int, faces: np.ndarray, pixel_index: np.ndarray,
+                min_vertices: int = MIN_PIECE_VERTICES, width: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`remove_small_components`' faces (F', 3) int32 into the new vertices and the old vertex each new
+    one copies (V',) int64, for a mesh of ``n_vertices`` vertices (none of which it needs but their count).
+
+    ``width``: the pixel grid's width when the mesh is on it (``pixel_index`` the row-major pixels of the
+    vertices, increasing, every edge a grid step: :func:`grid_faces`' mesh); the kernel then finds the faces
+    that share an edge by the edge's place on the grid (the same result, faster)."""
+    faces = np.ascontiguousarray(faces, dtype=np.int32)
+    if width is None:
+        return _kernel.clean_faces(int(n_vertices), faces, int(min_vertices))
+    return _kernel.clean_faces(int(n_vertices), faces, int(min_vertices),
+                               np.ascontiguousarray(pixel_index, dtype=np.int64), int(width))
 
 
 def _remove_small_components_numpy(mesh: GridMesh, min_vertices: int = 50) -> GridMesh:

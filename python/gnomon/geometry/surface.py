@@ -16,10 +16,11 @@ import numpy as np
 from gnomon import _kernel
 from gnomon.camera.models import Pose
 from gnomon.geometry.meshing import (
+    MIN_PIECE_VERTICES,
     GridMesh,
+    clean_faces,
     grid_faces,
     grid_normals,
-    remove_small_components,
 )
 
 
@@ -86,12 +87,18 @@ class SurfacePoints:
     normal_grid: np.ndarray  # (H, W, 3) float32 unit normals, NaN off the surface
 
 
+def surface_maps(depth: np.ndarray, sigma: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The depth and σ maps (float32) of the valid pixels, NaN elsewhere: what :func:`surface_points` and
+    :func:`mesh_faces` take (either again gives the same maps)."""
+    return (np.where(valid, depth, np.nan).astype(np.float32, copy=False),
+            np.where(valid, sigma, np.nan).astype(np.float32, copy=False))
+
+
 def surface_points(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np.ndarray, valid: np.ndarray,
                    rgb: np.ndarray, max_relative_jump: float) -> SurfacePoints:
     """Points (world frame), colours and normals of the valid pixels (the mesh: :func:`mesh_surface`);
     a neighbour beyond ``max_relative_jump`` of a pixel's depth takes no part in its normal."""
-    depth = np.where(valid, depth, np.nan).astype(np.float32)
-    sigma = np.where(valid, sigma, np.nan).astype(np.float32)
+    depth, sigma = surface_maps(depth, sigma, valid)
     # points_from_depth, then pose.camera_to_world, per pixel in the kernel (rows in parallel)
     world_grid = _kernel.world_points(np.ascontiguousarray(ray_map, dtype=np.float64), depth,
                                       np.ascontiguousarray(valid, dtype=np.uint8), pose.R, pose.t)
@@ -105,11 +112,34 @@ def surface_points(ray_map: np.ndarray, pose: Pose, depth: np.ndarray, sigma: np
                          rgb, world_grid, normals)
 
 
-def mesh_surface(points: SurfacePoints, max_relative_jump: float) -> Surface:
-    """The cut grid mesh of a surface's points (:func:`gnomon.geometry.meshing.grid_mesh`, small pieces removed)."""
+@dataclass
+class MeshFaces:
+    """A surface's cleaned grid mesh before its vertices are gathered (:func:`mesh_faces`)."""
+
+    faces: np.ndarray  # (F, 3) int32 into the mesh's vertices
+    source: np.ndarray  # (V,) int64: the point (valid pixel, row-major rank) each mesh vertex is
+
+
+def mesh_faces(depth: np.ndarray, sigma: np.ndarray, valid: np.ndarray, max_relative_jump: float) -> MeshFaces:
+    """The cut grid mesh's faces over the valid pixels, small pieces removed and non-manifold vertices split
+    (:func:`gnomon.geometry.meshing.grid_faces` then ``clean_faces``): it needs only the maps
+    (:func:`surface_maps`'), not the points, so it can be built while they are."""
+    depth, sigma = surface_maps(depth, sigma, valid)
+    faces = grid_faces(depth, valid, max_relative_jump, sigma=sigma)
+    clean, source = clean_faces(int(np.count_nonzero(valid)), faces, np.flatnonzero(valid), MIN_PIECE_VERTICES,
+                                valid.shape[1])
+    return MeshFaces(clean, source)
+
+
+def mesh_surface(points: SurfacePoints, max_relative_jump: float, faces: MeshFaces | None = None) -> Surface:
+    """The cut grid mesh of a surface's points (:func:`gnomon.geometry.meshing.grid_mesh`, small pieces removed);
+    ``faces``: :func:`mesh_faces` of the same maps, if already built."""
     # grid_mesh's vertices and normals are the points' own (the valid pixels, row-major): not gathered again
-    faces = grid_faces(points.depth, points.valid, max_relative_jump, sigma=points.sigma)
-    mesh = remove_small_components(GridMesh(points.points_world, faces, np.flatnonzero(points.valid), points.normals))
+    if faces is None:
+        faces = mesh_faces(points.depth, points.sigma, points.valid, max_relative_jump)
+    source = faces.source
+    mesh = GridMesh(np.take(points.points_world, source, axis=0), faces.faces,
+                    np.take(np.flatnonzero(points.valid), source), np.take(points.normals, source, axis=0))
     return Surface(points.depth, points.sigma, points.valid, points.points_world, points.colors, points.uv, mesh,
                    np.take(points.rgb.reshape(-1, 3), mesh.pixel_index, axis=0), points.normals, points.rgb)
 

@@ -127,10 +127,18 @@ def fusion_warnings(fused: FusedMaps, light: LightModel) -> list[str]:
 
 
 def mean_ignoring_nan(maps: list[np.ndarray]) -> np.ndarray:
-    stack = np.stack(maps)
-    n = np.isfinite(stack).sum(axis=0)
+    """(H, W) float32: each pixel's sum of the maps with NaN as 0 (``np.nansum`` over their stack, in the
+    maps' dtype, in order) over its count of finite values, divided in float64; NaN where none is finite.
+    The same values as ``np.nansum(stack, 0) / np.maximum(n, 1)`` without the stack and its NaN-less copy."""
+    total = np.zeros(maps[0].shape, np.result_type(*maps))  # from +0, as np.sum starts (+0 + -0.0 is +0)
+    count = np.zeros(maps[0].shape, np.uint16)
+    for m in maps:
+        total += np.where(np.isnan(m), 0, m)
+        count += np.isfinite(m)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n > 0, np.nansum(stack, axis=0) / np.maximum(n, 1), np.nan).astype(np.float32)
+        mean = np.divide(total, np.maximum(count, 1), dtype=np.float64).astype(np.float32)
+    mean[count == 0] = np.nan
+    return mean
 
 
 def crop_fused(fused: FusedMaps, setup: ScanSetup, ray_map: np.ndarray) -> np.ndarray:

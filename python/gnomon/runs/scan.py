@@ -36,7 +36,7 @@ from gnomon.config.specs import FieldLog
 from gnomon.errors import GnomonError, Remark
 from gnomon.geometry.meshing import GridMesh
 from gnomon.geometry.reference_lines import ReferenceLines
-from gnomon.geometry.surface import Surface, SurfacePoints, mesh_surface, surface_points
+from gnomon.geometry.surface import Surface, SurfacePoints, mesh_faces, mesh_surface, surface_maps, surface_points
 from gnomon.outputs.formats import OutputContext
 from gnomon.outputs.images import coverage_map
 from gnomon.outputs.publish import staged_outputs
@@ -165,6 +165,7 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
                 progress: bool = False, frame_stride: int = 10,
                 track: Callable[..., TrackedSequence] = track_source,
                 on_points: Callable[[PointsReady], None] | None = None,
+                on_mesh: Callable[[Surface], None] | None = None,
                 ) -> tuple[ScanResult, Callable[[ScanRecording], None] | None]:
     """:func:`scan` without its last step: the result, and the call that logs it to a recorder
     (None without ``recorder``), so that a caller can record while it writes the outputs.
@@ -173,7 +174,8 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
     ``recorder`` is one); the ray map is computed on a worker thread while the frames are tracked
     (OpenCV releases the GIL). ``on_points``: called with the surface's points and maps as soon as
     they are final, before the mesh is built (:class:`PointsReady`: e.g. to start writing them);
-    the returned call then logs only what its ``record`` did not.
+    the returned call then logs only what its ``record`` did not. ``on_mesh``: called with the
+    surface as soon as its mesh is built, before the report (e.g. to start writing the mesh's files).
     """
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
@@ -229,16 +231,24 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
             if setup.light.occluder_hides_light:
                 warnings += screen_direct_light(fused, edges, tracked, levels)
             cropped = crop_fused(fused, setup, ray_map)
-            points = surface_points(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, colours.result(),
-                                    setup.max_depth_jump)
-            coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
-                                    ambiguous=tracked.times.ambiguous, conflict=fused.conflict,
-                                    unsupported=fused.unsupported, no_direct_light=fused.no_direct_light)
-            if on_points is not None:
-                on_points(PointsReady(points, fused.shadow_time, fused.undersampled, coverage, None if recorder is None
-                                      else points_part_recorder(timings, setup, edges, points, fused, frame_stride,
-                                                               tracked.used, coverage)))
-            surface = mesh_surface(points, setup.max_depth_jump)
+            # The mesh's faces need only the final maps: built on a thread (the kernel, GIL released) while the
+            # points are and their files and recording start.
+            depth, sigma = surface_maps(fused.depth, fused.sigma, fused.keep)
+            with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-mesh") as mesh_pool:
+                faces = mesh_pool.submit(mesh_faces, depth, sigma, fused.keep, setup.max_depth_jump)
+                points = surface_points(ray_map, setup.pose, depth, sigma, fused.keep, colours.result(),
+                                        setup.max_depth_jump)
+                coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
+                                        ambiguous=tracked.times.ambiguous, conflict=fused.conflict,
+                                        unsupported=fused.unsupported, no_direct_light=fused.no_direct_light)
+                if on_points is not None:
+                    on_points(PointsReady(points, fused.shadow_time, fused.undersampled, coverage,
+                                          None if recorder is None
+                                          else points_part_recorder(timings, setup, edges, points, fused,
+                                                                    frame_stride, tracked.used, coverage)))
+                surface = mesh_surface(points, setup.max_depth_jump, faces.result())
+            if on_mesh is not None:
+                on_mesh(surface)
     warnings += fusion_warnings(fused, setup.light) + grazing_warnings(edges)
     timings["total_s"] = time.perf_counter() - t0
     report = scan_report(setup, source, tracked, edges, fused, surface.mesh, timings, warnings)
@@ -332,9 +342,13 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
         with recording(staging, opts, name, image_scale=scale, full=opts.rrd_full) as recorder:
             # The points' files and recording start as soon as the points are final, while the mesh is built.
             with Writers() as writers:
+                def mesh_files(surface: Surface) -> None:  # started as soon as the mesh is built
+                    write_mesh_files(staging, surface, output_context(setup), writers, setup.mesh_formats)
+
                 result, record = reconstruct(setup, source, recorder, progress=opts.progress,
                                              frame_stride=opts.frame_stride, track=opts.track or track_source,
-                                             on_points=_point_outputs(staging, setup, writers, recorder))
+                                             on_points=_point_outputs(staging, setup, writers, recorder),
+                                             on_mesh=mesh_files)
                 # the set-up's own stage (reading the field log, the camera, the planes from their marks)
                 result.report["timings_s"].update(setup_timing)
                 result.report["cpu_timings_s"].update(setup_cpu)
@@ -342,8 +356,7 @@ def run_scan(field_log: str | Path | FieldLog, out_dir: str | Path, options: Sca
                     recorder.submit(record)
                     recorder.close_soon()  # encoded and written while the mesh files are
                 t, c = time.perf_counter(), time.process_time()
-                with stage("output files"):
-                    write_mesh_files(staging, result.surface, output_context(setup), writers, setup.mesh_formats)
+                with stage("output files"):  # the mesh's files (started by reconstruct) and the points'
                     writers.wait()
             with stage("recording" if recorder is not None else "report"):
                 write_report(staging, result.report, t, c, t0, None if recorder is None else recorder.finish)

@@ -51,7 +51,10 @@ pub use intensity::NORMALISED_SCALE;
 pub use lines::{frame_lines, isochrone_crossings, line_times, Crossings, FrameLines, LineParams};
 pub use live::{FinishedPixel, WatchParams};
 pub use lut::lut_lookup;
-pub use mesh::{clean_faces, grid_faces, obj_text, obj_text_parts, triangles, CleanMesh};
+pub use mesh::{
+    clean_faces, clean_grid_faces, grid_faces, obj_text, obj_text_parts, triangles, CleanMesh,
+    VertexPixels,
+};
 pub use noise::{clipped_fit_step, noise_samples, pairwise_sum, ClipFit, NoiseSamples};
 pub use retime::{
     average_across, retime_rows, retime_rows_sigma, RetimeParams, Retimed, RetimedSigma,
@@ -59,7 +62,8 @@ pub use retime::{
 pub use sample::Sample;
 pub use simd::SimdPath;
 pub use surface::{
-    fuse_supported, grid_normals, lit_median, stl_records, world_points, STL_RECORD_BYTES,
+    fuse_supported, grid_normals, lit_median, lit_median_between, lit_median_channels, stl_records,
+    world_points, STL_RECORD_BYTES,
 };
 pub use tracker::{
     find_crossing, Crossing, Edge, SecondDips, ShadowTimes, TemporalTracker, TrackerParams,

@@ -131,6 +131,162 @@ impl EdgeBuckets {
     }
 }
 
+/// The pixel grid a mesh's vertices lie on: `pixel[v]`, the row-major pixel of vertex `v`
+/// (strictly increasing: vertices numbered by their pixel's rank), in rows `width` wide.
+#[derive(Debug, Clone, Copy)]
+pub struct VertexPixels<'a> {
+    pub pixel: &'a [i64],
+    pub width: usize,
+}
+
+/// A grid mesh's edges by their slot: `4·lo + step`, `lo` the edge's smaller vertex and
+/// `step` which of the grid's four steps (`1`, `W − 1`, `W`, `W + 1` pixels) leads from its
+/// pixel to the other end's. Two faces share an edge exactly when they share its slot (the
+/// pixels strictly increase, so `lo` and the step name the other end), so this finds what
+/// [`EdgeBuckets`] does with one table lookup per edge and no sort.
+struct GridEdges<'a> {
+    pixel: &'a [i64],
+    width: i64,
+    /// Each slot's faces (saturating at 255) and each vertex's interior edges, over all the
+    /// faces: [`GridEdges::link`]'s, taken by [`GridEdges::interior`].
+    counted: Option<(Vec<u8>, Vec<u32>)>,
+}
+
+impl<'a> GridEdges<'a> {
+    /// The table when every edge of `faces` is one grid step between its ends' pixels, the
+    /// pixels strictly increase and the grid is at least 3 wide (so the four steps differ);
+    /// None otherwise (the caller buckets the edges instead). Invariant: vertex indices of
+    /// `faces` are in `0..pixel.len()`.
+    fn new(grid: VertexPixels<'a>, faces: &[[i32; 3]]) -> Option<Self> {
+        let width = i64::try_from(grid.width).ok()?;
+        if width < 3 || grid.pixel.windows(2).any(|p| p[0] >= p[1]) {
+            return None;
+        }
+        let table = GridEdges {
+            pixel: grid.pixel,
+            width,
+            counted: None,
+        };
+        let steps_ok = faces
+            .par_iter()
+            .all(|f| edges(f).iter().all(|&(a, b)| table.step(a, b).is_some()));
+        steps_ok.then_some(table)
+    }
+
+    /// Which grid step leads from the pixel of `a`'s and `b`'s smaller vertex to the other's.
+    fn step(&self, a: i32, b: i32) -> Option<usize> {
+        let (lo, hi) = (a.min(b) as usize, a.max(b) as usize);
+        match self.pixel[hi] - self.pixel[lo] {
+            1 => Some(0),
+            d if d == self.width - 1 => Some(1),
+            d if d == self.width => Some(2),
+            d if d == self.width + 1 => Some(3),
+            _ => None,
+        }
+    }
+
+    /// The edge's slot (invariant: [`GridEdges::new`] accepted its faces).
+    fn slot(&self, a: i32, b: i32) -> usize {
+        4 * a.min(b) as usize + self.step(a, b).unwrap_or(0)
+    }
+
+    /// Link the faces that share an edge (each to the first earlier face with it), and count
+    /// every edge's faces and the interior edges (in two or more faces) at each vertex, kept in
+    /// the table for [`GridEdges::interior`].
+    fn link(&mut self, faces: &[[i32; 3]], sets: &mut UnionFind) {
+        let n = self.pixel.len();
+        let mut first = vec![u32::MAX; 4 * n];
+        let mut count = vec![0u8; 4 * n];
+        let mut interior = vec![0u32; n];
+        for (i, f) in faces.iter().enumerate() {
+            for (a, b) in edges(f) {
+                let s = self.slot(a, b);
+                if first[s] == u32::MAX {
+                    first[s] = i as u32;
+                } else {
+                    sets.union(first[s], i as u32);
+                }
+                count[s] = count[s].saturating_add(1);
+                if count[s] == 2 {
+                    interior[a as usize] += 1;
+                    interior[b as usize] += 1;
+                }
+            }
+        }
+        self.counted = Some((count, interior));
+    }
+
+    /// Interior edges (in two or more of the faces `keep` marks) at each vertex: those of all
+    /// the faces ([`GridEdges::link`]'s), less the edges that the faces not kept leave in one
+    /// face (a count that falls from 2 to 1); counted again over the kept faces when `link`
+    /// did not run or an edge has too many faces for its count (255).
+    fn interior(&mut self, faces: &[[i32; 3]], keep: &[bool]) -> Vec<u32> {
+        match self.counted.take() {
+            Some((mut count, mut interior)) if !count.contains(&u8::MAX) => {
+                for (f, _) in faces.iter().zip(keep).filter(|(_, &k)| !k) {
+                    for (a, b) in edges(f) {
+                        let s = self.slot(a, b);
+                        count[s] -= 1;
+                        if count[s] == 1 {
+                            interior[a as usize] -= 1;
+                            interior[b as usize] -= 1;
+                        }
+                    }
+                }
+                interior
+            }
+            _ => self.interior_of_kept(faces, keep),
+        }
+    }
+
+    /// [`GridEdges::interior`] counted over the kept faces alone.
+    fn interior_of_kept(&self, faces: &[[i32; 3]], keep: &[bool]) -> Vec<u32> {
+        let mut count = vec![0u8; 4 * self.pixel.len()];
+        let mut interior = vec![0u32; self.pixel.len()];
+        for (f, _) in faces.iter().zip(keep).filter(|(_, &k)| k) {
+            for (a, b) in edges(f) {
+                let s = self.slot(a, b);
+                if count[s] < 2 {
+                    count[s] += 1;
+                    if count[s] == 2 {
+                        interior[a as usize] += 1;
+                        interior[b as usize] += 1;
+                    }
+                }
+            }
+        }
+        interior
+    }
+}
+
+/// Which faces share each edge: the grid's slots ([`GridEdges`]) or, for any mesh, the
+/// edges bucketed ([`EdgeBuckets`]); both give the same links and interior edges.
+enum EdgeTable<'a> {
+    Grid(GridEdges<'a>),
+    Buckets(EdgeBuckets),
+}
+
+impl EdgeTable<'_> {
+    fn link(&mut self, faces: &[[i32; 3]], sets: &mut UnionFind) {
+        match self {
+            EdgeTable::Grid(t) => t.link(faces, sets),
+            EdgeTable::Buckets(b) => b.link(sets),
+        }
+    }
+
+    fn interior(&mut self, faces: &[[i32; 3]], keep: &[bool]) -> Vec<u32> {
+        match self {
+            EdgeTable::Grid(t) => t.interior(faces, keep),
+            EdgeTable::Buckets(b) => b.interior(keep),
+        }
+    }
+}
+
+/// A face's three edges `(f0, f1)`, `(f1, f2)`, `(f2, f0)`.
+fn edges(f: &[i32; 3]) -> [(i32, i32); 3] {
+    [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])]
+}
+
 /// The faces of the grid mesh of an `H × W` grid (see `gnomon.geometry.meshing.grid_mesh`).
 ///
 /// `valid`, `depth` (camera Z, f32, NaN where invalid) and `sigma` (σZ; NaN
@@ -292,6 +448,19 @@ pub fn clean_faces(
     faces: &[[i32; 3]],
     min_vertices: usize,
 ) -> Result<CleanMesh, KernelError> {
+    clean_grid_faces(n_vertices, faces, min_vertices, None)
+}
+
+/// [`clean_faces`], the same result, with the pixel grid the vertices lie on (`grid`): when
+/// every edge is a grid step (a mesh of `grid_faces`) the faces sharing an edge are found
+/// through the edge's grid slot instead of bucketing the edges; otherwise as without it.
+/// An error when `grid`'s pixels are not one per vertex.
+pub fn clean_grid_faces(
+    n_vertices: usize,
+    faces: &[[i32; 3]],
+    min_vertices: usize,
+    grid: Option<VertexPixels>,
+) -> Result<CleanMesh, KernelError> {
     if faces
         .as_flattened()
         .par_iter()
@@ -308,15 +477,30 @@ pub fn clean_faces(
             "more corners than a u32 index holds",
         ));
     }
+    if let Some(g) = grid {
+        if g.pixel.len() != n_vertices {
+            return Err(KernelError::LengthMismatch {
+                what: "pixels (one per vertex)",
+                expected: n_vertices,
+                got: g.pixel.len(),
+            });
+        }
+    }
     // Pieces: faces sharing an edge.
-    let buckets = EdgeBuckets::new(n_vertices, faces);
+    let mut table = match grid.and_then(|g| GridEdges::new(g, faces)) {
+        Some(t) => EdgeTable::Grid(t),
+        None => EdgeTable::Buckets(EdgeBuckets::new(n_vertices, faces)),
+    };
     let mut sets = UnionFind::new(faces.len());
-    buckets.link(&mut sets);
+    table.link(faces, &mut sets);
     let root = sets.into_roots();
     let mut vertex_piece = vec![u32::MAX; n_vertices];
+    // Each vertex's faces (< 2^32: at most 3·faces), all of them here, the kept ones below.
+    let mut degree = vec![0u32; n_vertices];
     for (f, &r) in faces.iter().zip(&root) {
         for &v in f {
             vertex_piece[v as usize] = r;
+            degree[v as usize] += 1;
         }
     }
     // A piece's vertices, at most `n_vertices` (< 2^31: they are i32 indices).
@@ -330,24 +514,24 @@ pub fn clean_faces(
         .map(|&r| size[r as usize] as usize >= min_vertices)
         .collect();
     drop((root, size));
-    let interior = buckets.interior(&keep);
-    drop(buckets);
-    Ok(split_fans(n_vertices, faces, &keep, &interior))
+    for (f, _) in faces.iter().zip(&keep).filter(|(_, &k)| !k) {
+        for &v in f {
+            degree[v as usize] -= 1;
+        }
+    }
+    let interior = table.interior(faces, &keep);
+    drop(table);
+    Ok(split_fans(faces, &keep, &interior, degree))
 }
 
 /// The faces `keep` marks, renumbered, with every fan of triangles at a vertex beyond its first
 /// given its own copy of the vertex (see [`clean_faces`]); `interior[v]`: the edges at `v` in two
-/// or more of the kept faces.
+/// or more of the kept faces; `degree[v]`: the kept faces at `v` (one per vertex).
 ///
-/// Invariant: vertex indices of `faces` are in `0..n_vertices`. The kept vertices are numbered
+/// Invariant: vertex indices of `faces` are in `0..degree.len()` (the vertices). The kept vertices are numbered
 /// in their order (a monotonic renumbering, so edges compare equal before and after it).
-fn split_fans(n_vertices: usize, faces: &[[i32; 3]], keep: &[bool], interior: &[u32]) -> CleanMesh {
-    let mut degree = vec![0u32; n_vertices];
-    for (f, _) in faces.iter().zip(keep).filter(|(_, &k)| k) {
-        for &v in f {
-            degree[v as usize] += 1;
-        }
-    }
+fn split_fans(faces: &[[i32; 3]], keep: &[bool], interior: &[u32], degree: Vec<u32>) -> CleanMesh {
+    let n_vertices = degree.len();
     let mut remap = vec![-1i32; n_vertices];
     let used = degree.iter().filter(|&&d| d > 0).count();
     let mut source: Vec<i64> = Vec::with_capacity(used);
@@ -802,10 +986,165 @@ mod tests {
                 .iter()
                 .map(|&r| size[r as usize] >= min_vertices)
                 .collect();
-            let expected = split_fans(n, &faces, &keep, &buckets.interior(&keep));
+            let mut degree = vec![0u32; n];
+            for (f, _) in faces.iter().zip(&keep).filter(|(_, &k)| k) {
+                for &v in f {
+                    degree[v as usize] += 1;
+                }
+            }
+            let expected = split_fans(&faces, &keep, &buckets.interior(&keep), degree);
             assert_eq!(clean, expected);
             assert_eq!(clean.faces.len(), keep.iter().filter(|&&k| k).count());
         }
+    }
+
+    /// A random grid mesh: `h × w` pixels, about a tenth invalid, depths in steps that the
+    /// jump test cuts, and the valid pixels (row-major) as the vertices' pixels.
+    fn random_grid_mesh(h: usize, w: usize, seed: u64) -> (Vec<[i32; 3]>, Vec<i64>) {
+        let mut next = lcg(seed);
+        let valid: Vec<u8> = (0..h * w).map(|_| u8::from(next(10) != 0)).collect();
+        let depth: Vec<f32> = (0..h * w).map(|_| 100.0 + 20.0 * next(3) as f32).collect();
+        let faces = grid_faces(&valid, &depth, &vec![0.0; h * w], w, 0.05, 5.0).unwrap();
+        let pixel = (0..(h * w) as i64)
+            .filter(|&p| valid[p as usize] != 0)
+            .collect();
+        (faces, pixel)
+    }
+
+    #[test]
+    fn grid_slots_clean_like_the_buckets() {
+        let (mut dropped, mut split) = (false, false);
+        for (seed, (h, w), min_vertices) in [
+            (1, (9, 7), 1),
+            (2, (12, 11), 4),
+            (3, (20, 3), 3),
+            (4, (15, 16), 6),
+        ] {
+            let (faces, pixel) = random_grid_mesh(h, w, seed);
+            let n = pixel.len();
+            let grid = VertexPixels {
+                pixel: &pixel,
+                width: w,
+            };
+            assert!(GridEdges::new(grid, &faces).is_some());
+            let expected = clean_faces(n, &faces, min_vertices).unwrap();
+            assert!(!expected.faces.is_empty());
+            dropped |= expected.faces.len() < faces.len();
+            split |= expected.source.len()
+                > expected
+                    .source
+                    .iter()
+                    .collect::<std::collections::HashSet<_>>()
+                    .len();
+            assert_eq!(
+                clean_grid_faces(n, &faces, min_vertices, Some(grid)).unwrap(),
+                expected
+            );
+        }
+        // the meshes had small pieces to drop and vertices to split
+        assert!(dropped && split);
+    }
+
+    #[test]
+    fn grid_slots_are_the_buckets_links_and_interior_edges() {
+        let (faces, pixel) = random_grid_mesh(14, 13, 9);
+        let n = pixel.len();
+        let mut table = GridEdges::new(
+            VertexPixels {
+                pixel: &pixel,
+                width: 13,
+            },
+            &faces,
+        )
+        .unwrap();
+        let buckets = EdgeBuckets::new(n, &faces);
+        let (mut by_grid, mut by_buckets) =
+            (UnionFind::new(faces.len()), UnionFind::new(faces.len()));
+        table.link(&faces, &mut by_grid);
+        buckets.link(&mut by_buckets);
+        // the same partition: each face's root is the same face under both
+        let (a, b) = (by_grid.into_roots(), by_buckets.into_roots());
+        for i in 0..faces.len() {
+            for j in 0..faces.len() {
+                assert_eq!(a[i] == a[j], b[i] == b[j]);
+            }
+        }
+        let mut next = lcg(5);
+        let keep: Vec<bool> = faces.iter().map(|_| next(4) != 0).collect();
+        // from link's counts less the dropped faces', and counted over the kept faces alone
+        assert_eq!(
+            table.interior_of_kept(&faces, &keep),
+            buckets.interior(&keep)
+        );
+        assert_eq!(table.interior(&faces, &keep), buckets.interior(&keep));
+        assert!(table.counted.is_none());
+        assert_eq!(table.interior(&faces, &keep), buckets.interior(&keep));
+    }
+
+    #[test]
+    fn an_edge_of_many_faces_is_counted_over_the_kept_faces() {
+        // one triangle repeated 300 times (its edges' counts saturate) beside another, four
+        // vertices, and a piece of three to drop
+        let (w, pixel): (usize, Vec<i64>) = (5, (0..25).collect());
+        let mut faces = vec![[0, 5, 6]; 300];
+        faces.push([0, 6, 1]);
+        faces.push([12, 17, 18]);
+        let grid = VertexPixels {
+            pixel: &pixel,
+            width: w,
+        };
+        let clean = clean_grid_faces(25, &faces, 3, Some(grid)).unwrap();
+        assert_eq!(clean, clean_faces(25, &faces, 3).unwrap());
+        assert_eq!(clean.faces.len(), 302);
+        let fewer = clean_grid_faces(25, &faces, 4, Some(grid)).unwrap();
+        assert_eq!(fewer, clean_faces(25, &faces, 4).unwrap());
+        assert_eq!(fewer.faces.len(), 301);
+    }
+
+    #[test]
+    fn off_grid_edges_fall_back_to_the_buckets() {
+        let (mut faces, pixel) = random_grid_mesh(10, 9, 3);
+        let n = pixel.len();
+        let grid = VertexPixels {
+            pixel: &pixel,
+            width: 9,
+        };
+        // a face between far pixels; pixels out of order; a grid 2 wide (its steps 1 and W − 1 agree)
+        faces.push([0, (n / 2) as i32, (n - 1) as i32]);
+        assert!(GridEdges::new(grid, &faces).is_none());
+        assert_eq!(
+            clean_grid_faces(n, &faces, 3, Some(grid)).unwrap(),
+            clean_faces(n, &faces, 3).unwrap()
+        );
+        faces.pop();
+        let mut shuffled = pixel.clone();
+        shuffled.swap(3, 4);
+        assert!(GridEdges::new(
+            VertexPixels {
+                pixel: &shuffled,
+                width: 9
+            },
+            &faces
+        )
+        .is_none());
+        assert!(GridEdges::new(
+            VertexPixels {
+                pixel: &pixel,
+                width: 2
+            },
+            &faces
+        )
+        .is_none());
+        assert!(clean_grid_faces(
+            n,
+            &faces,
+            3,
+            Some(VertexPixels {
+                pixel: &pixel[1..],
+                width: 9
+            })
+        )
+        .is_err());
     }
 
     #[test]

@@ -176,34 +176,64 @@ pub fn fuse_supported(
 /// The median of n lit samples is `(s[(n−1)/2] + s[n/2] + 1) / 2` of the sorted
 /// samples (integer, rounding half up). Chunks of pixels in parallel.
 pub fn lit_median(stack: &[u8], lit: &[u8], frames: usize) -> Result<Vec<u8>, KernelError> {
+    lit_median_channels(stack, lit, frames, 3)
+}
+
+/// [`lit_median`] of samples with `channels` values each (`stack`: `K·P·channels`; 1 for
+/// grey frames, whose median is then taken once per pixel instead of once per repeated
+/// channel), the output `P·channels`.
+pub fn lit_median_channels(
+    stack: &[u8],
+    lit: &[u8],
+    frames: usize,
+    channels: usize,
+) -> Result<Vec<u8>, KernelError> {
     if frames == 0 || lit.len() % frames != 0 {
         return Err(KernelError::parameter(
             "frames",
             format!("{frames} does not divide the {} lit flags", lit.len()),
         ));
     }
+    if channels == 0 {
+        return Err(KernelError::parameter("channels", "at least one"));
+    }
     let pixels = lit.len() / frames;
-    if stack.len() != 3 * lit.len() {
+    if stack.len() != channels * lit.len() {
         return Err(KernelError::LengthMismatch {
-            what: "stack (3 per lit flag)",
-            expected: 3 * lit.len(),
+            what: "stack (one sample per channel and lit flag)",
+            expected: channels * lit.len(),
             got: stack.len(),
         });
     }
-    let mut out = vec![0u8; 3 * pixels];
+    Ok(lit_medians(stack, frames, pixels, channels, |p, flags| {
+        for (k, f) in flags.iter_mut().enumerate() {
+            *f = lit[k * pixels + p] != 0;
+        }
+    }))
+}
+
+/// Each pixel's and channel's median of its lit samples (`stack`: `K·P·channels`), the lit
+/// frames of pixel `p` written by `lit_at(p, flags)` (K flags): the rule of [`lit_median`].
+fn lit_medians<F>(stack: &[u8], frames: usize, pixels: usize, channels: usize, lit_at: F) -> Vec<u8>
+where
+    F: Fn(usize, &mut [bool]) + Sync,
+{
+    let mut out = vec![0u8; channels * pixels];
     const PIXELS_PER_CHUNK: usize = 8192;
-    out.par_chunks_mut(3 * PIXELS_PER_CHUNK)
+    out.par_chunks_mut(channels * PIXELS_PER_CHUNK)
         .enumerate()
         .for_each(|(chunk, out)| {
             let mut values = vec![0u8; frames];
-            for (i, o) in out.chunks_exact_mut(3).enumerate() {
+            let mut lit = vec![false; frames];
+            for (i, o) in out.chunks_exact_mut(channels).enumerate() {
                 let p = chunk * PIXELS_PER_CHUNK + i;
-                let any = (0..frames).any(|k| lit[k * pixels + p] != 0);
+                lit_at(p, &mut lit);
+                let any = lit.iter().any(|&l| l);
                 for (c, o) in o.iter_mut().enumerate() {
                     let mut n = 0;
-                    for k in 0..frames {
-                        if !any || lit[k * pixels + p] != 0 {
-                            values[n] = stack[3 * (k * pixels + p) + c];
+                    for (k, &l) in lit.iter().enumerate() {
+                        if !any || l {
+                            values[n] = stack[channels * (k * pixels + p) + c];
                             n += 1;
                         }
                     }
@@ -214,7 +244,7 @@ pub fn lit_median(stack: &[u8], lit: &[u8], frames: usize) -> Result<Vec<u8>, Ke
                 }
             }
         });
-    Ok(out)
+    out
 }
 
 /// World-frame points `H·W·3` (f32) of a camera depth map, NaN off the surface.
@@ -437,6 +467,52 @@ pub fn stl_records(vertices: &[f32], faces: &[i32]) -> Result<Vec<u8>, KernelErr
     Ok(out)
 }
 
+/// [`lit_median_channels`] with each pixel's lit frames found from its shadow interval
+/// (`gnomon.capture.texture.LitColour.finish`): kept frame `k` (at capture frame `times[k]`)
+/// is shadowed at a pixel when `min(s, e) − margin ≤ times[k] ≤ max(s, e) + margin`, `s` and
+/// `e` the pixel's `start` and `end` (P each, f64) with a NaN one taken as the other; with
+/// both NaN no frame is shadowed. The same f64 comparisons as the numpy definition's.
+pub fn lit_median_between(
+    stack: &[u8],
+    times: &[f64],
+    start: &[f64],
+    end: &[f64],
+    margin: f64,
+    channels: usize,
+) -> Result<Vec<u8>, KernelError> {
+    let (frames, pixels) = (times.len(), start.len());
+    if end.len() != pixels {
+        return Err(KernelError::LengthMismatch {
+            what: "end (one per pixel)",
+            expected: pixels,
+            got: end.len(),
+        });
+    }
+    if frames == 0 || channels == 0 || stack.len() != frames * pixels * channels {
+        return Err(KernelError::LengthMismatch {
+            what: "stack (one sample per frame, pixel and channel)",
+            expected: frames * pixels * channels,
+            got: stack.len(),
+        });
+    }
+    Ok(lit_medians(stack, frames, pixels, channels, |p, flags| {
+        let (s0, e0) = (start[p], end[p]);
+        let (s, e) = (
+            if s0.is_nan() { e0 } else { s0 },
+            if e0.is_nan() { s0 } else { e0 },
+        );
+        // np.minimum / np.maximum: NaN when either is (then no comparison holds)
+        let (lo, hi) = if s.is_nan() || e.is_nan() {
+            (f64::NAN, f64::NAN)
+        } else {
+            (s.min(e) - margin, s.max(e) + margin)
+        };
+        for (f, &t) in flags.iter_mut().zip(times) {
+            *f = !(t >= lo && t <= hi);
+        }
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -454,6 +530,40 @@ mod tests {
         assert_eq!(got, vec![20, 200, 7, 49, 102, 5]);
         assert!(lit_median(&stack[..23], &lit, 4).is_err());
         assert!(lit_median(&stack, &lit, 3).is_err());
+        // one channel: each pixel's median of its grey samples, the same as of three equal channels
+        let grey: Vec<u8> = stack.iter().step_by(3).copied().collect();
+        let once = lit_median_channels(&grey, &lit, 4, 1).unwrap();
+        assert_eq!(once, vec![20, 49]);
+        let tripled: Vec<u8> = grey.iter().flat_map(|&g| [g, g, g]).collect();
+        assert_eq!(
+            lit_median(&tripled, &lit, 4).unwrap(),
+            vec![20, 20, 20, 49, 49, 49]
+        );
+        assert!(lit_median_channels(&grey, &lit, 4, 0).is_err());
+        assert!(lit_median_channels(&grey[..7], &lit, 4, 1).is_err());
+    }
+
+    #[test]
+    fn lit_median_between_finds_the_lit_frames_from_the_interval() {
+        // 4 frames at 0, 10, 20, 30 of 4 pixels, one channel
+        let times = [0.0, 10.0, 20.0, 30.0];
+        let stack: Vec<u8> = (0..4u8)
+            .flat_map(|k| [10 * k, 100 + k, 7 * k, 40 - k])
+            .collect();
+        let nan = f64::NAN;
+        // pixel 0: shadowed 9..21 (frames 1, 2): lit 0, 30 -> (0 + 30 + 1) / 2 = 15;
+        // pixel 1: end unknown, start 0 (frame 0 shadowed): 101, 102, 103 -> 102;
+        // pixel 2: no times: every frame lit -> 0, 7, 14, 21 -> (7 + 14 + 1) / 2 = 11;
+        // pixel 3: shadowed in every frame (-5..35): all four -> 40..37 -> (38 + 39 + 1) / 2 = 39
+        let start = [10.0, 0.0, nan, -5.0];
+        let end = [20.0, nan, nan, 35.0];
+        let got = lit_median_between(&stack, &times, &start, &end, 1.0, 1).unwrap();
+        assert_eq!(got, vec![15, 102, 11, 39]);
+        // the lit flags written out, through lit_median_channels
+        let lit = [1, 0, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 1, 1, 1, 0];
+        assert_eq!(lit_median_channels(&stack, &lit, 4, 1).unwrap(), got);
+        assert!(lit_median_between(&stack, &times, &start, &end[..3], 1.0, 1).is_err());
+        assert!(lit_median_between(&stack[..15], &times, &start, &end, 1.0, 1).is_err());
     }
 
     #[test]

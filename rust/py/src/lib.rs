@@ -44,7 +44,7 @@ fn _kernel(m: &Bound<'_, PyModule>) -> PyResult<()> {
         mesh::grid_faces, mesh::clean_faces, mesh::obj_text, surface::grid_normals,
         surface::stl_records, retime::retime_rows, retime::retime_rows_sigma,
         retime::average_across, triangulate::triangulate_depth, surface::world_points,
-        camera::ray_map, surface::lit_median, noise::clipped_fit_step, noise::noise_samples,
+        camera::ray_map, surface::lit_median, surface::lit_median_between, noise::clipped_fit_step, noise::noise_samples,
         surface::fuse_supported, tracker::simd_path, tracker::simd_paths, lines::line_times,
         deblock::deblock_interpolate, lut::lut_lookup,
     }

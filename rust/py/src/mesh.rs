@@ -28,16 +28,28 @@ pub(crate) fn grid_faces<'py>(
 }
 
 /// Drop small pieces and split non-manifold vertices (see `gnomon_core::clean_faces`):
-/// the new faces (F', 3) int32 and the source vertex of each new vertex (V',) int64.
+/// the new faces (F', 3) int32 and the source vertex of each new vertex (V',) int64. With
+/// `pixels` (V,) int64, each vertex's row-major pixel in a grid `width` wide, the same result
+/// through the grid's edge slots when the mesh is on the grid (`gnomon_core::clean_grid_faces`).
 #[pyfunction]
-#[pyo3(signature = (n_vertices, faces, min_vertices))]
+#[pyo3(signature = (n_vertices, faces, min_vertices, pixels = None, width = 0))]
 pub(crate) fn clean_faces<'py>(
     py: Python<'py>, n_vertices: usize, faces: &Bound<'py, PyAny>, min_vertices: usize,
+    pixels: Option<&Bound<'py, PyAny>>, width: usize,
 ) -> PyResult<FacesAndSources<'py>> {
     let faces = borrow::<i32, 2>(faces, "faces", [Any("F"), Exactly(3)])?;
-    let clean = on_slices!(py, [faces] => {
-        gnomon_core::clean_faces(n_vertices, gnomon_core::triangles(faces)?, min_vertices)
-    })?;
+    let clean = match pixels {
+        None => on_slices!(py, [faces] => {
+            gnomon_core::clean_faces(n_vertices, gnomon_core::triangles(faces)?, min_vertices)
+        })?,
+        Some(p) => {
+            let pixels = borrow::<i64, 1>(p, "pixels", [Exactly(n_vertices)])?;
+            on_slices!(py, [faces, pixels] => {
+                let grid = gnomon_core::VertexPixels { pixel: pixels, width };
+                gnomon_core::clean_grid_faces(n_vertices, gnomon_core::triangles(faces)?, min_vertices, Some(grid))
+            })?
+        }
+    };
     Ok((rows(py, clean.faces)?, clean.source.into_pyarray(py)))
 }
 

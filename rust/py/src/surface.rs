@@ -6,7 +6,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 
 use crate::arrays::Extent::{Any, Exactly};
-use crate::arrays::{borrow, camera_rays, grid, grid3, image, on_slices};
+use crate::arrays::{borrow, camera_rays, grid, grid3, image, on_slices, shape_error};
+use crate::errors::KernelArrayError;
 
 /// Fused depth and σ of K estimates per pixel, neighbour-supported only, and each pixel's code
 /// (0 none, 1 kept, 2 conflict, 3 unsupported), each (H, W) (see `gnomon_core::fuse_supported`).
@@ -27,8 +28,8 @@ pub(crate) fn fuse_supported<'py>(
     PyTuple::new(py, [depth.into_any(), sigma.into_any(), code.into_any()])
 }
 
-/// Per pixel and channel, the median of the frames it is lit in: (H, W, 3) uint8 (see
-/// `gnomon_core::lit_median`).
+/// Per pixel and channel, the median of the frames it is lit in: (H, W, C) uint8 of a stack
+/// (K, H, W, C), C 3 (RGB) or 1 (grey) (see `gnomon_core::lit_median_channels`).
 #[pyfunction]
 #[pyo3(signature = (stack, lit))]
 pub(crate) fn lit_median<'py>(
@@ -36,9 +37,50 @@ pub(crate) fn lit_median<'py>(
 ) -> PyResult<Bound<'py, PyArray3<u8>>> {
     let lit = borrow::<u8, 3>(lit, "lit", [Any("K"), Any("H"), Any("W")])?;
     let (k, h, w) = (lit.shape()[0], lit.shape()[1], lit.shape()[2]);
-    let stack = borrow::<u8, 4>(stack, "stack", [Exactly(k), Exactly(h), Exactly(w), Exactly(3)])?;
-    let rgb = on_slices!(py, [stack, lit] => gnomon_core::lit_median(stack, lit, k))?;
-    grid3(py, rgb, h, w)
+    let stack = borrow::<u8, 4>(stack, "stack", [Exactly(k), Exactly(h), Exactly(w), Any("C")])?;
+    let channels = colour_channels(stack.shape()[3])?;
+    let out =
+        on_slices!(py, [stack, lit] => gnomon_core::lit_median_channels(stack, lit, k, channels))?;
+    pixel_channels(py, out, h, w, channels)
+}
+
+/// [`lit_median`] with the lit frames found per pixel from its shadow interval: `times` (K,)
+/// the kept frames' capture frames, `start` and `end` (H, W) float64 (see
+/// `gnomon_core::lit_median_between`); (H, W, C) uint8.
+#[pyfunction]
+#[pyo3(signature = (stack, times, start, end, margin))]
+pub(crate) fn lit_median_between<'py>(
+    py: Python<'py>, stack: &Bound<'py, PyAny>, times: &Bound<'py, PyAny>,
+    start: &Bound<'py, PyAny>, end: &Bound<'py, PyAny>, margin: f64,
+) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    let (start, h, w) = grid::<f64>(start, "start")?;
+    let end = borrow::<f64, 2>(end, "end", [Exactly(h), Exactly(w)])?;
+    let times = borrow::<f64, 1>(times, "times", [Any("K")])?;
+    let k = times.shape()[0];
+    let stack = borrow::<u8, 4>(stack, "stack", [Exactly(k), Exactly(h), Exactly(w), Any("C")])?;
+    let channels = colour_channels(stack.shape()[3])?;
+    let out = on_slices!(py, [stack, times, start, end] => {
+        gnomon_core::lit_median_between(stack, times, start, end, margin, channels)
+    })?;
+    pixel_channels(py, out, h, w, channels)
+}
+
+/// A colour stack's channels: 1 (grey) or 3 (RGB), else an error.
+fn colour_channels(channels: usize) -> PyResult<usize> {
+    if channels == 1 || channels == 3 {
+        Ok(channels)
+    } else {
+        Err(KernelArrayError::new_err(format!("stack: expected 1 or 3 channels, got {channels}")))
+    }
+}
+
+/// A row-major (height, width, channels) core result as a numpy array.
+fn pixel_channels<'py>(
+    py: Python<'py>, data: Vec<u8>, height: usize, width: usize, channels: usize,
+) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    let array = numpy::ndarray::Array3::from_shape_vec((height, width, channels), data)
+        .map_err(shape_error)?;
+    Ok(array.into_pyarray(py))
 }
 
 /// World-frame points (H, W, 3) float32 of a depth map, NaN off the surface (see
