@@ -562,3 +562,19 @@ def test_regions_started_over_objects_cut_them_out_and_say_so(two_plane_small: P
     print(naive.table("marks' outlines as regions"), reference.table("the simulator's bare regions"), sep="\n")
     assert naive.gross_rate <= reference.gross_rate + 0.0005
     assert naive.rms_pct <= max(0.15, 1.5 * reference.rms_pct)
+
+
+def test_frames_without_a_line_are_named_by_their_files() -> None:
+    """`gnomon regions`' warning numbers frames from 0 (as field_logs/README.md does) and names their files
+    too, through the tracker's `used` (a frame refused as a dip shifts the files); a video gets no names."""
+    from pathlib import Path
+
+    from gnomon.capture.frames import FrameSource
+    from gnomon.commands.regions import _files
+
+    files = tuple(Path(f"frames/{k + 1:06d}.jpg") for k in range(10))
+    source = FrameSource(image_files=files)
+    used = np.array([0, 1, 2, 4, 5, 6, 7, 8, 9])  # file 000004.jpg refused
+    assert _files(source, used, 2, 4) == " (files 000003.jpg–000006.jpg)"
+    assert _files(source, used, 3, 3) == " (file 000005.jpg)"
+    assert _files(source, used, 7, 9) == ""  # past the tracked frames: nothing rather than a wrong name

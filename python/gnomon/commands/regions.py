@@ -14,14 +14,28 @@ import argparse
 import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gnomon.commands import COMMANDS
 
+if TYPE_CHECKING:
+    from gnomon.capture.frames import FrameSource
+
 # The first lines are fitted inside the hull of a plane's markers grown by this fraction around their centre.
 SEED_GROWTH = -0.25
 PLANE_COLOURS = ((60, 60, 255), (255, 120, 40), (60, 200, 60), (200, 60, 200))  # BGR
+
+
+def _files(source: FrameSource, used: np.ndarray, first: int, last: int) -> str:
+    """' (files A–B)': the image files of the tracker's frames ``first``..``last`` (0-based, as the warnings
+    number them), or '' for a video."""
+    files = source.image_files
+    if not files or last >= len(used) or int(used[last]) >= len(files):
+        return ""
+    a, b = files[int(used[first])].name, files[int(used[last])].name
+    return f" (file {a})" if a == b else f" (files {a}–{b})"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -174,7 +188,8 @@ def run(args: argparse.Namespace) -> int:
                   f"{len(region.seed_pieces)} pieces, the largest {area} px in [{u0}, {v0}, {u1}, {v1}]): an "
                   "object, its shadow, a mark or another surface")
         if region.gaps:
-            spans = ", ".join(f"{a}–{b}" for a, b in region.gaps[:6]) + (" …" if len(region.gaps) > 6 else "")
+            spans = ", ".join(f"{a}–{b}{_files(source, tracked.used, a, b)}" for a, b in region.gaps[:6]) + (
+                " …" if len(region.gaps) > 6 else "")
             print(f"warning: plane {region.name!r}: no line in frames {spans} of its sweep (the shadow there fits "
                   "no line through its pixels): the stripes it crossed then are missing from the mask; check "
                   "there for an object or a wrong plane, or draw a rough region across them and run again")
