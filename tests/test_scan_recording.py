@@ -101,6 +101,7 @@ def test_scan_warnings_are_on_the_frame_timeline(scanned) -> None:
     assert all(f == 0 for f, _ in found)
 
 
+@pytest.mark.slow  # its fixture simulates and scans the desk scene
 def test_scan_recording_has_coverage_and_depth_under_the_camera(scanned) -> None:
     from rerun.chunk import RrdReader
 
