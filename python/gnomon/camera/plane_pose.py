@@ -659,17 +659,13 @@ def _fit_pose_planar(camera, local2d: np.ndarray, pixels: np.ndarray, where: str
 def _refine(camera, obj, pixels, rvec, tvec):
     """The pose (rvec, tvec) minimising the pixel residuals, from a closed-form start; the fit (its
     residuals and their Jacobian at the solution, for the pose's covariance)."""
-    def fun(p):
-        r = _pixel_residuals(camera, p[:3], p[3:], obj, pixels).ravel()
+    def many(ps):  # the residuals of each pose row, the rows' points projected in one call
+        moved = [obj @ cv2.Rodrigues(np.asarray(p[:3], dtype=np.float64).reshape(3))[0].T + p[3:] for p in ps]
+        r = (pixels - camera.project(np.concatenate(moved)).reshape(len(ps), len(obj), 2)).reshape(len(ps), -1)
         # np.nan_to_num's call costs more than the projection: only when a residual is not finite
         return r if np.isfinite(r).all() else np.nan_to_num(r, nan=1e6)
 
-    def many(ps):  # fun of each row, the rows' points projected in one call (each point's pixel is its own)
-        moved = [obj @ cv2.Rodrigues(np.asarray(p[:3], dtype=np.float64).reshape(3))[0].T + p[3:] for p in ps]
-        r = (pixels - camera.project(np.concatenate(moved)).reshape(len(ps), len(obj), 2)).reshape(len(ps), -1)
-        return r if np.isfinite(r).all() else np.nan_to_num(r, nan=1e6)  # row by row as fun: the same numbers
-
-    sol = levenberg_marquardt(fun, np.concatenate([rvec, tvec]), many=many)
+    sol = levenberg_marquardt(lambda p: many(p[None])[0], np.concatenate([rvec, tvec]), many=many)
     return sol.x[:3], sol.x[3:], sol
 
 

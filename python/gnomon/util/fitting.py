@@ -62,27 +62,18 @@ class LeastSquares:
     iterations: int
 
 
-def _jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
-    """Central differences, steps of ε^(1/3) relative to each parameter (at least ε^(1/3))."""
-    step = np.finfo(float).eps ** (1.0 / 3.0) * np.maximum(1.0, np.abs(x))
-    cols = []
-    for i in range(len(x)):
-        dx = np.zeros_like(x)
-        dx[i] = step[i]
-        cols.append((fun(x + dx) - fun(x - dx)) / (2.0 * step[i]))
-    return np.stack(cols, axis=1)
-
-
-def _jacobian_many(many: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
-    """:func:`_jacobian` from one call: ``many`` maps (2N, N) parameter rows (x + step_i e_i, x − step_i e_i
-    for each i in turn) to their (2N, M) residuals, each row what ``fun`` gives for it; the same numbers."""
+def _jacobian(fun: Callable[[np.ndarray], np.ndarray], x: np.ndarray,
+              many: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
+    """Central differences, steps of ε^(1/3) relative to each parameter (at least ε^(1/3)). ``many``: ``fun``
+    over the (2N, N) rows x + step_i e_i, x − step_i e_i (for each i in turn) in one call, (2N, M) residuals
+    each ``fun``'s for its row (the same numbers); without it ``fun`` is called row by row."""
     step = np.finfo(float).eps ** (1.0 / 3.0) * np.maximum(1.0, np.abs(x))
     rows = np.empty((2 * len(x), len(x)))
     for i in range(len(x)):
         dx = np.zeros_like(x)
         dx[i] = step[i]
         rows[2 * i], rows[2 * i + 1] = x + dx, x - dx
-    r = many(rows)
+    r = many(rows) if many is not None else [fun(row) for row in rows]
     return np.stack([(r[2 * i] - r[2 * i + 1]) / (2.0 * step[i]) for i in range(len(x))], axis=1)
 
 
@@ -102,7 +93,7 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
     x = np.asarray(x0, dtype=np.float64).copy()
     r = np.asarray(fun(x), dtype=np.float64)
     cost = float(r @ r)
-    jac = _jacobian(fun, x) if many is None else _jacobian_many(many, x)
+    jac = _jacobian(fun, x, many)
     damping = 1e-3
     iterations = 0
     while iterations < max_iterations:
@@ -121,7 +112,7 @@ def levenberg_marquardt(fun: Callable[[np.ndarray], np.ndarray], x0: np.ndarray,
             break  # no step lowers the sum of squares: a minimum to machine precision
         x, r, gain, cost = x + step, r_new, cost - cost_new, cost_new
         damping = max(damping / 10.0, 1e-12)
-        jac = _jacobian(fun, x) if many is None else _jacobian_many(many, x)
+        jac = _jacobian(fun, x, many)
         if np.all(np.abs(step) <= xtol * (np.abs(x) + xtol)) or gain <= ftol * (cost + gain):
             break
     return LeastSquares(x, r, jac, iterations)
