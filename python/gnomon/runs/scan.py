@@ -36,7 +36,7 @@ from gnomon.config.specs import FieldLog
 from gnomon.errors import GnomonError, Remark
 from gnomon.geometry.meshing import GridMesh
 from gnomon.geometry.reference_lines import ReferenceLines
-from gnomon.geometry.surface import Surface, SurfacePoints, mesh_faces, mesh_surface, surface_maps, surface_points
+from gnomon.geometry.surface import Surface, SurfacePoints, mesh_faces, mesh_surface, surface_points
 from gnomon.outputs.formats import OutputContext
 from gnomon.outputs.images import coverage_map
 from gnomon.outputs.publish import staged_outputs
@@ -232,11 +232,10 @@ def reconstruct(setup: ScanSetup, source: FrameSource, recorder: Recorder | None
                 warnings += screen_direct_light(fused, edges, tracked, levels)
             cropped = crop_fused(fused, setup, ray_map)
             # The mesh's faces need only the final maps: built on a thread (the kernel, GIL released) while the
-            # points are and their files and recording start.
-            depth, sigma = surface_maps(fused.depth, fused.sigma, fused.keep)
+            # points are and their files and recording start (each takes the maps' valid pixels itself).
             with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gnomon-mesh") as mesh_pool:
-                faces = mesh_pool.submit(mesh_faces, depth, sigma, fused.keep, setup.max_depth_jump)
-                points = surface_points(ray_map, setup.pose, depth, sigma, fused.keep, colours.result(),
+                faces = mesh_pool.submit(mesh_faces, fused.depth, fused.sigma, fused.keep, setup.max_depth_jump)
+                points = surface_points(ray_map, setup.pose, fused.depth, fused.sigma, fused.keep, colours.result(),
                                         setup.max_depth_jump)
                 coverage = coverage_map(tracked.times.valid, fused.keep, fused.undersampled, cropped,
                                         ambiguous=tracked.times.ambiguous, conflict=fused.conflict,
