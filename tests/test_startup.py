@@ -1,4 +1,4 @@
-"""Start-up cost: what `import gnomon.runs.scan` and `gnomon --version` load.
+"""Start-up cost: what `import gnomon.runs.scan`, `import gnomon.api` and `gnomon --version` load.
 
 A scan with a lamp or two planes needs neither pandas (the sun's clock, through pvlib)
 nor scipy.optimize nor scipy.stats (a plane's pose refined and checked from its markers): together
@@ -35,6 +35,21 @@ def _loaded_after(code: str, modules: list[str]) -> dict[str, bool]:
 def test_pipeline_import_loads_neither_pandas_nor_scipy_optimize() -> None:
     loaded = _loaded_after("import gnomon.runs.scan", ["gnomon.runs.scan", "pandas", "scipy.optimize", "pvlib"])
     assert loaded == {"gnomon.runs.scan": True, "pandas": False, "scipy.optimize": False, "pvlib": False}
+
+
+def test_the_api_loads_no_scene_until_one_is_asked_for() -> None:
+    """`gnomon scan` imports gnomon.api (for SCENES and scan): no scene module, and so not pandas (the facade's
+    and pvlib's, ≈ 0.45 s) until a scene's name is asked for."""
+    loaded = _loaded_after("import gnomon.api\nimport gnomon.simulate as s\nassert 'chessboard' in s.SCENES",
+                           ["gnomon.api", "gnomon.simulate.facade_sun", "gnomon.simulate.desk_lamp", "pandas", "pvlib"])
+    assert loaded == {"gnomon.api": True, "gnomon.simulate.facade_sun": False, "gnomon.simulate.desk_lamp": False,
+                      "pandas": False, "pvlib": False}
+    loaded = _loaded_after("from gnomon.simulate import FacadeSunConfig, simulate_two_plane\n"
+                           "from gnomon.simulate.facade_sun import FacadeSunConfig as direct\n"
+                           "assert FacadeSunConfig is direct and callable(simulate_two_plane)",
+                           ["gnomon.simulate.facade_sun", "gnomon.simulate.two_plane_scene", "gnomon.simulate.room"])
+    assert loaded == {"gnomon.simulate.facade_sun": True, "gnomon.simulate.two_plane_scene": True,
+                      "gnomon.simulate.room": False}
 
 
 def test_sun_names_load_on_first_use() -> None:

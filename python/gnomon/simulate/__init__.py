@@ -32,42 +32,43 @@ frames, ``.npz``). Scenes:
 
 import sys as _sys
 import types as _types
+from typing import TYPE_CHECKING
 
-from gnomon.simulate.desk_lamp import (
-    DeskLampConfig,
-    DeskLampScene,
-    SimulationResult,
-    SweepConfig,
-    simulate_desk_lamp,
-)
-from gnomon.simulate.facade_sun import FacadeSunConfig, FacadeSunResult, FacadeSunScene, simulate_facade_sun
-from gnomon.simulate.room import RoomConfig, RoomScene, simulate_room
-from gnomon.simulate.turntable import TurnsConfig, TurnsResult, simulate_turns
-from gnomon.simulate.two_plane_scene import TwoPlaneConfig, TwoPlaneScene, simulate_two_plane
+from gnomon._lazy import attach
+from gnomon.simulate.scenes import SCENES
 
-SCENES = ("desk_lamp", "desk_lamp_right", "desk_turns", "two_plane", "room", "facade_sun", "facade_day")
+if TYPE_CHECKING:
+    from gnomon.simulate.desk_lamp import DeskLampConfig as DeskLampConfig
+    from gnomon.simulate.desk_lamp import DeskLampScene as DeskLampScene
+    from gnomon.simulate.desk_lamp import SimulationResult as SimulationResult
+    from gnomon.simulate.desk_lamp import SweepConfig as SweepConfig
+    from gnomon.simulate.desk_lamp import simulate_desk_lamp as simulate_desk_lamp
+    from gnomon.simulate.facade_sun import FacadeSunConfig as FacadeSunConfig
+    from gnomon.simulate.facade_sun import FacadeSunResult as FacadeSunResult
+    from gnomon.simulate.facade_sun import FacadeSunScene as FacadeSunScene
+    from gnomon.simulate.facade_sun import simulate_facade_sun as simulate_facade_sun
+    from gnomon.simulate.room import RoomConfig as RoomConfig
+    from gnomon.simulate.room import RoomScene as RoomScene
+    from gnomon.simulate.room import simulate_room as simulate_room
+    from gnomon.simulate.turntable import TurnsConfig as TurnsConfig
+    from gnomon.simulate.turntable import TurnsResult as TurnsResult
+    from gnomon.simulate.turntable import simulate_turns as simulate_turns
+    from gnomon.simulate.two_plane_scene import TwoPlaneConfig as TwoPlaneConfig
+    from gnomon.simulate.two_plane_scene import TwoPlaneScene as TwoPlaneScene
+    from gnomon.simulate.two_plane_scene import simulate_two_plane as simulate_two_plane
 
-__all__ = [
-    "SCENES",
-    "FacadeSunConfig",
-    "FacadeSunResult",
-    "FacadeSunScene",
-    "simulate_facade_sun",
-    "DeskLampConfig",
-    "RoomConfig",
-    "RoomScene",
-    "DeskLampScene",
-    "SimulationResult",
-    "SweepConfig",
-    "TurnsConfig",
-    "TurnsResult",
-    "TwoPlaneConfig",
-    "TwoPlaneScene",
-    "simulate_desk_lamp",
-    "simulate_room",
-    "simulate_turns",
-    "simulate_two_plane",
-]
+# Each scene's names are imported from its module on first use: importing the package (as `gnomon scan`
+# does through gnomon.api, for SCENES) loads no scene, and so not pandas (the facade's and pvlib's, ~0.45 s).
+__getattr__, __dir__, _names = attach(__name__, {
+    **dict.fromkeys(("DeskLampConfig", "DeskLampScene", "SimulationResult", "SweepConfig", "simulate_desk_lamp"),
+                    "gnomon.simulate.desk_lamp"),
+    **dict.fromkeys(("FacadeSunConfig", "FacadeSunResult", "FacadeSunScene", "simulate_facade_sun"),
+                    "gnomon.simulate.facade_sun"),
+    **dict.fromkeys(("RoomConfig", "RoomScene", "simulate_room"), "gnomon.simulate.room"),
+    **dict.fromkeys(("TurnsConfig", "TurnsResult", "simulate_turns"), "gnomon.simulate.turntable"),
+    **dict.fromkeys(("TwoPlaneConfig", "TwoPlaneScene", "simulate_two_plane"), "gnomon.simulate.two_plane_scene"),
+})
+__all__ = ["SCENES", *_names]
 
 
 class _CallableModule(_types.ModuleType):
