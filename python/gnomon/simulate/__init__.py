@@ -27,7 +27,12 @@ frames, ``.npz``). Scenes:
   (:mod:`gnomon.simulate.outdoor_bounce`), frame by frame;
 * ``facade_day`` — the same facade over a whole day, night at both ends
   (``FacadeSunConfig.day()``): six cloud dips, a lamp post whose shadow is
-  another moving darkening, the evening's fading sun.
+  another moving darkening, the evening's fading sun;
+* ``chessboard`` — views of a 9 × 6 board with known intrinsics, distortion and poses
+  (:mod:`gnomon.simulate.chessboard`), for ``gnomon calibrate camera``.
+
+The scenes' names (:data:`SCENES`) and :func:`gnomon.simulate.scenes.simulate` load no scene: each
+scene's module is imported when it is rendered or one of its names is asked for.
 """
 
 import sys as _sys
